@@ -1,0 +1,1 @@
+//! iuq-sensitivity
