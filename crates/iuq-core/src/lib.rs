@@ -10,3 +10,15 @@ pub mod random;
 
 pub use error::{CoreError, Result};
 pub use model::{Evaluation, EvaluationFailure, Model, Outcome};
+pub mod exponential;
+pub mod expression;
+pub mod kde;
+pub mod normal;
+pub mod parameter_space;
+pub mod prior;
+pub mod weighted_statistics;
+
+pub use expression::{Expression, ExpressionModel};
+pub use kde::GaussianKde;
+pub use parameter_space::{Parameter, ParameterSpace};
+pub use prior::Prior;
