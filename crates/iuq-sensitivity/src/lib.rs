@@ -1,1 +1,16 @@
-//! iuq-sensitivity
+//! Sobol' sensitivity indices (spec section 5): Saltelli/Jansen estimators on a Saltelli
+//! design, bootstrap and replicate-scrambling confidence intervals, several outputs at once,
+//! and explicit accounting of failed runs.
+//!
+//! - [`estimator`]: the point estimators on f_A, f_B, f_ABi;
+//! - [`confidence`]: bootstrap and replicate intervals;
+//! - [`analysis`]: a whole analysis of a [`iuq_core::Model`] over a parameter space.
+
+pub mod analysis;
+pub mod confidence;
+pub mod error;
+pub mod estimator;
+
+pub use analysis::{IntervalMethod, OutputIndices, SensitivityOptions, SensitivityReport, analyse};
+pub use error::{Result, SensitivityError};
+pub use estimator::{SaltelliValues, SobolEstimate, estimate_indices};

@@ -1,1 +1,66 @@
-fn main() {}
+//! `iuq`: inverse uncertainty quantification of expensive simulation models.
+//!
+//! Exit codes: 0 success, 1 failure of the work, 2 bad input (the message names the file, key
+//! and reason). With `--json` every verb prints exactly one JSON object on stdout; on an error
+//! that object is `{"error": {"kind": "bad_input" | "failure", "message": ...}}`.
+
+mod commands;
+mod input_error;
+mod report_output;
+mod study;
+mod table_io;
+
+use clap::{Parser, Subcommand};
+
+use input_error::{EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_SUCCESS, is_input_error};
+
+/// Calibrate expensive simulation models against measurements and quantify the uncertainty of
+/// their parameters: designs, Gaussian-process surrogates, Sobol' sensitivity indices.
+#[derive(Debug, Parser)]
+#[command(name = "iuq", version, about, propagate_version = true)]
+struct Cli {
+    /// Print exactly one JSON object on stdout instead of text.
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Space-filling designs (Latin hypercube, Sobol', Saltelli) written as CSV.
+    Design(commands::design::DesignArgs),
+    /// Sobol' sensitivity indices of a study whose model is an expression.
+    Sobol(commands::sobol::SobolArgs),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Design(args) => commands::design::run(args, cli.json),
+        Command::Sobol(args) => commands::sobol::run(args, cli.json),
+    };
+    let code = match result {
+        Ok(()) => EXIT_SUCCESS,
+        Err(error) => {
+            let bad_input = is_input_error(&error);
+            let message = format!("{error:#}");
+            if cli.json {
+                println!(
+                    "{}",
+                    serde_json::json!({"error": {
+                        "kind": if bad_input { "bad_input" } else { "failure" },
+                        "message": message,
+                    }})
+                );
+            }
+            eprintln!("error: {message}");
+            if bad_input {
+                EXIT_BAD_INPUT
+            } else {
+                EXIT_FAILURE
+            }
+        }
+    };
+    std::process::exit(code);
+}

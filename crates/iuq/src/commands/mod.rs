@@ -1,0 +1,4 @@
+//! One module per verb of the command line.
+
+pub mod design;
+pub mod sobol;

@@ -1,0 +1,296 @@
+//! Study files (TOML): the parameters with their priors, the model and the settings of each
+//! stage. See ARCHITECTURE.md for the format; this module reads the keys the built verbs use and
+//! accepts the sections of later stages unchanged (they are validated by the verbs that use them).
+//!
+//! Every error names the file, the key and the reason, and is an input error (exit code 2).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use serde::Deserialize;
+
+use iuq_core::{ExpressionModel, Parameter, ParameterSpace, Prior};
+
+use crate::input_error::{BadInput, input_error};
+
+/// The `[model]` section.
+#[derive(Debug, Clone)]
+pub enum ModelSection {
+    /// `kind = "expression"`: analytic outputs, `outputs = { name = "formula" }` in file order.
+    Expression {
+        /// Output name → formula over the parameter names.
+        outputs: toml::Table,
+    },
+    /// A kind named by the architecture (`rbc-shear`, `command`, `batch-command`, `umbridge`)
+    /// whose stage this version does not build yet; verbs that need a model reject it.
+    NotBuilt {
+        /// The kind as written.
+        kind: String,
+    },
+}
+
+/// Model kinds a study file may name.
+pub const MODEL_KINDS: [&str; 5] = [
+    "expression",
+    "rbc-shear",
+    "command",
+    "batch-command",
+    "umbridge",
+];
+
+fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> {
+    let kind = table
+        .get("kind")
+        .ok_or_else(|| {
+            input_error(format!(
+                "{file}: key `model.kind`: missing (one of {})",
+                MODEL_KINDS.join(", ")
+            ))
+        })?
+        .as_str()
+        .ok_or_else(|| input_error(format!("{file}: key `model.kind`: expected a string")))?;
+    match kind {
+        "expression" => {
+            if let Some(key) = table.keys().find(|k| *k != "kind" && *k != "outputs") {
+                return Err(input_error(format!(
+                    "{file}: key `model.{key}`: unknown key for kind = \"expression\" (expected `outputs`)"
+                )));
+            }
+            let outputs = table
+                .get("outputs")
+                .ok_or_else(|| {
+                    input_error(format!(
+                        "{file}: key `model.outputs`: missing (outputs = {{ name = \"formula\" }})"
+                    ))
+                })?
+                .as_table()
+                .ok_or_else(|| {
+                    input_error(format!(
+                        "{file}: key `model.outputs`: expected a table of formulas"
+                    ))
+                })?;
+            Ok(ModelSection::Expression {
+                outputs: outputs.clone(),
+            })
+        }
+        k if MODEL_KINDS.contains(&k) => Ok(ModelSection::NotBuilt {
+            kind: k.to_string(),
+        }),
+        other => Err(input_error(format!(
+            "{file}: key `model.kind`: unknown kind `{other}` (one of {})",
+            MODEL_KINDS.join(", ")
+        ))),
+    }
+}
+
+/// The `[sensitivity]` section.
+#[derive(Debug, Clone, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SensitivitySection {
+    /// Base points N of the Saltelli design.
+    pub n: Option<usize>,
+    /// Seed of the scrambling and bootstrap.
+    pub seed: Option<u64>,
+    /// Independent scramblings for replicate intervals (bootstrap when absent).
+    pub replicates: Option<usize>,
+    /// Bootstrap resamples.
+    pub resamples: Option<usize>,
+    /// Confidence level of the intervals.
+    pub confidence: Option<f64>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StudyFile {
+    name: String,
+    #[serde(default)]
+    description: Option<String>,
+    parameters: toml::Table,
+    model: toml::Table,
+    #[serde(default)]
+    sensitivity: Option<SensitivitySection>,
+    // Sections of later stages, validated by the verbs that use them.
+    #[serde(default)]
+    likelihood: Option<toml::Table>,
+    #[serde(default)]
+    surrogate: Option<toml::Table>,
+    #[serde(default)]
+    sampler: Option<toml::Table>,
+    #[serde(default)]
+    executor: Option<toml::Table>,
+    #[serde(default)]
+    design: Option<toml::Table>,
+}
+
+/// A study read from a file.
+#[derive(Debug, Clone)]
+pub struct Study {
+    /// The file it was read from.
+    pub path: PathBuf,
+    /// The study's name.
+    pub name: String,
+    /// The parameters and priors, in file order.
+    pub space: ParameterSpace,
+    /// The model section.
+    pub model: ModelSection,
+    /// The sensitivity section (defaults when absent).
+    pub sensitivity: SensitivitySection,
+}
+
+impl Study {
+    /// Read and validate a study file.
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())))?;
+        Self::parse(&text, path)
+    }
+
+    /// Parse and validate study text; `path` names the file in errors.
+    pub fn parse(text: &str, path: &Path) -> Result<Self> {
+        let file = path.display();
+        let raw: StudyFile = toml::from_str(text).bad_input(|| format!("{file}"))?;
+        let _ = (
+            &raw.description,
+            &raw.likelihood,
+            &raw.surrogate,
+            &raw.sampler,
+            &raw.executor,
+            &raw.design,
+        );
+        if raw.name.trim().is_empty() {
+            return Err(input_error(format!(
+                "{file}: key `name`: must not be empty"
+            )));
+        }
+        let mut parameters = Vec::with_capacity(raw.parameters.len());
+        for (name, value) in &raw.parameters {
+            let prior: Prior = value.clone().try_into().bad_input(|| {
+                format!(
+                    "{file}: key `parameters.{name}`: expected a prior such as {{ uniform = [lower, upper] }}, {{ normal = [mean, std] }}, {{ log_normal = [mu, sigma] }} or {{ truncated_normal = [mean, std, lower, upper] }}"
+                )
+            })?;
+            prior
+                .validate(name)
+                .bad_input(|| format!("{file}: key `parameters.{name}`"))?;
+            parameters.push(Parameter {
+                name: name.clone(),
+                prior,
+            });
+        }
+        let space = ParameterSpace::new(parameters)
+            .bad_input(|| format!("{file}: section `[parameters]`"))?;
+        let study = Self {
+            path: path.to_path_buf(),
+            name: raw.name,
+            space,
+            model: parse_model_section(&raw.model, &file.to_string())?,
+            sensitivity: raw.sensitivity.unwrap_or_default(),
+        };
+        if let ModelSection::Expression { .. } = study.model {
+            study.expression_model()?;
+        }
+        Ok(study)
+    }
+
+    /// The expression model of the study, or an input error if the model is of another kind.
+    pub fn expression_model(&self) -> Result<ExpressionModel> {
+        let file = self.path.display();
+        let outputs = match &self.model {
+            ModelSection::Expression { outputs } => outputs,
+            ModelSection::NotBuilt { kind } => {
+                return Err(input_error(format!(
+                    "{file}: key `model.kind`: this command needs kind = \"expression\"; models of kind `{kind}` are not supported by this version"
+                )));
+            }
+        };
+        if outputs.is_empty() {
+            return Err(input_error(format!(
+                "{file}: key `model.outputs`: at least one output is needed"
+            )));
+        }
+        let mut formulas = Vec::with_capacity(outputs.len());
+        for (name, value) in outputs {
+            let formula = value.as_str().ok_or_else(|| {
+                input_error(format!(
+                    "{file}: key `model.outputs.{name}`: expected a formula string"
+                ))
+            })?;
+            formulas.push((name.clone(), formula.to_string()));
+        }
+        let inputs = self.space.names();
+        for (name, formula) in &formulas {
+            iuq_core::Expression::parse(formula, &inputs)
+                .bad_input(|| format!("{file}: key `model.outputs.{name}`"))?;
+        }
+        ExpressionModel::new(inputs, &formulas).bad_input(|| format!("{file}: key `model.outputs`"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Study> {
+        Study::parse(text, Path::new("study.toml"))
+    }
+
+    const ISHIGAMI: &str = r#"
+name = "ishigami"
+[parameters]
+x1 = { uniform = [-3.141592653589793, 3.141592653589793] }
+x2 = { uniform = [-3.141592653589793, 3.141592653589793] }
+x3 = { uniform = [-3.141592653589793, 3.141592653589793] }
+[model]
+kind = "expression"
+outputs = { f = "sin(x1) + 7*sin(x2)^2 + 0.1*x3^4*sin(x1)" }
+[sensitivity]
+n = 1024
+"#;
+
+    #[test]
+    fn a_valid_study_keeps_parameter_order() {
+        let s = parse(ISHIGAMI).unwrap();
+        assert_eq!(s.space.names(), vec!["x1", "x2", "x3"]);
+        assert_eq!(s.sensitivity.n, Some(1024));
+        assert!(s.expression_model().is_ok());
+    }
+
+    #[test]
+    fn errors_name_the_file_key_and_reason() {
+        let cases = [
+            (
+                ISHIGAMI.replace(
+                    "uniform = [-3.141592653589793, 3.141592653589793] }\nx2",
+                    "uniform = [3, 1] }\nx2",
+                ),
+                "parameters.x1",
+            ),
+            (ISHIGAMI.replace("x3^4", "x4^4"), "model.outputs.f"),
+            (
+                ISHIGAMI.replace(
+                    "{ uniform = [-3.141592653589793, 3.141592653589793] }\nx3",
+                    "{ unifrom = [0, 1] }\nx3",
+                ),
+                "parameters.x2",
+            ),
+            (ISHIGAMI.replace("n = 1024", "n = -3"), "study.toml"),
+            (
+                ISHIGAMI.replace("kind = \"expression\"", "kind = \"magic\""),
+                "model.kind",
+            ),
+            (
+                ISHIGAMI.replace("name = \"ishigami\"", "name = \"\""),
+                "name",
+            ),
+        ];
+        for (text, key) in cases {
+            let err = parse(&text).unwrap_err();
+            assert!(crate::input_error::is_input_error(&err));
+            let message = format!("{err:#}");
+            assert!(
+                message.contains("study.toml") && message.contains(key),
+                "{message}"
+            );
+        }
+    }
+}
