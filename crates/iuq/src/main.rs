@@ -32,6 +32,9 @@ enum Command {
     Design(commands::design::DesignArgs),
     /// Sobol' sensitivity indices of a study whose model is an expression.
     Sobol(commands::sobol::SobolArgs),
+    /// In-process timings of numerical kernels, for the side-by-side benchmark scripts.
+    #[command(subcommand)]
+    Bench(commands::bench::BenchCommand),
 }
 
 fn main() {
@@ -39,6 +42,7 @@ fn main() {
     let result = match &cli.command {
         Command::Design(args) => commands::design::run(args, cli.json),
         Command::Sobol(args) => commands::sobol::run(args, cli.json),
+        Command::Bench(command) => commands::bench::run(command, cli.json),
     };
     let code = match result {
         Ok(()) => EXIT_SUCCESS,

@@ -135,6 +135,10 @@ pub struct Study {
     pub model: ModelSection,
     /// The sensitivity section (defaults when absent).
     pub sensitivity: SensitivitySection,
+    /// The `[likelihood]` section as written (read by the inference verbs).
+    pub likelihood: Option<toml::Table>,
+    /// The `[sampler]` section as written (read by the inference verbs).
+    pub sampler: Option<toml::Table>,
 }
 
 impl Study {
@@ -149,14 +153,7 @@ impl Study {
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
         let file = path.display();
         let raw: StudyFile = toml::from_str(text).bad_input(|| format!("{file}"))?;
-        let _ = (
-            &raw.description,
-            &raw.likelihood,
-            &raw.surrogate,
-            &raw.sampler,
-            &raw.executor,
-            &raw.design,
-        );
+        let _ = (&raw.description, &raw.surrogate, &raw.executor, &raw.design);
         if raw.name.trim().is_empty() {
             return Err(input_error(format!(
                 "{file}: key `name`: must not be empty"
@@ -185,6 +182,8 @@ impl Study {
             space,
             model: parse_model_section(&raw.model, &file.to_string())?,
             sensitivity: raw.sensitivity.unwrap_or_default(),
+            likelihood: raw.likelihood,
+            sampler: raw.sampler,
         };
         if let ModelSection::Expression { .. } = study.model {
             study.expression_model()?;

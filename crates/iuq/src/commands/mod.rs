@@ -1,4 +1,5 @@
 //! One module per verb of the command line.
 
+pub mod bench;
 pub mod design;
 pub mod sobol;
