@@ -84,13 +84,7 @@ const EXP2_TABLE: [f64; 64] = [
 /// e^x for −708 ≤ x ≤ 709; returns 0 below −708 (where e^x is subnormal or zero) and NaN for NaN.
 #[inline(always)]
 pub fn exp_fast(x: f64) -> f64 {
-    let clamped = if x < -708.0 {
-        -708.0
-    } else if x > 709.0 {
-        709.0
-    } else {
-        x
-    };
+    let clamped = x.clamp(-708.0, 709.0);
     let shifted = clamped * SIXTY_FOUR_OVER_LN2 + ROUNDING_MAGIC;
     let k = shifted - ROUNDING_MAGIC;
     let r = (clamped - k * LN2_OVER_64_HI) - k * LN2_OVER_64_LO;
