@@ -30,6 +30,9 @@ struct Cli {
 enum Command {
     /// Space-filling designs (Latin hypercube, Sobol', Saltelli) written as CSV.
     Design(commands::design::DesignArgs),
+    /// Gaussian-process surrogates: fit, predict, validate.
+    #[command(subcommand)]
+    Gp(commands::gp::GpCommand),
     /// Sobol' sensitivity indices of a study whose model is an expression.
     Sobol(commands::sobol::SobolArgs),
     /// In-process timings of numerical kernels, for the side-by-side benchmark scripts.
@@ -41,6 +44,7 @@ fn main() {
     let cli = Cli::parse();
     let result = match &cli.command {
         Command::Design(args) => commands::design::run(args, cli.json),
+        Command::Gp(command) => commands::gp::run(command, cli.json),
         Command::Sobol(args) => commands::sobol::run(args, cli.json),
         Command::Bench(command) => commands::bench::run(command, cli.json),
     };

@@ -21,6 +21,22 @@ pub enum BenchCommand {
     /// 2-D Gaussian KDE of the first two columns of a CSV, evaluated on a G×G grid spanning
     /// the data's range.
     Kde(KdeBenchArgs),
+    /// Prediction of a saved GP at the points of a CSV file: mean only, and mean with variance.
+    GpPredict(GpPredictBenchArgs),
+}
+
+/// Arguments of `iuq bench gp-predict`.
+#[derive(Debug, Args)]
+pub struct GpPredictBenchArgs {
+    /// A GP saved by `iuq gp fit`.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Points (CSV with the GP's input columns).
+    #[arg(long)]
+    pub points: PathBuf,
+    /// Timed repetitions (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
 }
 
 /// Arguments of `iuq bench kde`.
@@ -124,9 +140,52 @@ fn kde(args: &KdeBenchArgs, json: bool) -> Result<()> {
     Ok(())
 }
 
+fn gp_predict(args: &GpPredictBenchArgs, json: bool) -> Result<()> {
+    if args.repeats == 0 {
+        return Err(input_error("--repeats must be at least 1"));
+    }
+    let (file, gp) = crate::commands::gp::load_gp(&args.model)?;
+    let table = read_numeric_csv(&args.points, false)?;
+    let x = table.select(&file.inputs, &args.points)?;
+    let mut with_variance = Vec::with_capacity(args.repeats);
+    let mut mean_only = Vec::with_capacity(args.repeats);
+    for _ in 0..args.repeats {
+        let start = Instant::now();
+        let p = gp.predict(&x)?;
+        with_variance.push(start.elapsed().as_secs_f64());
+        std::hint::black_box(p);
+        let start = Instant::now();
+        let m = gp.predict_mean(&x)?;
+        mean_only.push(start.elapsed().as_secs_f64());
+        std::hint::black_box(m);
+    }
+    let (seconds, seconds_mean) = (median(with_variance), median(mean_only));
+    let value = json!({
+        "kernel": "gp-predict",
+        "points": x.len(),
+        "n_training": gp.n_training(),
+        "seconds_median": seconds,
+        "seconds_mean_median": seconds_mean,
+        "repeats": args.repeats,
+        "threads": rayon::current_num_threads(),
+    });
+    emit(json, &value, || {
+        format!(
+            "GP prediction of {} points ({} training points): mean {} s, mean and variance {} s (medians of {})",
+            x.len(),
+            gp.n_training(),
+            short(seconds_mean),
+            short(seconds),
+            args.repeats
+        )
+    });
+    Ok(())
+}
+
 /// Run `iuq bench`.
 pub fn run(command: &BenchCommand, json: bool) -> Result<()> {
     match command {
         BenchCommand::Kde(args) => kde(args, json),
+        BenchCommand::GpPredict(args) => gp_predict(args, json),
     }
 }

@@ -131,6 +131,7 @@ pub fn run(args: &DesignArgs, json: bool) -> Result<()> {
         "seed": args.seed,
         "out": args.out.display().to_string(),
     });
+    let start = std::time::Instant::now();
     let unit = match args.kind {
         DesignKind::Lhs => {
             let method = match args.method {
@@ -168,6 +169,7 @@ pub fn run(args: &DesignArgs, json: bool) -> Result<()> {
         None => unit,
     };
     summary["rows"] = json!(rows.len());
+    summary["seconds"] = json!(start.elapsed().as_secs_f64());
     let columns: Vec<String> = (1..=args.dim).map(|k| format!("x{k}")).collect();
     write_numeric_csv(&args.out, &columns, &rows)?;
     emit(json, &summary, || {

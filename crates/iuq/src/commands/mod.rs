@@ -2,4 +2,5 @@
 
 pub mod bench;
 pub mod design;
+pub mod gp;
 pub mod sobol;

@@ -76,6 +76,7 @@ pub fn run(args: &SobolArgs, json: bool) -> Result<()> {
         confidence_level: confidence,
         ..Default::default()
     };
+    let start = std::time::Instant::now();
     let report = analyse(&model, &study.space, &options)
         .bad_input(|| format!("{}", args.study.display()))?;
     let by_name = |values: &[f64]| -> Value {
@@ -110,6 +111,7 @@ pub fn run(args: &SobolArgs, json: bool) -> Result<()> {
         "failure_handling": report.failure_handling(),
         "failure_reasons": report.failure_reasons,
         "base_points": n,
+        "seconds": start.elapsed().as_secs_f64(),
         "interval": match options.interval {
             IntervalMethod::Bootstrap { resamples } => json!({"method": "bootstrap", "resamples": resamples, "confidence": confidence}),
             IntervalMethod::Replicates { count } => json!({"method": "replicates", "count": count, "confidence": confidence}),
