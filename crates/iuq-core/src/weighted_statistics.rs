@@ -72,7 +72,6 @@ pub fn weighted_mean(points: &[Vec<f64>], weights: &[f64]) -> Result<Vec<f64>> {
 }
 
 /// Weighted covariance matrix (row-major d×d) with the given normalisation.
-#[allow(clippy::needless_range_loop)] // symmetric fill by (row, column) indices
 pub fn weighted_covariance(
     points: &[Vec<f64>],
     weights: &[f64],
