@@ -99,7 +99,10 @@ pub fn parse_likelihood(study: &Study) -> Result<LikelihoodSection> {
             "{file}: section `[likelihood]`: missing (give `log_density = \"...\"` or `data = {{ file, x, y, y_err }}`)"
         ))
     })?;
-    if let Some(key) = table.keys().find(|k| !LIKELIHOOD_KEYS.contains(&k.as_str())) {
+    if let Some(key) = table
+        .keys()
+        .find(|k| !LIKELIHOOD_KEYS.contains(&k.as_str()))
+    {
         return Err(input_error(format!(
             "{file}: key `likelihood.{key}`: unknown key (expected one of {})",
             LIKELIHOOD_KEYS.join(", ")
@@ -148,9 +151,9 @@ fn parse_data(
         )));
     }
     let required = |key: &str| -> Result<String> {
-        let value = data.get(key).ok_or_else(|| {
-            input_error(format!("{file}: key `likelihood.data.{key}`: missing"))
-        })?;
+        let value = data
+            .get(key)
+            .ok_or_else(|| input_error(format!("{file}: key `likelihood.data.{key}`: missing")))?;
         string_of(value, file, &format!("likelihood.data.{key}"))
     };
     let data_file = required("file")?;

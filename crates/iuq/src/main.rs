@@ -6,7 +6,9 @@
 
 mod commands;
 mod input_error;
+mod likelihood_section;
 mod report_output;
+mod sampler_section;
 mod study;
 mod table_io;
 
@@ -35,6 +37,8 @@ enum Command {
     Gp(commands::gp::GpCommand),
     /// Sobol' sensitivity indices of a study whose model is an expression.
     Sobol(commands::sobol::SobolArgs),
+    /// Posterior samples and evidence with BASIS (annealed sequential importance sampling).
+    Basis(commands::basis::BasisArgs),
     /// In-process timings of numerical kernels, for the side-by-side benchmark scripts.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
@@ -46,6 +50,7 @@ fn main() {
         Command::Design(args) => commands::design::run(args, cli.json),
         Command::Gp(command) => commands::gp::run(command, cli.json),
         Command::Sobol(args) => commands::sobol::run(args, cli.json),
+        Command::Basis(args) => commands::basis::run(args, cli.json),
         Command::Bench(command) => commands::bench::run(command, cli.json),
     };
     let code = match result {

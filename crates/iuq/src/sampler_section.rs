@@ -116,9 +116,8 @@ pub fn parse_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<Chec
     };
     let usize_of = |v: Option<u64>, key: &str| -> Result<Option<usize>> {
         v.map(|v| {
-            usize::try_from(v).map_err(|_| {
-                input_error(format!("{file}: key `sampler.{key}`: {v} is too large"))
-            })
+            usize::try_from(v)
+                .map_err(|_| input_error(format!("{file}: key `sampler.{key}`: {v} is too large")))
         })
         .transpose()
     };

@@ -27,6 +27,9 @@ pub enum ModelSection {
         /// The kind as written.
         kind: String,
     },
+    /// No `[model]` section: allowed for studies whose likelihood needs no model
+    /// (`[likelihood] log_density = ...` or a `prediction` formula).
+    Absent,
 }
 
 /// Model kinds a study file may name.
@@ -106,7 +109,8 @@ struct StudyFile {
     #[serde(default)]
     description: Option<String>,
     parameters: toml::Table,
-    model: toml::Table,
+    #[serde(default)]
+    model: Option<toml::Table>,
     #[serde(default)]
     sensitivity: Option<SensitivitySection>,
     // Sections of later stages, validated by the verbs that use them.
@@ -180,7 +184,10 @@ impl Study {
             path: path.to_path_buf(),
             name: raw.name,
             space,
-            model: parse_model_section(&raw.model, &file.to_string())?,
+            model: match &raw.model {
+                Some(table) => parse_model_section(table, &file.to_string())?,
+                None => ModelSection::Absent,
+            },
             sensitivity: raw.sensitivity.unwrap_or_default(),
             likelihood: raw.likelihood,
             sampler: raw.sampler,
@@ -196,6 +203,11 @@ impl Study {
         let file = self.path.display();
         let outputs = match &self.model {
             ModelSection::Expression { outputs } => outputs,
+            ModelSection::Absent => {
+                return Err(input_error(format!(
+                    "{file}: section `[model]`: missing; this command needs a model of kind = \"expression\""
+                )));
+            }
             ModelSection::NotBuilt { kind } => {
                 return Err(input_error(format!(
                     "{file}: key `model.kind`: this command needs kind = \"expression\"; models of kind `{kind}` are not supported by this version"

@@ -141,7 +141,9 @@ pub fn load_gp(path: &Path) -> Result<(GpFile, GaussianProcess)> {
 
 fn fit(args: &FitArgs, json: bool) -> Result<()> {
     if args.inputs.is_empty() || args.inputs.iter().any(|s| s.trim().is_empty()) {
-        return Err(input_error("--inputs: give the input columns, e.g. --inputs a,b,c"));
+        return Err(input_error(
+            "--inputs: give the input columns, e.g. --inputs a,b,c",
+        ));
     }
     let table = read_numeric_csv(&args.data, false)?;
     let x = table.select(&args.inputs, &args.data)?;
@@ -151,7 +153,10 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
         .map(|r| r[0])
         .collect();
     if x.len() < 2 {
-        return Err(input_error(format!("{}: at least two data rows are needed", args.data.display())));
+        return Err(input_error(format!(
+            "{}: at least two data rows are needed",
+            args.data.display()
+        )));
     }
     let options = FitOptions {
         kernel: match args.kernel {
@@ -166,7 +171,8 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
         ..FitOptions::default()
     };
     let start = Instant::now();
-    let gp = GaussianProcess::fit(&x, &y, &options).bad_input(|| format!("{}", args.data.display()))?;
+    let gp =
+        GaussianProcess::fit(&x, &y, &options).bad_input(|| format!("{}", args.data.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     let file = GpFile {
         format: "iuq-gp".into(),
@@ -199,7 +205,11 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
             gp.n_training(),
             short(seconds),
             short(gp.log_marginal_likelihood()),
-            h.length_scales.iter().map(|v| short(*v)).collect::<Vec<_>>().join(", "),
+            h.length_scales
+                .iter()
+                .map(|v| short(*v))
+                .collect::<Vec<_>>()
+                .join(", "),
             short(h.signal_variance),
             short(h.noise_variance),
             gp.loo_q2().map_or("undefined".into(), short),
@@ -218,24 +228,40 @@ fn predict(args: &PredictArgs, json: bool) -> Result<()> {
     let table = read_numeric_csv(&args.points, false)?;
     let x = table.select(&file.inputs, &args.points)?;
     let start = Instant::now();
-    let prediction = gp.predict(&x).bad_input(|| format!("{}", args.points.display()))?;
+    let prediction = gp
+        .predict(&x)
+        .bad_input(|| format!("{}", args.points.display()))?;
     let seconds = start.elapsed().as_secs_f64();
     let mut columns = file.inputs.clone();
-    columns.extend(["mean".to_string(), "std".to_string(), "std_with_noise".to_string()]);
+    columns.extend([
+        "mean".to_string(),
+        "std".to_string(),
+        "std_with_noise".to_string(),
+    ]);
     let rows: Vec<Vec<f64>> = x
         .iter()
         .enumerate()
         .map(|(i, p)| {
             let mut r = p.clone();
             let v = prediction.variance[i].max(0.0);
-            r.extend([prediction.mean[i], v.sqrt(), (v + prediction.noise_variance).sqrt()]);
+            r.extend([
+                prediction.mean[i],
+                v.sqrt(),
+                (v + prediction.noise_variance).sqrt(),
+            ]);
             r
         })
         .collect();
     write_numeric_csv(&args.out, &columns, &rows)?;
-    let value = json!({"points": rows.len(), "seconds": seconds, "out": args.out.display().to_string()});
+    let value =
+        json!({"points": rows.len(), "seconds": seconds, "out": args.out.display().to_string()});
     emit(json, &value, || {
-        format!("predicted {} points in {} s; wrote {}", rows.len(), short(seconds), args.out.display())
+        format!(
+            "predicted {} points in {} s; wrote {}",
+            rows.len(),
+            short(seconds),
+            args.out.display()
+        )
     });
     Ok(())
 }
@@ -249,9 +275,13 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
         .into_iter()
         .map(|r| r[0])
         .collect();
-    let q2 = gp.q2(&x, &y).bad_input(|| format!("{}", args.data.display()))?;
+    let q2 = gp
+        .q2(&x, &y)
+        .bad_input(|| format!("{}", args.data.display()))?;
     let value = json!({"q2": q2, "points": y.len(), "loo_q2": gp.loo_q2()});
-    emit(json, &value, || format!("Q2 on {} test points: {}", y.len(), short(q2)));
+    emit(json, &value, || {
+        format!("Q2 on {} test points: {}", y.len(), short(q2))
+    });
     Ok(())
 }
 

@@ -1,0 +1,736 @@
+//! The BASIS sampler (spec §2; Wu et al. 2017, "A Bayesian annealed sequential importance
+//! sampling"; Ching & Chen 2007, TMCMC).
+//!
+//! The run is a sequence of stages, each a pure function of the previous [`BasisState`], so it
+//! can be driven step by step ([`Basis::initialise`], [`Basis::advance`]), run to the end with an
+//! [`Observer`] called after every stage ([`Basis::run`]), or resumed from a checkpoint
+//! ([`Basis::resume`]).
+//!
+//! 1. Stage 0: N prior draws θ_i (member i from stream (seed, SAMPLER_BASE + 0, i)), ll_i, lp_i;
+//!    p = 0, ln Z = 0.
+//! 2. Stage k ≥ 1 from p < 1: the step dp solved from the CV target ([`crate::annealing`]),
+//!    p' = p + dp (exactly 1 when the CV of the full step is within the target); ln Z += ln
+//!    E[f^dp]; normalised weights w̄ ∝ f^dp; proposal covariance β²·Cov_w̄(θ)
+//!    ([`crate::proposal`]); copy counts n_i ([`crate::resampling`], stream (seed,
+//!    SAMPLER_BASE + k, [`RESAMPLING_STREAM`])); member i seeds ⌈n_i/l_max⌉ chains of
+//!    near-equal lengths summing to n_i; chain c (in member order) draws from stream (seed,
+//!    SAMPLER_BASE + k, c) and runs n_burn discarded steps then its length; each step proposes
+//!    θ' = θ + L z, rejects θ' outside the prior support without evaluating it, and accepts with
+//!    ln u < p'(ll' − ll) + (lp' − lp); a failed or non-finite evaluation is a rejection. Every
+//!    state after a post-burn-in step is a member of the new population (chain by chain, in
+//!    chain order); the seed itself is not.
+//! 3. When a stage starts at p = 1 it is the final pass (dp = 0, uniform weights, ln Z
+//!    unchanged); after it the run stops with [`StopReason::Converged`].
+//!
+//! Every MCMC step of every chain is one point of a single batch sent to
+//! [`LogLikelihood::log_likelihood_batch`]: one batch for stage 0 and one per MCMC step.
+//! Everything random is keyed by (seed, stage, chain) and every reduction is sequential, so the
+//! result does not depend on the number of rayon threads, and a run resumed from the state after
+//! stage k is bit-identical to an uninterrupted one.
+
+use std::collections::{BTreeMap, HashSet};
+use std::time::Instant;
+
+use rand::Rng;
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use iuq_core::ParameterSpace;
+use iuq_core::random::{StreamRng, stages::SAMPLER_BASE, stream};
+
+use crate::annealing::{incremental_weights, log_evidence_increment, max_finite, next_step};
+use crate::diagnostics::{StageDiagnostics, count_failure, merge_failure_reasons};
+use crate::error::{BasisError, Result};
+use crate::likelihood::{LogLikelihood, PointLogLikelihood};
+use crate::proposal::Proposal;
+use crate::resampling::resample;
+use crate::settings::{CheckedSettings, MinStepAction};
+
+/// The stream index (within a stage) of the resampling draws; chains use 0, 1, 2, ….
+pub const RESAMPLING_STREAM: u64 = u64::MAX;
+
+/// Why a run stopped.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum StopReason {
+    /// p reached 1 and the final resample-and-move pass at p = 1 is done: the population is a
+    /// sample of the posterior.
+    Converged,
+    /// `max_stages` annealing stages were run without reaching p = 1; the population samples
+    /// the tempered posterior at `exponent`, and the evidence is incomplete.
+    MaxStages {
+        /// The limit.
+        max_stages: usize,
+        /// The exponent reached.
+        exponent: f64,
+    },
+    /// The step solved from the CV target was below the minimum (with
+    /// [`MinStepAction::Stop`]); no stage was run for it.
+    StepBelowMinimum {
+        /// The solved step.
+        step: f64,
+        /// The minimum.
+        min_step: f64,
+        /// The exponent reached.
+        exponent: f64,
+    },
+    /// The observer stopped the run after stage `stage`; the state can be resumed.
+    Interrupted {
+        /// The last completed stage.
+        stage: usize,
+    },
+}
+
+impl StopReason {
+    /// A short machine-readable name: `converged`, `max_stages`, `step_below_minimum`,
+    /// `interrupted`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            StopReason::Converged => "converged",
+            StopReason::MaxStages { .. } => "max_stages",
+            StopReason::StepBelowMinimum { .. } => "step_below_minimum",
+            StopReason::Interrupted { .. } => "interrupted",
+        }
+    }
+}
+
+impl std::fmt::Display for StopReason {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            StopReason::Converged => {
+                f.write_str("converged: p reached 1 and the final pass at p = 1 is done")
+            }
+            StopReason::MaxStages {
+                max_stages,
+                exponent,
+            } => write!(
+                f,
+                "stopped: the maximum of {max_stages} stages was reached at p = {exponent} (the evidence is incomplete)"
+            ),
+            StopReason::StepBelowMinimum {
+                step,
+                min_step,
+                exponent,
+            } => write!(
+                f,
+                "stopped: the annealing step {step:e} solved at p = {exponent} is below the minimum {min_step:e}"
+            ),
+            StopReason::Interrupted { stage } => {
+                write!(f, "interrupted after stage {stage} (resumable)")
+            }
+        }
+    }
+}
+
+/// The complete state of a run after a stage: enough to continue it bit-identically (the stage
+/// index is the position of every random stream). Serialised by [`crate::checkpoint`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BasisState {
+    /// Names of the sampled parameters, in order (the model's, then `sigma_m` if estimated).
+    pub parameter_names: Vec<String>,
+    /// The settings of the run (with the seed).
+    pub settings: CheckedSettings,
+    /// Index of the last completed stage (0 = prior draws).
+    pub stage: usize,
+    /// The annealing exponent p of the population.
+    pub exponent: f64,
+    /// ln Z accumulated so far (the evidence once p = 1).
+    pub log_evidence: f64,
+    /// The population θ_i, N vectors.
+    pub samples: Vec<Vec<f64>>,
+    /// ln f(D | θ_i); −∞ (`null` in JSON) for failed members, which only stage 0 can hold.
+    #[serde(with = "crate::checkpoint::negative_infinity_as_null")]
+    pub log_likelihood: Vec<f64>,
+    /// ln π(θ_i).
+    pub log_prior: Vec<f64>,
+    /// Points sent to the likelihood (model evaluations) over all stages.
+    pub evaluations: usize,
+    /// Diagnostics of every stage so far, stage 0 first.
+    pub diagnostics: Vec<StageDiagnostics>,
+    /// Why the run finished (`None` while it can be advanced).
+    pub stop_reason: Option<StopReason>,
+}
+
+impl BasisState {
+    /// True when the run has finished and cannot be advanced.
+    pub fn is_finished(&self) -> bool {
+        self.stop_reason.is_some()
+    }
+
+    /// Failures over all stages.
+    pub fn failures(&self) -> usize {
+        self.diagnostics.iter().map(|d| d.failures).sum()
+    }
+
+    /// Failures over all stages, by reason.
+    pub fn failure_reasons(&self) -> BTreeMap<String, usize> {
+        merge_failure_reasons(self.diagnostics.iter().map(|d| &d.failure_reasons))
+    }
+
+    /// Proposals outside the prior support over all stages.
+    pub fn out_of_support(&self) -> usize {
+        self.diagnostics.iter().map(|d| d.out_of_support).sum()
+    }
+
+    /// Number of stages after the prior stage (annealing stages and the final pass).
+    pub fn stages(&self) -> usize {
+        self.stage
+    }
+}
+
+/// Whether to go on after a stage.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Control {
+    /// Continue with the next stage.
+    Continue,
+    /// Stop now; the run ends with [`StopReason::Interrupted`] (unless it had finished anyway).
+    Stop,
+}
+
+/// Called with the state after every stage (stage 0 included) — to report progress, write a
+/// checkpoint, or stop the run (in the manner of argmin's observers).
+pub trait Observer {
+    /// Look at the state after a stage. An error aborts the run with that error.
+    fn observe(&mut self, state: &BasisState) -> Result<Control>;
+}
+
+impl<F: FnMut(&BasisState) -> Result<Control>> Observer for F {
+    fn observe(&mut self, state: &BasisState) -> Result<Control> {
+        self(state)
+    }
+}
+
+/// An observer that never stops the run and reports nothing.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Silent;
+
+impl Observer for Silent {
+    fn observe(&mut self, _: &BasisState) -> Result<Control> {
+        Ok(Control::Continue)
+    }
+}
+
+/// The end of a run: the last state and why it stopped.
+#[derive(Debug, Clone, PartialEq)]
+pub struct BasisRun {
+    /// The state after the last completed stage.
+    pub state: BasisState,
+    /// Why the run stopped.
+    pub stop_reason: StopReason,
+}
+
+/// The BASIS sampler of a posterior π(θ)·f(D|θ) over `space`.
+pub struct Basis<'a, L: ?Sized> {
+    space: &'a ParameterSpace,
+    likelihood: &'a L,
+    settings: CheckedSettings,
+    widths: Vec<f64>,
+}
+
+impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
+    /// A sampler for the prior of `space` and `likelihood` (which must take as many parameters as
+    /// `space` has), with checked settings.
+    pub fn new(
+        space: &'a ParameterSpace,
+        likelihood: &'a L,
+        settings: CheckedSettings,
+    ) -> Result<Self> {
+        if likelihood.parameter_count() != space.dimension() {
+            return Err(BasisError::InvalidLikelihood(format!(
+                "the likelihood takes {} parameters but the parameter space has {} ({})",
+                likelihood.parameter_count(),
+                space.dimension(),
+                space.names().join(", ")
+            )));
+        }
+        let widths = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
+        Ok(Self {
+            space,
+            likelihood,
+            settings,
+            widths,
+        })
+    }
+
+    /// The settings.
+    pub fn settings(&self) -> &CheckedSettings {
+        &self.settings
+    }
+
+    /// Run from the prior to the end, calling `observer` after every stage.
+    pub fn run(&self, observer: &mut dyn Observer) -> Result<BasisRun> {
+        let state = self.initialise()?;
+        if observer.observe(&state)? == Control::Stop && !state.is_finished() {
+            return Ok(BasisRun {
+                stop_reason: StopReason::Interrupted { stage: state.stage },
+                state,
+            });
+        }
+        self.continue_run(state, observer)
+    }
+
+    /// Continue a run from a state (e.g. read from a checkpoint), calling `observer` after every
+    /// new stage. The state must come from a run with the same settings and parameters.
+    pub fn resume(&self, state: BasisState, observer: &mut dyn Observer) -> Result<BasisRun> {
+        self.check_compatible(&state)?;
+        self.continue_run(state, observer)
+    }
+
+    fn continue_run(&self, mut state: BasisState, observer: &mut dyn Observer) -> Result<BasisRun> {
+        loop {
+            if let Some(reason) = &state.stop_reason {
+                return Ok(BasisRun {
+                    stop_reason: reason.clone(),
+                    state,
+                });
+            }
+            state = self.advance(state)?;
+            if observer.observe(&state)? == Control::Stop && !state.is_finished() {
+                return Ok(BasisRun {
+                    stop_reason: StopReason::Interrupted { stage: state.stage },
+                    state,
+                });
+            }
+        }
+    }
+
+    /// Check that `state` belongs to a run of this sampler (settings, parameter names,
+    /// population size and support).
+    pub fn check_compatible(&self, state: &BasisState) -> Result<()> {
+        let mismatch = |m: String| Err(BasisError::CheckpointMismatch(m));
+        if state.settings != self.settings {
+            return mismatch(format!(
+                "settings differ: {}",
+                settings_differences(&state.settings, &self.settings)
+            ));
+        }
+        if state.parameter_names != self.space.names() {
+            return mismatch(format!(
+                "the checkpoint's parameters ({}) differ from this run's ({})",
+                state.parameter_names.join(", "),
+                self.space.names().join(", ")
+            ));
+        }
+        let n = self.settings.samples;
+        if state.samples.len() != n || state.log_likelihood.len() != n || state.log_prior.len() != n
+        {
+            return mismatch(format!(
+                "the checkpoint holds {} samples, {} log-likelihoods and {} log-priors; {n} expected",
+                state.samples.len(),
+                state.log_likelihood.len(),
+                state.log_prior.len()
+            ));
+        }
+        if let Some(i) = state.samples.iter().position(|x| !self.space.in_support(x)) {
+            return mismatch(format!(
+                "sample {i} lies outside the prior support of this run"
+            ));
+        }
+        Ok(())
+    }
+
+    /// Evaluate a batch, turning failures and non-finite values into −∞ with a counted reason.
+    fn evaluate(
+        &self,
+        stage: usize,
+        points: &[Vec<f64>],
+        reasons: &mut BTreeMap<String, usize>,
+        failures: &mut usize,
+    ) -> Result<Vec<f64>> {
+        if points.is_empty() {
+            return Ok(Vec::new());
+        }
+        let values = self
+            .likelihood
+            .log_likelihood_batch(points)
+            .map_err(|e| match e {
+                BasisError::ModelBatch(reason) => BasisError::Evaluation { stage, reason },
+                other => other,
+            })?;
+        if values.len() != points.len() {
+            return Err(BasisError::Evaluation {
+                stage,
+                reason: format!(
+                    "the likelihood returned {} values for {} points",
+                    values.len(),
+                    points.len()
+                ),
+            });
+        }
+        Ok(values
+            .into_iter()
+            .map(|v: PointLogLikelihood| match v {
+                Ok(ll) if ll.is_finite() => ll,
+                Ok(ll) => {
+                    *failures += 1;
+                    count_failure(reasons, &format!("log-likelihood is {ll}"));
+                    f64::NEG_INFINITY
+                }
+                Err(failure) => {
+                    *failures += 1;
+                    count_failure(reasons, &failure.reason);
+                    f64::NEG_INFINITY
+                }
+            })
+            .collect())
+    }
+
+    /// Stage 0: N draws from the prior and their log-likelihoods (one batch).
+    pub fn initialise(&self) -> Result<BasisState> {
+        let start = Instant::now();
+        let n = self.settings.samples;
+        let seed = self.settings.seed;
+        let stage_key = SAMPLER_BASE;
+        let samples: Vec<Vec<f64>> = (0..n)
+            .into_par_iter()
+            .with_min_len(256)
+            .map(|i| self.space.sample(&mut stream(seed, stage_key, i as u64)))
+            .collect();
+        let log_prior = samples
+            .iter()
+            .map(|x| self.space.log_prior(x))
+            .collect::<iuq_core::Result<Vec<f64>>>()?;
+        let mut reasons = BTreeMap::new();
+        let mut failures = 0;
+        let log_likelihood = self.evaluate(0, &samples, &mut reasons, &mut failures)?;
+        let max_ll = max_finite(&log_likelihood)
+            .ok_or(BasisError::NoFiniteLikelihood { stage: 0, failures })?;
+        let diagnostics = StageDiagnostics {
+            stage: 0,
+            exponent: 0.0,
+            step: 0.0,
+            cv: 0.0,
+            ess_fraction: 1.0,
+            step_clamped: false,
+            bisection_iterations: 0,
+            log_evidence_increment: 0.0,
+            log_evidence: 0.0,
+            max_log_likelihood: max_ll,
+            covariance: None,
+            chains: 0,
+            proposals: 0,
+            accepted: 0,
+            acceptance_rate: 0.0,
+            out_of_support: 0,
+            failures,
+            failure_reasons: reasons,
+            evaluations: n,
+            batches: 1,
+            unique_fraction: unique_fraction(&samples),
+            wall_seconds: start.elapsed().as_secs_f64(),
+        };
+        Ok(BasisState {
+            parameter_names: self.space.names(),
+            settings: self.settings,
+            stage: 0,
+            exponent: 0.0,
+            log_evidence: 0.0,
+            samples,
+            log_likelihood,
+            log_prior,
+            evaluations: n,
+            diagnostics: vec![diagnostics],
+            stop_reason: None,
+        })
+    }
+
+    /// Run the next stage from `state` (spec §2 steps 2–7). A state whose step would be below
+    /// the minimum (with [`MinStepAction::Stop`]) comes back finished, with no new stage. The
+    /// state is checked first ([`Basis::check_compatible`]).
+    pub fn advance(&self, mut state: BasisState) -> Result<BasisState> {
+        if let Some(reason) = &state.stop_reason {
+            return Err(BasisError::AlreadyFinished(reason.to_string()));
+        }
+        self.check_compatible(&state)?;
+        let start = Instant::now();
+        let settings = &self.settings;
+        let n = settings.samples;
+        let stage = state.stage + 1;
+        let stage_key = SAMPLER_BASE + stage as u64;
+        let p = state.exponent;
+        let failed_members = state
+            .log_likelihood
+            .iter()
+            .filter(|v| !v.is_finite())
+            .count();
+        let max_ll = max_finite(&state.log_likelihood).ok_or(BasisError::NoFiniteLikelihood {
+            stage: state.stage,
+            failures: failed_members,
+        })?;
+
+        // Step 2: the next exponent.
+        let final_pass = p >= 1.0;
+        let (step, new_p, cv_solved, clamped, iterations) = if final_pass {
+            (0.0, 1.0, 0.0, false, 0)
+        } else {
+            let solved = next_step(&state.log_likelihood, p, settings.cv_target, max_ll);
+            if solved.reaches_one {
+                (solved.step, 1.0, solved.cv, false, solved.iterations)
+            } else if solved.step < settings.min_step {
+                match settings.on_min_step {
+                    MinStepAction::Stop => {
+                        state.stop_reason = Some(StopReason::StepBelowMinimum {
+                            step: solved.step,
+                            min_step: settings.min_step,
+                            exponent: p,
+                        });
+                        return Ok(state);
+                    }
+                    MinStepAction::Clamp => {
+                        let step = settings.min_step.min(1.0 - p);
+                        let new_p = if p + step >= 1.0 { 1.0 } else { p + step };
+                        (step, new_p, f64::NAN, true, solved.iterations)
+                    }
+                }
+            } else {
+                (
+                    solved.step,
+                    p + solved.step,
+                    solved.cv,
+                    false,
+                    solved.iterations,
+                )
+            }
+        };
+
+        // Step 3: evidence; step 4: weights and proposal.
+        let increment = log_evidence_increment(&state.log_likelihood, step, max_ll);
+        let raw_weights = incremental_weights(&state.log_likelihood, step, max_ll);
+        let cv = if cv_solved.is_nan() {
+            crate::annealing::coefficient_of_variation(&raw_weights)
+        } else {
+            cv_solved
+        };
+        let total: f64 = raw_weights.iter().sum();
+        let weights: Vec<f64> = raw_weights.iter().map(|w| w / total).collect();
+        let ess_fraction = 1.0 / (n as f64 * weights.iter().map(|w| w * w).sum::<f64>());
+        let proposal = Proposal::new(
+            &state.samples,
+            &weights,
+            settings.proposal_scale,
+            &self.widths,
+        )?;
+
+        // Step 5: resampling.
+        let mut resampling_rng = stream(settings.seed, stage_key, RESAMPLING_STREAM);
+        let counts = resample(&weights, n, settings.resampling, &mut resampling_rng);
+
+        // Step 6: chains.
+        let mut chains = Vec::new();
+        for (member, &count) in counts.iter().enumerate() {
+            if count == 0 {
+                continue;
+            }
+            let pieces = count.div_ceil(settings.max_chain_length);
+            let (base, extra) = (count / pieces, count % pieces);
+            for piece in 0..pieces {
+                let length = base + usize::from(piece < extra);
+                let index = chains.len() as u64;
+                chains.push(Chain {
+                    theta: state.samples[member].clone(),
+                    log_likelihood: state.log_likelihood[member],
+                    log_prior: state.log_prior[member],
+                    length,
+                    rng: stream(settings.seed, stage_key, index),
+                    samples: Vec::with_capacity(length),
+                    proposed: None,
+                });
+            }
+        }
+        let burn_in = settings.burn_in;
+        let longest = chains.iter().map(|c| c.length).max().unwrap_or(0);
+        let dimension = self.space.dimension();
+        let mut reasons = BTreeMap::new();
+        let (mut failures, mut proposals, mut accepted, mut out_of_support) = (0, 0, 0, 0);
+        let (mut evaluations, mut batches) = (0, 0);
+        for step_index in 0..burn_in + longest {
+            let active: Vec<usize> = (0..chains.len())
+                .filter(|&c| burn_in + chains[c].length > step_index)
+                .collect();
+            // Propose in parallel, each chain from its own stream.
+            let space = self.space;
+            chains.par_iter_mut().with_min_len(64).for_each(|chain| {
+                if burn_in + chain.length > step_index {
+                    let z: Vec<f64> = (0..dimension)
+                        .map(|_| StandardNormal.sample(&mut chain.rng))
+                        .collect();
+                    let u: f64 = chain.rng.random::<f64>();
+                    let theta = proposal.step(&chain.theta, &z);
+                    let log_prior = if space.in_support(&theta) {
+                        space.log_prior(&theta).unwrap_or(f64::NEG_INFINITY)
+                    } else {
+                        f64::NEG_INFINITY
+                    };
+                    chain.proposed = Some(Proposed {
+                        theta,
+                        log_prior,
+                        ln_u: u.ln(),
+                    });
+                } else {
+                    chain.proposed = None;
+                }
+            });
+            let mut batch_chains = Vec::new();
+            let mut batch_points = Vec::new();
+            for &c in &active {
+                proposals += 1;
+                if let Some(proposed) = &chains[c].proposed {
+                    if proposed.log_prior.is_finite() {
+                        batch_chains.push(c);
+                        batch_points.push(proposed.theta.clone());
+                    } else {
+                        out_of_support += 1;
+                    }
+                }
+            }
+            if !batch_points.is_empty() {
+                batches += 1;
+                evaluations += batch_points.len();
+            }
+            let values = self.evaluate(stage, &batch_points, &mut reasons, &mut failures)?;
+            for (&c, ll_new) in batch_chains.iter().zip(values) {
+                let chain = &mut chains[c];
+                let Some(proposed) = chain.proposed.take() else {
+                    continue;
+                };
+                if !ll_new.is_finite() {
+                    continue;
+                }
+                let log_ratio = new_p * (ll_new - chain.log_likelihood)
+                    + (proposed.log_prior - chain.log_prior);
+                if proposed.ln_u < log_ratio {
+                    accepted += 1;
+                    chain.theta = proposed.theta;
+                    chain.log_likelihood = ll_new;
+                    chain.log_prior = proposed.log_prior;
+                }
+            }
+            if step_index >= burn_in {
+                for &c in &active {
+                    let chain = &mut chains[c];
+                    chain.samples.push((
+                        chain.theta.clone(),
+                        chain.log_likelihood,
+                        chain.log_prior,
+                    ));
+                }
+            }
+        }
+
+        let mut samples = Vec::with_capacity(n);
+        let mut log_likelihood = Vec::with_capacity(n);
+        let mut log_prior = Vec::with_capacity(n);
+        for chain in chains.iter_mut() {
+            for (theta, ll, lp) in chain.samples.drain(..) {
+                samples.push(theta);
+                log_likelihood.push(ll);
+                log_prior.push(lp);
+            }
+        }
+        let max_ll_new = max_finite(&log_likelihood).unwrap_or(f64::NEG_INFINITY);
+        let log_evidence = state.log_evidence + increment;
+        let diagnostics = StageDiagnostics {
+            stage,
+            exponent: new_p,
+            step,
+            cv,
+            ess_fraction,
+            step_clamped: clamped,
+            bisection_iterations: iterations,
+            log_evidence_increment: increment,
+            log_evidence,
+            max_log_likelihood: max_ll_new,
+            covariance: Some(proposal.factor),
+            chains: chains.len(),
+            proposals,
+            accepted,
+            acceptance_rate: if proposals > 0 {
+                accepted as f64 / proposals as f64
+            } else {
+                0.0
+            },
+            out_of_support,
+            failures,
+            failure_reasons: reasons,
+            evaluations,
+            batches,
+            unique_fraction: unique_fraction(&samples),
+            wall_seconds: start.elapsed().as_secs_f64(),
+        };
+        state.diagnostics.push(diagnostics);
+        state.stage = stage;
+        state.exponent = new_p;
+        state.log_evidence = log_evidence;
+        state.samples = samples;
+        state.log_likelihood = log_likelihood;
+        state.log_prior = log_prior;
+        state.evaluations += evaluations;
+        state.stop_reason = if final_pass {
+            Some(StopReason::Converged)
+        } else if new_p < 1.0 && stage >= settings.max_stages {
+            Some(StopReason::MaxStages {
+                max_stages: settings.max_stages,
+                exponent: new_p,
+            })
+        } else {
+            None
+        };
+        Ok(state)
+    }
+}
+
+/// One Markov chain of a stage.
+struct Chain {
+    theta: Vec<f64>,
+    log_likelihood: f64,
+    log_prior: f64,
+    length: usize,
+    rng: StreamRng,
+    samples: Vec<(Vec<f64>, f64, f64)>,
+    proposed: Option<Proposed>,
+}
+
+/// A chain's proposal of the current step.
+struct Proposed {
+    theta: Vec<f64>,
+    /// −∞ outside the prior support.
+    log_prior: f64,
+    ln_u: f64,
+}
+
+/// "name: checkpoint a, this run b" for every setting that differs.
+fn settings_differences(checkpoint: &CheckedSettings, run: &CheckedSettings) -> String {
+    let as_map = |s: &CheckedSettings| match serde_json::to_value(s) {
+        Ok(serde_json::Value::Object(m)) => m,
+        _ => serde_json::Map::new(),
+    };
+    let (a, b) = (as_map(checkpoint), as_map(run));
+    let differences: Vec<String> = a
+        .iter()
+        .filter(|(k, v)| b.get(*k) != Some(*v))
+        .map(|(k, v)| {
+            format!(
+                "{k}: checkpoint {v}, this run {}",
+                b.get(k).map_or("-".to_string(), |w| w.to_string())
+            )
+        })
+        .collect();
+    if differences.is_empty() {
+        format!("{:?} vs {:?}", checkpoint.settings(), run.settings())
+    } else {
+        differences.join("; ")
+    }
+}
+
+/// Distinct members (by bit pattern) divided by the population size.
+fn unique_fraction(samples: &[Vec<f64>]) -> f64 {
+    if samples.is_empty() {
+        return 0.0;
+    }
+    let distinct: HashSet<Vec<u64>> = samples
+        .iter()
+        .map(|x| x.iter().map(|v| v.to_bits()).collect())
+        .collect();
+    distinct.len() as f64 / samples.len() as f64
+}
