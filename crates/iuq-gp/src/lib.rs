@@ -1,1 +1,55 @@
-//! iuq-gp
+//! Gaussian-process regression for iuq (methods spec §3): the surrogate that stands in for an
+//! expensive model.
+//!
+//! - [`Kernel`]: k(x, x') = c·exp(−½‖(x − x')/l‖²) + σ²δ(x, x'), ARD or isotropic length
+//!   scales, c and σ² estimated or fixed; hyper-parameters θ = (ln c, ln l…, ln σ²).
+//! - [`log_marginal_likelihood()`]: LML = −½yᵀα − Σ ln L_ii − (n/2) ln 2π and its analytic
+//!   gradient ½ tr((ααᵀ − K⁻¹)∂K/∂θ), O(n³) + O(n²d).
+//! - [`fit()`] / [`GaussianProcess::fit`]: multi-start bounded quasi-Newton maximisation of the
+//!   LML on unit-cube inputs and standardised outputs ([`FitOptions`], [`Bounds`]), screened
+//!   on a subset for large n ([`screening`]), with [`FitDiagnostics`] flagging degenerate
+//!   optima.
+//! - [`GaussianProcess::predict`]: blocked, parallel posterior mean and variance (latent and
+//!   with noise) in original units.
+//! - [`q2()`], [`GaussianProcess::loo_q2`]: test-set and closed-form leave-one-out Q2.
+//! - [`GaussianProcess::to_json_string`] / [`GaussianProcess::from_json_str`]: persistence.
+//! - [`GpBank`]: one GP per output, an [`iuq_core::Model`].
+//!
+//! The crate does no I/O.
+
+#![warn(missing_docs)]
+
+pub mod bank;
+pub mod bounds;
+mod data;
+pub mod diagnostics;
+pub mod error;
+pub mod fit;
+pub mod gaussian_process;
+pub mod kernel;
+pub mod log_marginal_likelihood;
+mod multi_start;
+pub mod optimizer;
+pub mod persistence;
+pub mod prediction;
+pub mod scaling;
+pub mod screening;
+#[cfg(test)]
+mod test_data;
+pub mod validation;
+mod vector_math;
+
+pub use bank::{GpBank, PredictiveStd};
+pub use bounds::Bounds;
+pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
+pub use error::{GpError, Result};
+pub use fit::{FitOptions, fit};
+pub use gaussian_process::GaussianProcess;
+pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
+pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};
+pub use optimizer::{
+    Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
+};
+pub use prediction::Prediction;
+pub use scaling::{InputScaling, OutputScaling};
+pub use validation::{LeaveOneOut, q2};
