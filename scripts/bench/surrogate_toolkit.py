@@ -142,9 +142,9 @@ def bench_lhs(work, repeats):
         d = np.sqrt(((p[:, None, :] - p[None, :, :]) ** 2).sum(-1))
         return d[np.triu_indices(len(p), 1)].min()
 
-    py_seconds, design = median_time(lambda: lhs(3, samples=500, criterion="maximin", random_state=0), repeats)
+    py_seconds, design = median_time(lambda: lhs(3, samples=500, criterion="maximin", seed=0), repeats)
     py100_seconds, design100 = median_time(
-        lambda: lhs(3, samples=500, criterion="maximin", iterations=100, random_state=0), 1)
+        lambda: lhs(3, samples=500, criterion="maximin", iterations=100, seed=0), 1)
     print(f"{'LHS n=500 d=3 (quality, not speed)':<34} iuq ESE {seconds:.3f} s, min distance {distance:.4f} "
           f"(target ≥ 0.06 in < 1 s); pyDOE maximin {min_distance(design):.4f} in {py_seconds:.3f} s, "
           f"100 tries {min_distance(design100):.4f} in {py100_seconds:.2f} s")
