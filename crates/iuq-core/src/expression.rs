@@ -161,7 +161,7 @@ impl Parser<'_> {
             .map_or(self.source.len(), |t| t.1)
     }
 
-    fn expect(&mut self, expected: Token, what: &str) -> std::result::Result<(), String> {
+    fn consume(&mut self, expected: Token, what: &str) -> std::result::Result<(), String> {
         if self.peek() == Some(expected) {
             self.position += 1;
             Ok(())
@@ -239,7 +239,7 @@ impl Parser<'_> {
             Some(Token::Open) => {
                 self.position += 1;
                 self.expression()?;
-                self.expect(Token::Close, "`)`")
+                self.consume(Token::Close, "`)`")
             }
             Some(Token::Name(start, end)) => {
                 self.position += 1;
@@ -248,13 +248,13 @@ impl Parser<'_> {
                     self.position += 1;
                     if let Some(f) = unary_function(name) {
                         self.expression()?;
-                        self.expect(Token::Close, "`)` (one argument)")?;
+                        self.consume(Token::Close, "`)` (one argument)")?;
                         self.program.push(Instruction::Unary(f));
                     } else if let Some(f) = binary_function(name) {
                         self.expression()?;
-                        self.expect(Token::Comma, "`,` (two arguments)")?;
+                        self.consume(Token::Comma, "`,` (two arguments)")?;
                         self.expression()?;
-                        self.expect(Token::Close, "`)`")?;
+                        self.consume(Token::Close, "`)`")?;
                         self.program.push(Instruction::Binary(f));
                     } else {
                         return Err(format!("unknown function `{name}` at position {at}"));
