@@ -9,8 +9,9 @@ the output. Both run two commands at a time (two threads on EasyVVUQ's side).
 - iuq commits every result to its SQLite store (synchronous = FULL, WAL) as it is ingested;
 - EasyVVUQ, as shipped, turns SQLite's journal and syncing off and commits once at the end, so
   a crash loses every result since the start;
-- the bare spawn is `cp` started 1,000 times by `xargs -P 2`: the floor for any campaign of
-  this command.
+- the bare spawn is `cp` started 1,000 times, two at a time, exactly as the local executor
+  starts it (posix_spawn from a Rust program, no directories, templates, decoding or store): the
+  floor of any campaign of this command; `xargs -P 2` (fork + exec) is shown beside it.
 
 Per-run figures are wall time / runs. Usage:
   cargo build --release -p iuq && python3 scripts/bench/campaign_local.py [--runs N] [--repeats R]
@@ -110,9 +111,29 @@ def bench_easyvvuq(work, n, parallel):
     return elapsed
 
 
+def spawn_floor_binary():
+    for profile in ("release", "debug"):
+        path = os.path.join(ROOT, "target", profile, "examples", "spawn_floor")
+        if os.path.exists(path):
+            return path
+    subprocess.run(["cargo", "build", "-q", "-p", "iuq-campaign", "--example", "spawn_floor"], cwd=ROOT, check=True)
+    return os.path.join(ROOT, "target", "debug", "examples", "spawn_floor")
+
+
 def bench_bare_spawn(work, n, parallel):
-    """The command alone, started n times by `xargs -P` (fork + exec from a small C program,
-    `parallel` at a time): no directories, no templates, no decoding, no store."""
+    """The command alone, started n times `parallel` at a time the way the local executor starts
+    it (posix_spawn from a Rust program, crates/iuq-campaign/examples/spawn_floor.rs): no run
+    directories, templates, decoding or store."""
+    d = tempfile.mkdtemp(dir=work)
+    with open(os.path.join(d, "input.json"), "w") as f:
+        f.write('{"f": 0.5}\n')
+    out = subprocess.run([spawn_floor_binary(), str(n), str(parallel), d, "/bin/cp", "input.json", "result.json"],
+                         capture_output=True, text=True, check=True)
+    return float(out.stdout)
+
+
+def bench_xargs_spawn(work, n, parallel):
+    """The command alone, started n times by `xargs -P` (fork + exec from a small C program)."""
     d = tempfile.mkdtemp(dir=work)
     with open(os.path.join(d, "input.json"), "w") as f:
         f.write('{"f": 0.5}\n')
@@ -133,7 +154,8 @@ def main():
     work = tempfile.mkdtemp(prefix="iuq-bench-campaign-")
     try:
         results = {}
-        benches = [("bare spawn", bench_bare_spawn), ("iuq local executor", bench_iuq)]
+        benches = [("bare spawn", bench_bare_spawn), ("xargs -P spawn", bench_xargs_spawn),
+                   ("iuq local executor", bench_iuq)]
         if not args.skip_easyvvuq:
             benches.append(("EasyVVUQ 1.x", bench_easyvvuq))
         # Repeats interleave the three, so that a change of machine load hits all of them.
@@ -148,8 +170,9 @@ def main():
         for name, t in results.items():
             per_run = t / n * 1000
             overhead = (t - bare) / n * 1000
-            extra = "" if name == "bare spawn" else f"   overhead over bare spawn {overhead:6.3f} ms/run"
-            print(f"{name:<20} {t:7.3f} s   {per_run:6.3f} ms/run{extra}")
+            extra = "" if "spawn" in name else f"   overhead over bare spawn {overhead:6.3f} ms/run"
+            spread = ", ".join(f"{x:.2f}" for x in sorted(times[name]))
+            print(f"{name:<20} {t:7.3f} s   {per_run:6.3f} ms/run{extra}   (all: {spread} s)")
         if "EasyVVUQ 1.x" in results:
             ratio = results["EasyVVUQ 1.x"] / results["iuq local executor"]
             print(f"iuq is {ratio:.1f}× faster than EasyVVUQ, with every result committed (fsync) as it arrives;"

@@ -1,0 +1,507 @@
+//! The coordinator: registers designs in the store, hands pending runs to the executor, ingests
+//! results as they arrive (one committed transaction per group of events), retries by policy,
+//! and resumes after its own death.
+//!
+//! Each turn of the loop waits for events, then writes in one transaction everything that
+//! happened since the last turn (attempts started, attempts finished with their outputs, the
+//! attempts of the tasks about to be submitted); only then are the new tasks handed to the
+//! executor. A result is therefore on disk before the coordinator looks at the next one, and an
+//! execution never starts without its attempt row.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use serde::Serialize;
+
+use crate::error::{CampaignError, Result};
+use crate::executor::hyperqueue::{HyperQueueExecutor, HyperQueueSettings};
+use crate::executor::local::LocalExecutor;
+use crate::executor::slurm::{SlurmExecutor, SlurmSettings};
+use crate::executor::{
+    Executor, ExecutorEvent, OpenTask, SubmittedTask, report_events, report_matches,
+};
+use crate::outcome::OutcomeKind;
+use crate::run_directory::{Task, TaskRun, task_directory};
+use crate::store::{CampaignStore, Disposition, StatusCounts};
+use crate::study::{CampaignStudy, CommandKind, ExecutorKind};
+use crate::worker::{CompiledSpec, read_report, write_spec};
+
+/// The store file inside the campaign directory.
+pub const STORE_FILE: &str = "campaign.sqlite";
+
+/// Where the campaign's progress stands, for progress bars and log lines.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Progress {
+    /// Runs per status in the store.
+    pub counts: StatusCounts,
+    /// Runs finished since this coordinator started.
+    pub finished_this_session: u64,
+    /// Seconds since this coordinator started running.
+    pub elapsed_seconds: f64,
+    /// Estimated seconds until every run is final, from the rate of finished runs.
+    pub eta_seconds: Option<f64>,
+}
+
+/// What resuming found.
+#[derive(Debug, Clone, Default, PartialEq, Eq, Serialize)]
+pub struct ResumeSummary {
+    /// Attempts whose results were found and ingested.
+    pub ingested: u64,
+    /// Attempts the scheduler still runs, followed again.
+    pub reattached: u64,
+    /// Attempts declared lost (retried by policy).
+    pub lost: u64,
+    /// Runs put back to pending because they had no attempt.
+    pub requeued: u64,
+}
+
+/// Options of a campaign beyond its study file.
+#[derive(Debug, Clone, Default)]
+pub struct CampaignOptions {
+    /// The command that starts `iuq worker` for the Slurm and HyperQueue executors (default:
+    /// `executor.worker` of the study).
+    pub worker_command: Option<Vec<String>>,
+    /// Overrides `executor.max_parallel`.
+    pub max_parallel: Option<usize>,
+    /// Overrides `executor.poll_interval` (seconds).
+    pub poll_interval: Option<f64>,
+}
+
+/// A campaign: a study, its store and an executor.
+pub struct Campaign {
+    /// Held (with an exclusive `flock`) while this coordinator lives; released by the kernel
+    /// when it dies, however it dies.
+    _lock: std::fs::File,
+    study: CampaignStudy,
+    store: CampaignStore,
+    compiled: CompiledSpec,
+    executor: Box<dyn Executor>,
+    directory: PathBuf,
+    session_start: Option<Instant>,
+    finished_this_session: u64,
+}
+
+impl std::fmt::Debug for Campaign {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Campaign")
+            .field("study", &self.study.name)
+            .field("directory", &self.directory)
+            .finish()
+    }
+}
+
+/// The path of the store of `study`.
+pub fn store_path(study: &CampaignStudy) -> PathBuf {
+    study.executor.directory.join(STORE_FILE)
+}
+
+/// Take the coordinator lock of a campaign directory: only one coordinator may run a campaign.
+fn lock_campaign(directory: &Path) -> Result<std::fs::File> {
+    use std::io::{Read, Seek, Write};
+    use std::os::unix::io::AsRawFd;
+    let path = directory.join("coordinator.lock");
+    let mut file = std::fs::OpenOptions::new()
+        .read(true)
+        .write(true)
+        .create(true)
+        .truncate(false)
+        .open(&path)
+        .map_err(|e| CampaignError::io(&path, e))?;
+    // SAFETY: flock on a descriptor we own.
+    let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
+    if !locked {
+        let mut holder = String::new();
+        let _ = file.read_to_string(&mut holder);
+        return Err(CampaignError::BadInput(format!(
+            "{}: another coordinator ({}) is running this campaign; wait for it, or stop it and run again to resume",
+            directory.display(),
+            holder.trim()
+        )));
+    }
+    let _ = file.set_len(0);
+    let _ = file.rewind();
+    let _ = write!(
+        file,
+        "pid {} on {}",
+        std::process::id(),
+        crate::outcome::host_name()
+    );
+    Ok(file)
+}
+
+/// The name shared by every scheduler job of the campaign.
+fn job_name(study: &CampaignStudy) -> String {
+    let clean: String = study
+        .name
+        .chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '_' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .take(24)
+        .collect();
+    let dir_hash =
+        crate::study::hex_sha256(study.executor.directory.display().to_string().as_bytes());
+    format!("iuq-{clean}-{}", &dir_hash[..8])
+}
+
+impl Campaign {
+    /// Open the campaign of `study`: create its directory and store, write the worker
+    /// specification, build the executor, and resume whatever an earlier coordinator left open.
+    pub fn open(study: CampaignStudy, options: &CampaignOptions) -> Result<(Self, ResumeSummary)> {
+        let directory = study.executor.directory.clone();
+        std::fs::create_dir_all(&directory).map_err(|e| CampaignError::io(&directory, e))?;
+        let directory =
+            std::fs::canonicalize(&directory).map_err(|e| CampaignError::io(&directory, e))?;
+        let lock = lock_campaign(&directory)?;
+        let store = CampaignStore::open(&directory.join(STORE_FILE), &study)?;
+        let spec_path = write_spec(&directory, &study.model)?;
+        let compiled = CompiledSpec::new(study.model.clone())?;
+        let max_parallel = options.max_parallel.or(study.executor.max_parallel);
+        let poll = Duration::from_secs_f64(
+            options
+                .poll_interval
+                .unwrap_or(study.executor.poll_interval)
+                .max(0.01),
+        );
+        let worker_command = || -> Result<Vec<String>> {
+            if let Some(w) = options
+                .worker_command
+                .clone()
+                .or_else(|| study.executor.worker.clone())
+            {
+                return Ok(w);
+            }
+            Err(CampaignError::BadInput(format!(
+                "{}: key `executor.worker`: the {} executor needs the command that starts `iuq worker` on the compute nodes",
+                study.path.display(),
+                study.executor.kind.as_str()
+            )))
+        };
+        let executor: Box<dyn Executor> = match study.executor.kind {
+            ExecutorKind::Local => Box::new(LocalExecutor::new(compiled.clone(), max_parallel)),
+            ExecutorKind::Slurm => Box::new(SlurmExecutor::new(SlurmSettings {
+                campaign_dir: directory.clone(),
+                spec_path,
+                worker_command: worker_command()?,
+                job_name: job_name(&study),
+                throttle: max_parallel,
+                array_chunk: study.executor.array_chunk,
+                sbatch_args: study.executor.submit_args.clone(),
+                poll_interval: poll,
+            })),
+            ExecutorKind::Hyperqueue => Box::new(HyperQueueExecutor::new(HyperQueueSettings {
+                hq: study
+                    .executor
+                    .hq
+                    .clone()
+                    .or_else(|| std::env::var("HQ_BIN").ok())
+                    .unwrap_or_else(|| "hq".into()),
+                campaign_dir: directory.clone(),
+                spec_path,
+                worker_command: worker_command()?,
+                job_name: job_name(&study),
+                submit_args: study.executor.submit_args.clone(),
+                poll_interval: poll,
+            })),
+        };
+        let mut campaign = Self {
+            _lock: lock,
+            study,
+            store,
+            compiled,
+            executor,
+            directory,
+            session_start: None,
+            finished_this_session: 0,
+        };
+        let summary = campaign.resume()?;
+        Ok((campaign, summary))
+    }
+
+    /// The study.
+    pub fn study(&self) -> &CampaignStudy {
+        &self.study
+    }
+
+    /// The store.
+    pub fn store(&self) -> &CampaignStore {
+        &self.store
+    }
+
+    /// The campaign directory.
+    pub fn directory(&self) -> &Path {
+        &self.directory
+    }
+
+    fn resume(&mut self) -> Result<ResumeSummary> {
+        let mut summary = ResumeSummary {
+            requeued: self.store.requeue_orphans()? as u64,
+            ..ResumeSummary::default()
+        };
+        let open = self.store.open_attempts()?;
+        if open.is_empty() {
+            return Ok(summary);
+        }
+        // Group the open attempts by task directory.
+        let mut groups: BTreeMap<PathBuf, (String, Option<String>, SubmittedTask)> =
+            BTreeMap::new();
+        for a in open {
+            let entry = groups.entry(a.directory.clone()).or_insert_with(|| {
+                (
+                    a.executor.clone(),
+                    a.external_id.clone(),
+                    SubmittedTask {
+                        task: Task {
+                            directory: a.directory.clone(),
+                            runs: Vec::new(),
+                        },
+                        attempt_ids: Vec::new(),
+                    },
+                )
+            });
+            entry.2.task.runs.push(TaskRun {
+                run_id: a.run_id,
+                attempt: a.number,
+                parameters: a.parameters,
+            });
+            entry.2.attempt_ids.push(a.attempt_id);
+            if entry.1.is_none() {
+                entry.1 = a.external_id;
+            }
+        }
+        let mut events = Vec::new();
+        let mut to_reattach = Vec::new();
+        for (_, (executor, external_id, task)) in groups {
+            if let Some(report) =
+                read_report(&task.task.directory).filter(|r| report_matches(&task, r))
+            {
+                summary.ingested += task.attempt_ids.len() as u64;
+                events.extend(report_events(&task, report));
+            } else if executor == self.executor.kind().as_str() {
+                to_reattach.push(OpenTask {
+                    submitted: task,
+                    external_id,
+                });
+            } else {
+                events.extend(crate::executor::failure_events(
+                    &task,
+                    OutcomeKind::Lost,
+                    &format!("submitted to the {executor} executor, which this study no longer uses, and left no result"),
+                ));
+            }
+        }
+        let reattach_count: u64 = to_reattach
+            .iter()
+            .map(|t| t.submitted.attempt_ids.len() as u64)
+            .sum();
+        let reattach_events = self.executor.reattach(to_reattach)?;
+        let closed = reattach_events
+            .iter()
+            .filter(|e| matches!(e, ExecutorEvent::Finished { result, .. } if result.kind == OutcomeKind::Lost))
+            .count() as u64;
+        summary.lost = closed;
+        summary.reattached = reattach_count.saturating_sub(
+            reattach_events
+                .iter()
+                .filter(|e| matches!(e, ExecutorEvent::Finished { .. }))
+                .count() as u64,
+        );
+        events.extend(reattach_events);
+        let outputs = self.study.model.outputs.clone();
+        let policy = self.study.executor.retry.clone();
+        self.store.write(|w| {
+            for e in &events {
+                apply_event(w, e, &outputs, &policy)?;
+            }
+            Ok(())
+        })?;
+        Ok(summary)
+    }
+
+    /// Record a design (a batch of points) and return the run id of each point; identical
+    /// vectors share a run, and a vector already in the store is not run again.
+    pub fn add_points(&mut self, label: &str, points: &[Vec<f64>]) -> Result<Vec<i64>> {
+        let dim = self.study.space.dimension();
+        if let Some((i, p)) = points.iter().enumerate().find(|(_, p)| p.len() != dim) {
+            return Err(CampaignError::BadInput(format!(
+                "design `{label}`: point {i} has {} coordinates, the study has {dim} parameters",
+                p.len()
+            )));
+        }
+        self.store.add_design(label, points)
+    }
+
+    /// Run every pending run until all runs of the store are final, calling `observer` with the
+    /// progress at most every `report_every`. Returns the final counts.
+    pub fn run(
+        &mut self,
+        report_every: Duration,
+        observer: &mut dyn FnMut(&Progress),
+    ) -> Result<StatusCounts> {
+        let start = *self.session_start.get_or_insert_with(Instant::now);
+        let runs_per_task = match self.study.model.kind {
+            CommandKind::Command => 1,
+            CommandKind::BatchCommand { batch_size, .. } => batch_size,
+        };
+        let outputs = self.study.model.outputs.clone();
+        let policy = self.study.executor.retry.clone();
+        let executor_name = self.executor.kind().as_str();
+        let mut events: Vec<ExecutorEvent> = Vec::new();
+        let mut external: Vec<(i64, String)> = Vec::new();
+        let mut last_report: Option<Instant> = None;
+        loop {
+            let free = self
+                .executor
+                .capacity()
+                .saturating_sub(self.executor.in_flight());
+            let pending = if free > 0 {
+                self.store
+                    .pending_runs(free.saturating_mul(runs_per_task).min(100_000))?
+            } else {
+                Vec::new()
+            };
+            let directory = self.directory.clone();
+            let spec = &self.study.model;
+            let mut finished_now = 0u64;
+            let tasks = self.store.write(|w| {
+                for e in &events {
+                    if let Disposition::Succeeded | Disposition::Failed =
+                        apply_event(w, e, &outputs, &policy)?
+                    {
+                        finished_now += 1;
+                    }
+                }
+                for (attempt_id, id) in &external {
+                    w.set_external_id(*attempt_id, id)?;
+                }
+                let mut tasks = Vec::new();
+                for group in pending.chunks(runs_per_task.max(1)) {
+                    let dir = task_directory(&directory, spec, group[0].run_id);
+                    let mut task = SubmittedTask {
+                        task: Task {
+                            directory: dir.clone(),
+                            runs: Vec::with_capacity(group.len()),
+                        },
+                        attempt_ids: Vec::with_capacity(group.len()),
+                    };
+                    for run in group {
+                        let (attempt_id, number) =
+                            w.begin_attempt(run.run_id, executor_name, &dir)?;
+                        task.task.runs.push(TaskRun {
+                            run_id: run.run_id,
+                            attempt: number,
+                            parameters: run.parameters.clone(),
+                        });
+                        task.attempt_ids.push(attempt_id);
+                    }
+                    tasks.push(task);
+                }
+                Ok(tasks)
+            })?;
+            self.finished_this_session += finished_now;
+            events.clear();
+            external.clear();
+            let submitted_any = !tasks.is_empty();
+            if submitted_any {
+                external = self.executor.submit(tasks)?;
+            }
+            let due = last_report.is_none_or(|t| t.elapsed() >= report_every);
+            if due {
+                last_report = Some(Instant::now());
+                observer(&self.progress(start)?);
+            }
+            if self.executor.in_flight() == 0 && !submitted_any {
+                if self.store.pending_runs(1)?.is_empty() {
+                    if !external.is_empty() {
+                        let ext = std::mem::take(&mut external);
+                        self.store.write(|w| {
+                            for (attempt_id, id) in &ext {
+                                w.set_external_id(*attempt_id, id)?;
+                            }
+                            Ok(())
+                        })?;
+                    }
+                    break;
+                }
+                continue;
+            }
+            if !external.is_empty() {
+                // Record scheduler ids at once: a coordinator that dies now can reattach.
+                let ext = std::mem::take(&mut external);
+                self.store.write(|w| {
+                    for (attempt_id, id) in &ext {
+                        w.set_external_id(*attempt_id, id)?;
+                    }
+                    Ok(())
+                })?;
+            }
+            events = self
+                .executor
+                .wait(report_every.min(Duration::from_secs(1)))?;
+        }
+        let progress = self.progress(start)?;
+        observer(&progress);
+        Ok(progress.counts)
+    }
+
+    /// The current progress.
+    pub fn progress(&self, start: Instant) -> Result<Progress> {
+        let counts = self.store.counts(None)?;
+        let elapsed = start.elapsed().as_secs_f64();
+        let remaining = counts.pending + counts.queued + counts.running;
+        let eta = (self.finished_this_session > 0 && elapsed > 0.0)
+            .then(|| remaining as f64 * elapsed / self.finished_this_session as f64);
+        Ok(Progress {
+            counts,
+            finished_this_session: self.finished_this_session,
+            elapsed_seconds: elapsed,
+            eta_seconds: if remaining == 0 { Some(0.0) } else { eta },
+        })
+    }
+
+    /// Put failed runs back to pending (`failed`: model failures and other failures; `lost`:
+    /// runs whose last attempt was lost). Returns how many.
+    pub fn reset_for_retry(&mut self, failed: bool, lost: bool) -> Result<usize> {
+        self.store.reset_for_retry(failed, lost)
+    }
+
+    /// The executor's compiled model specification.
+    pub fn compiled_spec(&self) -> &CompiledSpec {
+        &self.compiled
+    }
+}
+
+/// Apply one executor event to the store.
+fn apply_event(
+    w: &crate::store::StoreWriter<'_>,
+    event: &ExecutorEvent,
+    outputs: &[String],
+    policy: &crate::retry_policy::RetryPolicy,
+) -> Result<Disposition> {
+    match event {
+        ExecutorEvent::Started {
+            attempt_id,
+            external_id,
+            host,
+            started_at,
+        } => {
+            w.mark_started(
+                *attempt_id,
+                external_id.as_deref(),
+                host.as_deref(),
+                *started_at,
+            )?;
+            Ok(Disposition::Ignored)
+        }
+        ExecutorEvent::Finished {
+            attempt_id,
+            result,
+            report,
+        } => w.finish_attempt(*attempt_id, result, report.as_ref(), outputs, policy),
+    }
+}

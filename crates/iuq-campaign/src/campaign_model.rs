@@ -1,0 +1,103 @@
+//! A campaign as a batch [`Model`]: the surrogate, the sensitivity analysis and BASIS evaluate an
+//! expensive model without knowing it runs as a campaign.
+//!
+//! Each call of [`Model::evaluate_batch`] records the batch as a design of the store, runs what
+//! is not yet known (a vector evaluated before, in this or an earlier session, is not run
+//! again), and returns one outcome per point: the outputs, or the failure with its reason.
+
+use std::sync::Mutex;
+use std::time::Duration;
+
+use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
+
+use crate::campaign::{Campaign, Progress};
+
+/// Observer of a campaign model's progress.
+pub type ProgressObserver = Box<dyn FnMut(&Progress) + Send>;
+
+/// A campaign evaluated as a batch model.
+pub struct CampaignModel {
+    inputs: Vec<String>,
+    outputs: Vec<String>,
+    state: Mutex<(Campaign, usize, Option<ProgressObserver>)>,
+    report_every: Duration,
+}
+
+impl std::fmt::Debug for CampaignModel {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CampaignModel")
+            .field("inputs", &self.inputs)
+            .field("outputs", &self.outputs)
+            .finish()
+    }
+}
+
+impl CampaignModel {
+    /// Wrap an open campaign.
+    pub fn new(campaign: Campaign) -> Self {
+        let inputs = campaign.study().space.names();
+        let outputs = campaign.study().model.outputs.clone();
+        Self {
+            inputs,
+            outputs,
+            state: Mutex::new((campaign, 0, None)),
+            report_every: Duration::from_secs(2),
+        }
+    }
+
+    /// Call `observer` with the progress of each batch, at most every `every`.
+    pub fn with_progress(mut self, every: Duration, observer: ProgressObserver) -> Self {
+        self.report_every = every;
+        if let Ok(mut state) = self.state.lock() {
+            state.2 = Some(observer);
+        }
+        self
+    }
+
+    /// Give the campaign back.
+    pub fn into_campaign(self) -> Option<Campaign> {
+        self.state.into_inner().ok().map(|s| s.0)
+    }
+}
+
+impl Model for CampaignModel {
+    fn input_names(&self) -> &[String] {
+        &self.inputs
+    }
+
+    fn output_names(&self) -> &[String] {
+        &self.outputs
+    }
+
+    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        let unavailable = |e: crate::CampaignError| CoreError::ModelUnavailable(e.to_string());
+        let mut guard = self
+            .state
+            .lock()
+            .map_err(|_| CoreError::ModelUnavailable("the campaign's lock is poisoned".into()))?;
+        let (campaign, batches, observer) = &mut *guard;
+        *batches += 1;
+        let label = format!("batch-{batches}");
+        let run_ids = campaign.add_points(&label, points).map_err(unavailable)?;
+        let mut noop = |_: &Progress| {};
+        let observer: &mut dyn FnMut(&Progress) = match observer {
+            Some(o) => o.as_mut(),
+            None => &mut noop,
+        };
+        campaign
+            .run(self.report_every, observer)
+            .map_err(unavailable)?;
+        let stored = campaign.store().outcomes(&run_ids).map_err(unavailable)?;
+        Ok(stored
+            .into_iter()
+            .map(|s| match s {
+                Some(Ok((outputs, std))) => Ok(Evaluation {
+                    outputs,
+                    computational_std: std,
+                }),
+                Some(Err(reason)) => Err(EvaluationFailure::new(reason)),
+                None => Err(EvaluationFailure::new("the run did not finish")),
+            })
+            .collect())
+    }
+}

@@ -1,0 +1,53 @@
+//! Campaigns of expensive model runs for iuq.
+//!
+//! A campaign takes a batch of parameter vectors (a training design, a Sobol' design, one BASIS
+//! stage), runs the model for each one in parallel — on this machine or on a cluster through
+//! Slurm or HyperQueue — keeps every result in an SQLite store the moment it exists, survives
+//! crashes of the simulator and of itself, and hands the results back as a batch: a
+//! [`CampaignModel`] is an [`iuq_core::Model`].
+//!
+//! | module | what |
+//! |---|---|
+//! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front |
+//! | [`template`] | `{{ name }}` templates for input files and command arguments |
+//! | [`decoder`] | outputs from a JSON file, a CSV column or a regex over a file |
+//! | [`run_directory`] | run directories: `params.json`, filled templates, batch input CSVs |
+//! | [`supervised_process`] | process groups, timeouts (SIGTERM, then SIGKILL) |
+//! | [`worker`] | executes one task, writes `result.json`/`status.json` atomically (`iuq worker`) |
+//! | [`store`] | the SQLite campaign store |
+//! | [`executor`] | local, Slurm and HyperQueue executors |
+//! | [`campaign`] | the coordinator: submit, ingest, retry, resume |
+//! | [`campaign_model`] | a campaign as a batch `Model` |
+//! | [`retry_policy`] | which failures are retried |
+//! | [`outcome`] | outcome kinds and worker reports |
+//! | [`design`] | the points of `iuq run` |
+//! | [`export`] | tidy CSV/JSON of parameters and outputs |
+//! | [`atomic_file`] | atomic file writes |
+//! | [`error`] | the crate's error type [`CampaignError`] |
+
+#![warn(missing_docs)]
+
+pub mod atomic_file;
+pub mod campaign;
+pub mod campaign_model;
+pub mod decoder;
+pub mod design;
+pub mod error;
+pub mod executor;
+pub mod export;
+pub mod outcome;
+pub mod retry_policy;
+pub mod run_directory;
+pub mod store;
+pub mod study;
+pub mod supervised_process;
+pub mod template;
+pub mod worker;
+
+pub use campaign::{Campaign, CampaignOptions, Progress, ResumeSummary, STORE_FILE, store_path};
+pub use campaign_model::CampaignModel;
+pub use error::{CampaignError, Result};
+pub use outcome::{OutcomeKind, RunResult, TaskReport};
+pub use retry_policy::RetryPolicy;
+pub use store::{CampaignStore, RunStatus, StatusCounts};
+pub use study::{CampaignStudy, CommandSpec, DesignSpec, ExecutorKind};

@@ -1,0 +1,431 @@
+//! Running one command under supervision: in its own process group, with a wall-clock limit
+//! enforced by SIGTERM to the whole group and, after a grace period, SIGKILL.
+//!
+//! The exit and the command's output are awaited with one `poll` on a pidfd and the stdout and
+//! stderr pipes (no busy waiting, no latency) where the kernel has pidfds, else with a poll
+//! timeout of a few milliseconds. Output goes to log files created only when there is output.
+//! The child is inspected with `waitid(WNOWAIT)` before it is reaped, so that the process-group
+//! id cannot be reused while stragglers of the group are killed.
+
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::Path;
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+use crate::outcome::unix_now;
+
+/// How a supervised process ended.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ProcessExit {
+    /// Its process id (and process-group id).
+    pub pid: u32,
+    /// Exit status, when it exited.
+    pub exit_code: Option<i32>,
+    /// The signal that ended it, when one did.
+    pub signal: Option<i32>,
+    /// True when it ran past its timeout and was stopped.
+    pub timed_out: bool,
+    /// Start time, seconds since the Unix epoch.
+    pub started_at: f64,
+    /// End time, seconds since the Unix epoch.
+    pub finished_at: f64,
+}
+
+/// The conventional name of a signal number (`SIGKILL`), or `signal N`.
+pub fn signal_name(signal: i32) -> String {
+    let name = match signal {
+        libc::SIGHUP => "SIGHUP",
+        libc::SIGINT => "SIGINT",
+        libc::SIGQUIT => "SIGQUIT",
+        libc::SIGILL => "SIGILL",
+        libc::SIGABRT => "SIGABRT",
+        libc::SIGBUS => "SIGBUS",
+        libc::SIGFPE => "SIGFPE",
+        libc::SIGKILL => "SIGKILL",
+        libc::SIGSEGV => "SIGSEGV",
+        libc::SIGPIPE => "SIGPIPE",
+        libc::SIGALRM => "SIGALRM",
+        libc::SIGTERM => "SIGTERM",
+        libc::SIGUSR1 => "SIGUSR1",
+        libc::SIGUSR2 => "SIGUSR2",
+        libc::SIGXCPU => "SIGXCPU",
+        _ => return format!("signal {signal}"),
+    };
+    name.to_string()
+}
+
+/// Sends `signal` to the process group `pgid`; errors (no such group) are ignored.
+pub fn signal_group(pgid: u32, signal: i32) {
+    if pgid > 1 {
+        // SAFETY: kill(2) with a negative pid signals a process group; it has no memory effects.
+        unsafe {
+            libc::kill(-(pgid as libc::pid_t), signal);
+        }
+    }
+}
+
+/// True when the child has exited (a zombie not yet reaped), without reaping it.
+fn has_exited(pid: u32) -> bool {
+    // SAFETY: waitid writes only into the zeroed siginfo_t we own.
+    unsafe {
+        let mut info: libc::siginfo_t = std::mem::zeroed();
+        let r = libc::waitid(
+            libc::P_PID,
+            pid as libc::id_t,
+            &mut info,
+            libc::WEXITED | libc::WNOWAIT | libc::WNOHANG,
+        );
+        r == 0 && info.si_pid() != 0
+    }
+}
+
+/// A pidfd of the child (when the kernel has them), readable once the child has exited.
+struct ExitWaiter {
+    pidfd: Option<libc::c_int>,
+}
+
+impl ExitWaiter {
+    fn new(pid: u32) -> Self {
+        // SAFETY: pidfd_open takes a pid and flags and returns a new descriptor or -1.
+        let fd = unsafe { libc::syscall(libc::SYS_pidfd_open, pid as libc::pid_t, 0) };
+        Self {
+            pidfd: (fd >= 0).then_some(fd as libc::c_int),
+        }
+    }
+}
+
+impl Drop for ExitWaiter {
+    fn drop(&mut self) {
+        if let Some(fd) = self.pidfd {
+            // SAFETY: closing the descriptor pidfd_open gave us.
+            unsafe {
+                libc::close(fd);
+            }
+        }
+    }
+}
+
+/// Where a supervised process's standard output and error go: files created only when the
+/// process writes something (a silent command leaves no empty log files behind, which saves two
+/// file creations per run).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct OutputLogs {
+    /// The standard-output log.
+    pub stdout: std::path::PathBuf,
+    /// The standard-error log.
+    pub stderr: std::path::PathBuf,
+    /// Bytes of standard error kept in memory for [`Supervised::stderr_tail`].
+    pub tail_bytes: usize,
+}
+
+/// A supervised process's end and the tail of its standard error.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Supervised {
+    /// How it ended.
+    pub exit: ProcessExit,
+    /// The last bytes of its standard error (lossy UTF-8).
+    pub stderr_tail: String,
+}
+
+/// A log file created on first write.
+struct LazyLog<'a> {
+    path: &'a Path,
+    file: Option<std::fs::File>,
+    failed: bool,
+}
+
+impl LazyLog<'_> {
+    fn write(&mut self, data: &[u8]) {
+        use std::io::Write;
+        if self.failed {
+            return;
+        }
+        if self.file.is_none() {
+            match std::fs::File::create(self.path) {
+                Ok(f) => self.file = Some(f),
+                Err(_) => {
+                    self.failed = true;
+                    return;
+                }
+            }
+        }
+        if let Some(f) = &mut self.file {
+            if f.write_all(data).is_err() {
+                self.failed = true;
+            }
+        }
+    }
+}
+
+/// Spawn `command` in a new process group and wait for it, enforcing `timeout` (SIGTERM to the
+/// group, then SIGKILL after `grace`), copying its standard output and error into `logs`.
+/// `on_start` is called with the pid right after the spawn. After the command ends, any process
+/// left in its group is killed.
+pub fn run_supervised(
+    command: &mut Command,
+    timeout: Option<Duration>,
+    grace: Duration,
+    logs: &OutputLogs,
+    on_start: impl FnOnce(u32),
+) -> std::io::Result<Supervised> {
+    use std::io::Read;
+    command
+        .process_group(0)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped());
+    let started_at = unix_now();
+    let start = Instant::now();
+    let mut child: Child = command.spawn()?;
+    let pid = child.id();
+    on_start(pid);
+    let mut pipes = [
+        child.stdout.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
+        child.stderr.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
+    ];
+    let mut out_log = LazyLog {
+        path: &logs.stdout,
+        file: None,
+        failed: false,
+    };
+    let mut err_log = LazyLog {
+        path: &logs.stderr,
+        file: None,
+        failed: false,
+    };
+    let mut tail: Vec<u8> = Vec::new();
+    let waiter = ExitWaiter::new(pid);
+    let mut timed_out = false;
+    let mut deadline = timeout.map(|t| start + t);
+    let mut killed = false;
+    let mut exited = false;
+    let mut drain_until: Option<Instant> = None;
+    let mut buf = vec![0u8; 64 * 1024];
+    loop {
+        if exited && pipes.iter().all(Option::is_none) {
+            break;
+        }
+        if drain_until.is_some_and(|d| Instant::now() >= d) {
+            break;
+        }
+        let mut fds: Vec<libc::pollfd> = Vec::with_capacity(3);
+        let mut which: Vec<usize> = Vec::with_capacity(3);
+        for (k, p) in pipes.iter().enumerate() {
+            if let Some(p) = p {
+                fds.push(libc::pollfd {
+                    fd: p.raw_fd(),
+                    events: libc::POLLIN,
+                    revents: 0,
+                });
+                which.push(k);
+            }
+        }
+        let pidfd_slot = match (exited, waiter.pidfd) {
+            (false, Some(fd)) => {
+                fds.push(libc::pollfd {
+                    fd,
+                    events: libc::POLLIN,
+                    revents: 0,
+                });
+                Some(fds.len() - 1)
+            }
+            _ => None,
+        };
+        let now = Instant::now();
+        let mut wait_ms: i64 = -1;
+        if let Some(d) = deadline.filter(|_| !exited) {
+            let left = d.saturating_duration_since(now);
+            wait_ms = left.as_millis() as i64 + 1;
+        }
+        if !exited && waiter.pidfd.is_none() {
+            wait_ms = if wait_ms < 0 { 5 } else { wait_ms.min(5) };
+        }
+        if let Some(d) = drain_until {
+            let left = d.saturating_duration_since(now).as_millis() as i64 + 1;
+            wait_ms = if wait_ms < 0 { left } else { wait_ms.min(left) };
+        }
+        // SAFETY: poll on pollfds we own; every descriptor stays open during the call.
+        let r = unsafe {
+            libc::poll(
+                fds.as_mut_ptr(),
+                fds.len() as libc::nfds_t,
+                wait_ms.clamp(-1, i32::MAX as i64) as i32,
+            )
+        };
+        if r < 0 && std::io::Error::last_os_error().kind() != std::io::ErrorKind::Interrupted {
+            std::thread::sleep(Duration::from_millis(5));
+        }
+        for (slot, &k) in which.iter().enumerate() {
+            if r > 0 && fds[slot].revents != 0 {
+                let n = match pipes[k].as_mut().map(|p| p.read(&mut buf)) {
+                    Some(Ok(n)) => n,
+                    Some(Err(e)) if e.kind() == std::io::ErrorKind::Interrupted => continue,
+                    _ => 0,
+                };
+                if n == 0 {
+                    pipes[k] = None;
+                } else if k == 0 {
+                    out_log.write(&buf[..n]);
+                } else {
+                    err_log.write(&buf[..n]);
+                    tail.extend_from_slice(&buf[..n]);
+                    if tail.len() > 2 * logs.tail_bytes.max(1) {
+                        tail.drain(..tail.len() - logs.tail_bytes);
+                    }
+                }
+            }
+        }
+        let pidfd_ready = pidfd_slot.is_some_and(|i| r > 0 && fds[i].revents != 0);
+        if !exited && (pidfd_ready || waiter.pidfd.is_none()) && has_exited(pid) {
+            exited = true;
+            // The leader is a zombie: its pid still names the group, so stragglers (which may
+            // hold the pipes open) can be killed safely.
+            signal_group(pid, libc::SIGKILL);
+            drain_until = Some(Instant::now() + Duration::from_secs(2));
+        }
+        if !exited && deadline.is_some_and(|d| Instant::now() >= d) {
+            if !timed_out {
+                timed_out = true;
+                signal_group(pid, libc::SIGTERM);
+                deadline = Some(Instant::now() + grace);
+            } else if !killed {
+                killed = true;
+                signal_group(pid, libc::SIGKILL);
+                deadline = None;
+            }
+        }
+    }
+    drop(pipes);
+    signal_group(pid, libc::SIGKILL);
+    drop(waiter);
+    let status = child.wait()?;
+    if tail.len() > logs.tail_bytes {
+        tail.drain(..tail.len() - logs.tail_bytes);
+    }
+    Ok(Supervised {
+        exit: ProcessExit {
+            pid,
+            exit_code: status.code(),
+            signal: status.signal(),
+            timed_out,
+            started_at,
+            finished_at: unix_now(),
+        },
+        stderr_tail: String::from_utf8_lossy(&tail).into_owned(),
+    })
+}
+
+/// A readable pipe with its descriptor.
+trait ReadFd: std::io::Read {
+    fn raw_fd(&self) -> libc::c_int;
+}
+
+impl ReadFd for std::process::ChildStdout {
+    fn raw_fd(&self) -> libc::c_int {
+        std::os::unix::io::AsRawFd::as_raw_fd(self)
+    }
+}
+
+impl ReadFd for std::process::ChildStderr {
+    fn raw_fd(&self) -> libc::c_int {
+        std::os::unix::io::AsRawFd::as_raw_fd(self)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn run(
+        script: &str,
+        timeout: Option<Duration>,
+        grace: Duration,
+        logs: &OutputLogs,
+    ) -> ProcessExit {
+        run_supervised(
+            Command::new("sh").args(["-c", script]),
+            timeout,
+            grace,
+            logs,
+            |_| {},
+        )
+        .unwrap()
+        .exit
+    }
+
+    fn logs(name: &str) -> OutputLogs {
+        let dir = std::env::temp_dir();
+        OutputLogs {
+            stdout: dir.join(format!("iuq-sp-{}-{name}.out", std::process::id())),
+            stderr: dir.join(format!("iuq-sp-{}-{name}.err", std::process::id())),
+            tail_bytes: 16,
+        }
+    }
+
+    #[test]
+    fn output_is_logged_lazily_and_the_stderr_tail_kept() {
+        let l = logs("lazy");
+        let _ = std::fs::remove_file(&l.stdout);
+        let _ = std::fs::remove_file(&l.stderr);
+        let s = run_supervised(
+            &mut Command::new("true"),
+            None,
+            Duration::from_millis(100),
+            &l,
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(s.exit.exit_code, Some(0));
+        assert!(!l.stdout.exists() && !l.stderr.exists());
+        let s = run_supervised(
+            Command::new("sh").args(["-c", "echo out; echo 0123456789abcdefXYZ >&2"]),
+            None,
+            Duration::from_millis(100),
+            &l,
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(std::fs::read_to_string(&l.stdout).unwrap(), "out\n");
+        assert_eq!(
+            std::fs::read_to_string(&l.stderr).unwrap(),
+            "0123456789abcdefXYZ\n"
+        );
+        assert_eq!(s.stderr_tail, "456789abcdefXYZ\n");
+        // A background process holding the pipes open does not keep the run alive.
+        let t = Instant::now();
+        let s = run_supervised(
+            Command::new("sh").args(["-c", "sleep 30 & echo started"]),
+            None,
+            Duration::from_millis(100),
+            &l,
+            |_| {},
+        )
+        .unwrap();
+        assert_eq!(s.exit.exit_code, Some(0));
+        assert!(t.elapsed() < Duration::from_secs(5));
+        let _ = std::fs::remove_file(&l.stdout);
+        let _ = std::fs::remove_file(&l.stderr);
+    }
+
+    #[test]
+    fn exit_codes_signals_and_timeouts() {
+        let grace = Duration::from_millis(300);
+        let l = logs("exits");
+        let e = run("exit 3", None, grace, &l);
+        assert_eq!((e.exit_code, e.signal, e.timed_out), (Some(3), None, false));
+        let e = run("kill -SEGV $$", None, grace, &l);
+        assert_eq!((e.exit_code, e.signal), (None, Some(libc::SIGSEGV)));
+        let t = Instant::now();
+        let e = run("sleep 30", Some(Duration::from_millis(200)), grace, &l);
+        assert!(e.timed_out && e.signal == Some(libc::SIGTERM), "{e:?}");
+        assert!(t.elapsed() < Duration::from_secs(5));
+        // A command that ignores SIGTERM is killed after the grace period.
+        let e = run(
+            "trap '' TERM; while :; do sleep 0.05; done",
+            Some(Duration::from_millis(200)),
+            grace,
+            &l,
+        );
+        assert!(e.timed_out && e.signal == Some(libc::SIGKILL), "{e:?}");
+        assert_eq!(signal_name(9), "SIGKILL");
+    }
+}

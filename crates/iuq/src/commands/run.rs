@@ -1,0 +1,184 @@
+//! `iuq run STUDY`: run the study's design as a campaign of model runs (resuming whatever an
+//! earlier coordinator left), with a progress bar on a terminal and log lines otherwise.
+
+use std::io::IsTerminal;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::{Value, json};
+
+use iuq_campaign::design::design_points;
+use iuq_campaign::{
+    Campaign, CampaignError, CampaignOptions, CampaignStudy, Progress, ResumeSummary, StatusCounts,
+};
+
+use crate::input_error::input_error;
+use crate::report_output::emit;
+
+/// Arguments of `iuq run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// The study file (TOML) with a [model] of kind "command" or "batch-command" and a [design].
+    pub study: PathBuf,
+    /// Runs at once (overrides `executor.max_parallel`).
+    #[arg(long)]
+    pub max_parallel: Option<usize>,
+    /// Seconds between log lines when stderr is not a terminal.
+    #[arg(long, default_value_t = 5.0)]
+    pub log_interval: f64,
+}
+
+/// A campaign error as a CLI error: bad input (exit 2) or a failure of the work (exit 1).
+pub fn campaign_error(error: CampaignError) -> anyhow::Error {
+    if error.is_bad_input() {
+        input_error(error.to_string())
+    } else {
+        anyhow::Error::new(error)
+    }
+}
+
+/// Read and validate a campaign study file.
+pub fn load_study(path: &Path) -> Result<CampaignStudy> {
+    CampaignStudy::load(path).map_err(campaign_error)
+}
+
+/// Open the campaign of `study` (resuming it), with this binary as the remote worker.
+pub fn open_campaign(
+    study: CampaignStudy,
+    max_parallel: Option<usize>,
+) -> Result<(Campaign, ResumeSummary)> {
+    let worker_command = std::env::current_exe()
+        .ok()
+        .map(|exe| vec![exe.display().to_string(), "worker".to_string()]);
+    let options = CampaignOptions {
+        worker_command: study.executor.worker.clone().or(worker_command),
+        max_parallel,
+        poll_interval: None,
+    };
+    if max_parallel == Some(0) {
+        return Err(input_error("--max-parallel: must be at least 1"));
+    }
+    Campaign::open(study, &options).map_err(campaign_error)
+}
+
+fn seconds(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..=59 => format!("{s}s"),
+        60..=3599 => format!("{}m{:02}s", s / 60, s % 60),
+        _ => format!("{}h{:02}m", s / 3600, (s % 3600) / 60),
+    }
+}
+
+/// One log line about the progress of campaign `name`.
+pub fn progress_line(name: &str, p: &Progress) -> String {
+    let c = &p.counts;
+    format!(
+        "campaign {name}: {}/{} finished ({} succeeded, {} failed), {} running, {} queued, {} pending, elapsed {}, ETA {}",
+        c.finished(),
+        c.total(),
+        c.succeeded,
+        c.failed + c.cancelled,
+        c.running,
+        c.queued,
+        c.pending,
+        seconds(p.elapsed_seconds),
+        p.eta_seconds.map_or_else(|| "unknown".into(), seconds)
+    )
+}
+
+/// Run every pending run of the campaign, showing progress on stderr: a progress bar with ETA
+/// when stderr is a terminal (and `--json` is off), log lines every `log_interval` otherwise.
+pub fn drive(campaign: &mut Campaign, json: bool, log_interval: f64) -> Result<StatusCounts> {
+    let name = campaign.study().name.clone();
+    let interactive = !json && std::io::stderr().is_terminal();
+    if interactive {
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(
+                "{prefix} [{bar:40}] {pos}/{len} {msg} (elapsed {elapsed}, ETA {eta})",
+            )
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+            .progress_chars("=> "),
+        );
+        bar.set_prefix(name.clone());
+        let counts = campaign
+            .run(Duration::from_millis(200), &mut |p: &Progress| {
+                bar.set_length(p.counts.total());
+                bar.set_position(p.counts.finished());
+                bar.set_message(format!(
+                    "{} failed, {} running",
+                    p.counts.failed + p.counts.cancelled,
+                    p.counts.running
+                ));
+            })
+            .map_err(campaign_error)?;
+        bar.finish();
+        Ok(counts)
+    } else {
+        let interval = Duration::from_secs_f64(log_interval.max(0.1));
+        campaign
+            .run(interval, &mut |p: &Progress| {
+                eprintln!("{}", progress_line(&name, p))
+            })
+            .map_err(campaign_error)
+    }
+}
+
+/// The summary printed by `iuq run` and `iuq retry`.
+pub fn summary(campaign: &Campaign, counts: &StatusCounts, resume: &ResumeSummary) -> Value {
+    json!({
+        "study": campaign.study().name,
+        "directory": campaign.directory().display().to_string(),
+        "store": campaign.store().path().display().to_string(),
+        "executor": campaign.study().executor.kind.as_str(),
+        "counts": counts,
+        "total": counts.total(),
+        "resumed": resume,
+    })
+}
+
+/// Human text of a summary.
+pub fn summary_text(v: &Value) -> String {
+    let c = &v["counts"];
+    let mut text = format!(
+        "campaign {}: {} runs, {} succeeded, {} failed, {} cancelled\nstore: {}",
+        v["study"].as_str().unwrap_or_default(),
+        v["total"],
+        c["succeeded"],
+        c["failed"],
+        c["cancelled"],
+        v["store"].as_str().unwrap_or_default()
+    );
+    let r = &v["resumed"];
+    if r["ingested"].as_u64().unwrap_or(0)
+        + r["lost"].as_u64().unwrap_or(0)
+        + r["reattached"].as_u64().unwrap_or(0)
+        > 0
+    {
+        text.push_str(&format!(
+            "\nresumed: {} results ingested, {} executions reattached, {} lost (retried by policy)",
+            r["ingested"], r["reattached"], r["lost"]
+        ));
+    }
+    if c["failed"].as_u64().unwrap_or(0) > 0 {
+        text.push_str("\nsee `iuq status` for the failures and their reasons");
+    }
+    text
+}
+
+/// Run `iuq run`.
+pub fn run(args: &RunArgs, json: bool) -> Result<()> {
+    let study = load_study(&args.study)?;
+    let points = design_points(&study).map_err(campaign_error)?;
+    let (mut campaign, resume) = open_campaign(study, args.max_parallel)?;
+    campaign
+        .add_points("design", &points)
+        .map_err(campaign_error)?;
+    let counts = drive(&mut campaign, json, args.log_interval)?;
+    let value = summary(&campaign, &counts, &resume);
+    emit(json, &value, || summary_text(&value));
+    Ok(())
+}

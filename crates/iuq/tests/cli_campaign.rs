@@ -1,0 +1,628 @@
+//! End-to-end tests of `iuq run`, `iuq status`, `iuq retry`, `iuq export` and `iuq worker`:
+//! real processes, a fake simulator driven by its parameters, a coordinator killed with SIGKILL
+//! in the middle of a campaign, and fake `sbatch`/`squeue`/`scontrol` and `hq` programs on PATH
+//! (the HyperQueue one prints the JSON shapes of `tests/fixtures/hq` in iuq-campaign).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+const FAKE_SIMULATOR: &str = r#"#!/bin/sh
+# usage: sim.sh MODE X — writes result.json with f = X, or misbehaves by MODE.
+mode=$1; x=$2
+case $mode in
+ 0) echo "{\"f\": $x}" > result.json ;;
+ 1) sleep 0.03; echo "{\"f\": $x}" > result.json ;;
+ 2) echo "solver diverged" >&2; exit 1 ;;
+ 3) kill -SEGV $$ ;;
+ 4) trap '' TERM; sleep 30 ;;
+ 5) echo "garbage{" > result.json ;;
+ 6) echo '{"f": "NaN"}' > result.json ;;
+ 7) : ;;
+ 8) sleep 0.4; echo "{\"f\": $x}" > result.json ;;
+ 9) if [ "$IUQ_ATTEMPT" = 1 ]; then kill -9 $PPID; sleep 0.2; exit 0; fi; echo "{\"f\": $x}" > result.json ;;
+esac
+"#;
+
+fn iuq(args: &[&str]) -> Output {
+    iuq_with_path(args, None)
+}
+
+fn iuq_with_path(args: &[&str], extra_path: Option<(&Path, &Path)>) -> Output {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_iuq"));
+    c.args(args);
+    if let Some((bin, state)) = extra_path {
+        let path = format!(
+            "{}:{}",
+            bin.display(),
+            std::env::var("PATH").unwrap_or_default()
+        );
+        c.env("PATH", path).env("FAKE_SCHED_DIR", state);
+    }
+    c.output().expect("the iuq binary runs")
+}
+
+fn json_of(output: &Output) -> Value {
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "exactly one JSON line expected, got: {stdout}\nstderr: {}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    serde_json::from_str(lines[0]).expect("valid JSON")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iuq-cli-campaign-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn executable(path: &Path, text: &str) {
+    std::fs::write(path, text).unwrap();
+    Command::new("chmod").arg("+x").arg(path).status().unwrap();
+}
+
+/// A study of the fake simulator over the points `(mode, x)`.
+fn study(dir: &Path, points: &[(u32, f64)], executor: &str) -> PathBuf {
+    executable(&dir.join("sim.sh"), FAKE_SIMULATOR);
+    let mut csv = String::from("mode,x\n");
+    for (m, x) in points {
+        csv.push_str(&format!("{m},{x}\n"));
+    }
+    std::fs::write(dir.join("points.csv"), csv).unwrap();
+    let text = format!(
+        r#"name = "fake"
+[parameters]
+mode = {{ uniform = [0, 10] }}
+x = {{ uniform = [0, 1000] }}
+[model]
+kind = "command"
+command = ["./sim.sh", "{{{{ mode }}}}", "{{{{ x }}}}"]
+outputs = ["f"]
+output = {{ file = "result.json", format = "json" }}
+timeout = "1s"
+kill_grace = "200ms"
+[design]
+kind = "file"
+file = "points.csv"
+[executor]
+{executor}
+"#
+    );
+    let path = dir.join("study.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn store_of(dir: &Path) -> iuq_campaign::CampaignStore {
+    iuq_campaign::CampaignStore::open_existing(&dir.join("study.campaign/campaign.sqlite")).unwrap()
+}
+
+#[test]
+fn run_status_export_and_retry_of_a_misbehaving_simulator() {
+    let dir = scratch("verbs");
+    let points: Vec<(u32, f64)> = (0..8)
+        .filter(|m| *m != 1)
+        .map(|m| (m, m as f64 + 0.5))
+        .collect();
+    let path = study(&dir, &points, "max_parallel = 3");
+    let p = path.to_str().unwrap();
+    let o = iuq(&["run", p, "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 1);
+    assert_eq!(v["counts"]["failed"], 6);
+    // Without a terminal, progress goes to stderr as log lines.
+    assert!(String::from_utf8_lossy(&o.stderr).contains("campaign fake: "));
+
+    let v = json_of(&iuq(&["status", p, "--json"]));
+    assert_eq!(v["total"], 7);
+    let failures = v["failures"].as_array().unwrap();
+    let kinds: Vec<&str> = failures
+        .iter()
+        .map(|f| f["kind"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        kinds,
+        [
+            "exit_status",
+            "signal",
+            "timeout",
+            "bad_output",
+            "non_finite",
+            "missing_output"
+        ]
+    );
+    assert!(
+        failures[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("solver diverged")
+    );
+    assert_eq!(failures[0]["parameters"]["mode"], 2.0);
+    let text = String::from_utf8_lossy(&iuq(&["status", p]).stdout).to_string();
+    assert!(text.contains("killed by SIGSEGV"), "{text}");
+
+    let csv_path = dir.join("runs.csv");
+    let o = iuq(&["export", p, "--out", csv_path.to_str().unwrap()]);
+    assert!(o.status.success());
+    let csv = std::fs::read_to_string(&csv_path).unwrap();
+    let mut lines = csv.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "run_id,status,mode,x,f,attempts,outcome,reason"
+    );
+    assert!(
+        lines
+            .next()
+            .unwrap()
+            .starts_with("1,succeeded,0.0,0.5,0.5,1,succeeded,")
+    );
+    let v = json_of(&iuq(&["export", p, "--json"]));
+    assert_eq!(v.as_array().unwrap().len(), 7);
+    assert_eq!(v[0]["f"], 0.5);
+    assert_eq!(v[1]["f"], Value::Null);
+
+    // A second `iuq run` runs nothing again.
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["total"], 7);
+    // `iuq retry --failed` runs the failures again (and they fail again, deterministically).
+    let v = json_of(&iuq(&["retry", p, "--failed", "--json"]));
+    assert_eq!(v["retried"], 6);
+    assert_eq!(v["counts"]["failed"], 6);
+    let attempts: i64 = store_of(&dir)
+        .connection()
+        .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(attempts, 13);
+    let v = json_of(&iuq(&["retry", p, "--lost", "--json"]));
+    assert_eq!(v["retried"], 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_study_files_exit_2_naming_file_key_and_reason() {
+    let dir = scratch("bad");
+    let path = study(&dir, &[(0, 1.0)], "max_parallel = 2");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let cases = [
+        (text.replace("{{ x }}", "{{ y }}"), "model.command[2]"),
+        (
+            text.replace("timeout = \"1s\"", "timeout = \"a while\""),
+            "model.timeout",
+        ),
+        (
+            text.replace("max_parallel = 2", "max_parallel = 0"),
+            "executor.max_parallel",
+        ),
+        (
+            text.replace("file = \"points.csv\"", "file = \"nope.csv\""),
+            "design.file",
+        ),
+    ];
+    for (body, key) in cases {
+        std::fs::write(&path, body).unwrap();
+        let o = iuq(&["run", path.to_str().unwrap(), "--json"]);
+        assert_eq!(o.status.code(), Some(2), "{key}");
+        let v = json_of(&o);
+        assert_eq!(v["error"]["kind"], "bad_input");
+        let m = v["error"]["message"].as_str().unwrap();
+        assert!(m.contains("study.toml") && m.contains(key), "{m}");
+    }
+    let o = iuq(&["status", dir.join("missing.toml").to_str().unwrap()]);
+    assert_eq!(o.status.code(), Some(2));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results() {
+    let dir = scratch("crash");
+    let points: Vec<(u32, f64)> = (0..200).map(|i| (1, i as f64)).collect();
+    let path = study(&dir, &points, "max_parallel = 4");
+    let p = path.to_str().unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(["run", p, "--json"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let db = dir.join("study.campaign/campaign.sqlite");
+    let start = Instant::now();
+    let mut before = 0;
+    while start.elapsed() < Duration::from_secs(60) {
+        std::thread::sleep(Duration::from_millis(20));
+        if !db.exists() {
+            continue;
+        }
+        let Ok(store) = iuq_campaign::CampaignStore::open_existing(&db) else {
+            continue;
+        };
+        before = store.counts(None).map_or(0, |c| c.succeeded);
+        if before >= 40 {
+            break;
+        }
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    assert!((40..200).contains(&before), "killed after {before} results");
+    let store = store_of(&dir);
+    let committed: Vec<(i64, f64, i64)> = store
+        .connection()
+        .prepare("SELECT o.run_id, o.value, o.attempt_id FROM outputs o ORDER BY o.run_id")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    drop(store);
+
+    let o = iuq(&["run", p, "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 200, "{v}");
+    let resumed = &v["resumed"];
+    assert!(
+        resumed["lost"].as_u64().unwrap() + resumed["ingested"].as_u64().unwrap() >= 1,
+        "the executions in flight at the kill were ingested or declared lost: {v}"
+    );
+    let store = store_of(&dir);
+    assert_eq!(store.integrity_check().unwrap(), "ok");
+    let per_run: Vec<(i64, i64)> = store
+        .connection()
+        .prepare("SELECT r.id, (SELECT COUNT(*) FROM attempts a WHERE a.run_id = r.id AND a.outcome_kind = 'succeeded') FROM runs r")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(per_run.len(), 200);
+    assert!(
+        per_run.iter().all(|(_, n)| *n == 1),
+        "every run has exactly one successful execution"
+    );
+    let open: i64 = store
+        .connection()
+        .query_row(
+            "SELECT COUNT(*) FROM attempts WHERE outcome_kind IS NULL",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(open, 0);
+    for (run_id, value, attempt_id) in committed {
+        let (v2, a2): (f64, i64) = store
+            .connection()
+            .query_row(
+                "SELECT value, attempt_id FROM outputs WHERE run_id = ?1",
+                [run_id],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .unwrap();
+        assert_eq!(
+            (v2, a2),
+            (value, attempt_id),
+            "result of run {run_id} kept as committed"
+        );
+    }
+    for (run_id, _) in &per_run {
+        let x: f64 = store
+            .connection()
+            .query_row(
+                "SELECT value FROM outputs WHERE run_id = ?1",
+                [run_id],
+                |r| r.get(0),
+            )
+            .unwrap();
+        assert_eq!(x, (*run_id - 1) as f64);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+const FAKE_SBATCH: &str = r#"#!/bin/sh
+D="$FAKE_SCHED_DIR"; mkdir -p "$D/queue"
+echo "$@" >> "$D/sbatch.log"
+array=""; name=""; script=""
+for a in "$@"; do
+  case "$a" in
+    --array=*) array="${a#--array=}" ;;
+    --job-name=*) name="${a#--job-name=}" ;;
+    --*) ;;
+    *) script="$a" ;;
+  esac
+done
+n=$(cat "$D/counter" 2>/dev/null || echo 100); n=$((n+1)); echo $n > "$D/counter"
+range="${array%%\%*}"; first="${range%-*}"; last="${range#*-}"
+i=$first; while [ $i -le $last ]; do echo "PENDING|$name" > "$D/queue/${n}_$i"; i=$((i+1)); done
+(
+  i=$first
+  while [ $i -le $last ]; do
+    echo "RUNNING|$name" > "$D/queue/.${n}_$i" && mv "$D/queue/.${n}_$i" "$D/queue/${n}_$i"
+    SLURM_ARRAY_TASK_ID=$i SLURM_ARRAY_JOB_ID=$n sh "$script" > "$D/${n}_$i.out" 2>&1
+    rm -f "$D/queue/${n}_$i"
+    i=$((i+1))
+  done
+) > /dev/null 2>&1 < /dev/null &
+echo "$n"
+"#;
+
+const FAKE_SQUEUE: &str = r#"#!/bin/sh
+D="$FAKE_SCHED_DIR"; name=""
+for a in "$@"; do case "$a" in --name=*) name="${a#--name=}" ;; esac; done
+for f in "$D"/queue/*; do
+  [ -e "$f" ] || continue
+  IFS='|' read -r state jn < "$f" 2>/dev/null || continue
+  [ "$jn" = "$name" ] && echo "$(basename "$f")|$state|localhost"
+done
+exit 0
+"#;
+
+const FAKE_SCONTROL: &str = r#"#!/bin/sh
+case "$1 $2" in
+  "show config") echo "MaxArraySize            = 5" ;;
+  *) echo "slurm_load_jobs error: Invalid job id specified" >&2; exit 1 ;;
+esac
+"#;
+
+#[test]
+fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_failures() {
+    let dir = scratch("fake-slurm");
+    let bin = dir.join("bin");
+    let state = dir.join("slurm-state");
+    std::fs::create_dir_all(&bin).unwrap();
+    std::fs::create_dir_all(&state).unwrap();
+    executable(&bin.join("sbatch"), FAKE_SBATCH);
+    executable(&bin.join("squeue"), FAKE_SQUEUE);
+    executable(&bin.join("scontrol"), FAKE_SCONTROL);
+    let mut points: Vec<(u32, f64)> = (0..10).map(|i| (0, i as f64)).collect();
+    points.push((2, 50.0)); // fails: exit status 1
+    points.push((9, 60.0)); // kills its worker on the first attempt: lost, then retried
+    let path = study(
+        &dir,
+        &points,
+        "kind = \"slurm\"\nmax_parallel = 2\narray_chunk = 100\npoll_interval = \"100ms\"",
+    );
+    let o = iuq_with_path(
+        &["run", path.to_str().unwrap(), "--json"],
+        Some((&bin, &state)),
+    );
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 11, "{v}");
+    assert_eq!(v["counts"]["failed"], 1);
+    let log = std::fs::read_to_string(state.join("sbatch.log")).unwrap();
+    let arrays: Vec<&str> = log.lines().collect();
+    // 12 tasks below MaxArraySize = 5: arrays of 5, 5 and 2, then the retry of the lost task.
+    assert_eq!(arrays.len(), 4, "{log}");
+    assert!(
+        arrays[0].contains("--array=0-4%2") && arrays[2].contains("--array=0-1%2"),
+        "{log}"
+    );
+    assert!(arrays[3].contains("--array=0-0%2"), "{log}");
+    let store = store_of(&dir);
+    let kinds: Vec<(String, Option<String>, Option<String>)> = store
+        .connection()
+        .prepare("SELECT outcome_kind, external_id, host FROM attempts WHERE run_id = 12 ORDER BY number")
+        .unwrap()
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(kinds.len(), 2);
+    assert_eq!(kinds[0].0, "lost");
+    assert_eq!(kinds[1].0, "succeeded");
+    assert!(
+        kinds[1].1.as_deref().unwrap().contains('_'),
+        "a Slurm array id: {:?}",
+        kinds[1].1
+    );
+    let failed: String = store
+        .connection()
+        .query_row("SELECT reason FROM runs WHERE status = 'failed'", [], |r| {
+            r.get(0)
+        })
+        .unwrap();
+    assert!(failed.contains("exited with status 1"), "{failed}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn a_coordinator_killed_while_slurm_runs_its_arrays_reattaches_without_resubmitting() {
+    let dir = scratch("slurm-reattach");
+    let bin = dir.join("bin");
+    let state = dir.join("slurm-state");
+    std::fs::create_dir_all(&bin).unwrap();
+    std::fs::create_dir_all(&state).unwrap();
+    executable(&bin.join("sbatch"), FAKE_SBATCH);
+    executable(&bin.join("squeue"), FAKE_SQUEUE);
+    executable(&bin.join("scontrol"), FAKE_SCONTROL);
+    let points: Vec<(u32, f64)> = (0..5).map(|i| (8, i as f64)).collect();
+    let path = study(&dir, &points, "kind = \"slurm\"\npoll_interval = \"100ms\"");
+    let p = path.to_str().unwrap();
+    let path_var = format!(
+        "{}:{}",
+        bin.display(),
+        std::env::var("PATH").unwrap_or_default()
+    );
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(["run", p, "--json"])
+        .env("PATH", &path_var)
+        .env("FAKE_SCHED_DIR", &state)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let start = Instant::now();
+    while !state.join("sbatch.log").exists() && start.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(500));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let o = iuq_with_path(&["run", p, "--json"], Some((&bin, &state)));
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 5, "{v}");
+    assert!(v["resumed"]["reattached"].as_u64().unwrap() >= 1, "{v}");
+    assert_eq!(v["resumed"]["lost"], 0, "{v}");
+    let log = std::fs::read_to_string(state.join("sbatch.log")).unwrap();
+    assert_eq!(log.lines().count(), 1, "one array, not resubmitted: {log}");
+    let attempts: i64 = store_of(&dir)
+        .connection()
+        .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(attempts, 5);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+const FAKE_HQ: &str = r#"#!/bin/sh
+D="$FAKE_SCHED_DIR"; mkdir -p "$D/hq"
+echo "$@" >> "$D/hq.log"
+[ "$1" = "--output-mode=json" ] || { echo "fake hq: JSON output mode only" >&2; exit 2; }
+shift
+case "$1" in
+  submit)
+    shift; array=""
+    while [ $# -gt 0 ]; do case "$1" in --array=*) array="${1#--array=}" ;; --) shift; break ;; esac; shift; done
+    n=$(cat "$D/hq_counter" 2>/dev/null || echo 0); n=$((n+1)); echo $n > "$D/hq_counter"
+    first="${array%-*}"; last="${array#*-}"
+    i=$first; while [ $i -le $last ]; do echo waiting > "$D/hq/$n.$i"; i=$((i+1)); done
+    (
+      i=$first
+      while [ $i -le $last ]; do
+        echo running > "$D/hq/.t" && mv "$D/hq/.t" "$D/hq/$n.$i"
+        if HQ_JOB_ID=$n HQ_TASK_ID=$i "$@" > /dev/null 2>&1; then s=finished; else s=failed; fi
+        echo $s > "$D/hq/.t" && mv "$D/hq/.t" "$D/hq/$n.$i"
+        i=$((i+1))
+      done
+    ) > /dev/null 2>&1 < /dev/null &
+    printf '{\n  "id": %s\n}\n' "$n" ;;
+  job)
+    ids=$(echo "$3" | tr ',' ' ')
+    printf '['; sep=''
+    for j in $ids; do
+      printf '%s{"info": {"id": %s, "name": "iuq", "task_count": 0, "task_stats": {}}, "tasks": [' "$sep" "$j"; tsep=''
+      for f in "$D"/hq/$j.*; do
+        [ -e "$f" ] || continue
+        t=${f##*.}; s=$(cat "$f")
+        w=''; [ "$s" = waiting ] || w=', "worker": 1'
+        printf '%s{"id": %s, "state": "%s"%s}' "$tsep" "$t" "$s" "$w"; tsep=', '
+      done
+      printf ']}'; sep=', '
+    done
+    printf ']\n' ;;
+  *) echo "fake hq: unknown command $1" >&2; exit 2 ;;
+esac
+"#;
+
+fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) {
+    let points: Vec<(u32, f64)> = vec![(0, 1.0), (0, 2.0), (2, 3.0), (0, 4.0)];
+    let executor = format!(
+        "kind = \"hyperqueue\"\nhq = \"{}\"\npoll_interval = \"100ms\"",
+        hq.display()
+    );
+    let path = study(dir, &points, &executor);
+    let mut c = Command::new(env!("CARGO_BIN_EXE_iuq"));
+    c.args(["run", path.to_str().unwrap(), "--json"]);
+    if let Some(state) = state {
+        c.env("FAKE_SCHED_DIR", state);
+    }
+    let o = c.output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 3, "{v}");
+    assert_eq!(v["counts"]["failed"], 1);
+    let v = json_of(&iuq(&["status", path.to_str().unwrap(), "--json"]));
+    assert!(
+        v["failures"][0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("exited with status 1")
+    );
+    let ids: Vec<Option<String>> = store_of(dir)
+        .connection()
+        .prepare("SELECT external_id FROM attempts ORDER BY id")
+        .unwrap()
+        .query_map([], |r| r.get(0))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert!(
+        ids.iter()
+            .all(|i| i.as_deref().is_some_and(|i| i.contains('.'))),
+        "{ids:?}"
+    );
+}
+
+#[test]
+fn hyperqueue_executor_with_a_fake_hq_printing_recorded_json() {
+    let dir = scratch("fake-hq");
+    let state = dir.join("hq-state");
+    std::fs::create_dir_all(&state).unwrap();
+    let hq = dir.join("hq");
+    executable(&hq, FAKE_HQ);
+    hyperqueue_campaign(&hq, Some(&state), &dir);
+    let log = std::fs::read_to_string(state.join("hq.log")).unwrap();
+    assert!(
+        log.lines().next().unwrap().contains("submit --array=0-3"),
+        "{log}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Against a real HyperQueue: set HQ_BIN to the `hq` binary. The test starts a server and a
+/// worker in a scratch directory and stops them afterwards.
+#[test]
+fn hyperqueue_executor_with_a_real_hq_when_hq_bin_is_set() {
+    let Ok(hq) = std::env::var("HQ_BIN") else {
+        eprintln!(
+            "skipped: set HQ_BIN to a HyperQueue `hq` binary to run the campaign against a real server"
+        );
+        return;
+    };
+    let dir = scratch("real-hq");
+    let server_dir = dir.join("hq-server");
+    let mut server = Command::new(&hq)
+        .args(["server", "start", "--server-dir"])
+        .arg(&server_dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("hq server starts");
+    std::thread::sleep(Duration::from_secs(2));
+    let mut worker = Command::new(&hq)
+        .args(["worker", "start", "--server-dir"])
+        .arg(&server_dir)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .expect("hq worker starts");
+    std::thread::sleep(Duration::from_secs(2));
+    // `hq` finds the server through HQ_SERVER_DIR.
+    let wrapper = dir.join("hq-wrapper.sh");
+    executable(
+        &wrapper,
+        &format!(
+            "#!/bin/sh\nexec '{hq}' --server-dir '{}' \"$@\"\n",
+            server_dir.display()
+        ),
+    );
+    let result = std::panic::catch_unwind(|| hyperqueue_campaign(&wrapper, None, &dir));
+    let _ = Command::new(&hq)
+        .args(["server", "stop", "--server-dir"])
+        .arg(&server_dir)
+        .status();
+    let _ = worker.kill();
+    let _ = server.kill();
+    let _ = worker.wait();
+    let _ = server.wait();
+    if let Err(e) = result {
+        std::panic::resume_unwind(e);
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
