@@ -10,7 +10,7 @@ use crate::data::validate_points;
 use crate::error::{GpError, Result};
 use crate::fit::{FitOptions, fit_with_stream};
 use crate::gaussian_process::GaussianProcess;
-use crate::prediction::Prediction;
+use crate::prediction::{BLOCK, Prediction};
 
 /// Which predictive standard deviation a bank reports as the computational std.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -179,6 +179,40 @@ impl GpBank {
     }
 }
 
+impl GpBank {
+    /// Means and reported stds of every output at validated points: one parallel loop over
+    /// (output, block of [`BLOCK`] points), so that all cores share the work of all GPs
+    /// whatever the batch size; each block is computed sequentially, so the results do not
+    /// depend on the number of threads.
+    fn predict_valid(&self, points: &[Vec<f64>]) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let m = points.len();
+        let mut means = vec![vec![0.0; m]; self.gps.len()];
+        let mut stds = vec![vec![0.0; m]; self.gps.len()];
+        let mut tasks = Vec::with_capacity(self.gps.len() * m.div_ceil(BLOCK));
+        for ((gp, mean), std) in self.gps.iter().zip(&mut means).zip(&mut stds) {
+            for ((mc, sc), pc) in mean
+                .chunks_mut(BLOCK)
+                .zip(std.chunks_mut(BLOCK))
+                .zip(points.chunks(BLOCK))
+            {
+                tasks.push((gp, mc, sc, pc));
+            }
+        }
+        tasks.into_par_iter().for_each(|(gp, mc, sc, pc)| {
+            gp.predict_block(pc, mc, Some(&mut *sc));
+            let s = gp.output_scaling.std;
+            let noise = match self.predictive_std {
+                PredictiveStd::WithNoise => s * s * gp.hyperparameters.noise_variance,
+                PredictiveStd::Latent => 0.0,
+            };
+            for v in sc.iter_mut() {
+                *v = (*v + noise).sqrt();
+            }
+        });
+        (means, stds)
+    }
+}
+
 impl Model for GpBank {
     fn input_names(&self) -> &[String] {
         &self.input_names
@@ -210,19 +244,7 @@ impl Model for GpBank {
             .filter(|(_, e)| e.is_none())
             .map(|(p, _)| p.clone())
             .collect();
-        let predictions: Vec<Prediction> = self
-            .gps
-            .iter()
-            .map(|gp| gp.predict(&valid))
-            .collect::<Result<_>>()
-            .map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
-        let stds: Vec<Vec<f64>> = predictions
-            .iter()
-            .map(|p| match self.predictive_std {
-                PredictiveStd::WithNoise => p.std_with_noise(),
-                PredictiveStd::Latent => p.std(),
-            })
-            .collect();
+        let (means, stds) = self.predict_valid(&valid);
         let mut next = 0;
         Ok(invalid
             .into_iter()
@@ -232,7 +254,7 @@ impl Model for GpBank {
                     let i = next;
                     next += 1;
                     Ok(Evaluation::with_std(
-                        predictions.iter().map(|p| p.mean[i]).collect(),
+                        means.iter().map(|m| m[i]).collect(),
                         stds.iter().map(|s| s[i]).collect(),
                     ))
                 }
@@ -307,6 +329,30 @@ mod tests {
                 .as_ref()
                 .unwrap()[0]
         );
+    }
+
+    #[test]
+    fn results_do_not_depend_on_threads_or_batch() {
+        let (b, _, _) = bank();
+        let pts: Vec<Vec<f64>> = (0..(2 * BLOCK + 19))
+            .map(|i| {
+                let t = (i as f64 + 0.5) / (2 * BLOCK + 19) as f64;
+                vec![t, (5.0 * t).fract(), (11.0 * t).fract()]
+            })
+            .collect();
+        let with = |threads: usize| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap()
+                .install(|| b.evaluate_batch(&pts).unwrap())
+        };
+        let one = with(1);
+        assert_eq!(one, with(2));
+        assert_eq!(one, with(3));
+        for i in [0, 7, 8, BLOCK, 2 * BLOCK + 18] {
+            assert_eq!(b.evaluate_batch(&pts[i..=i]).unwrap()[0], one[i], "{i}");
+        }
     }
 
     #[test]

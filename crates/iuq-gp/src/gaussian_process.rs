@@ -6,6 +6,7 @@ use crate::data::{ColumnMajor, validate_points, validate_values};
 use crate::diagnostics::{FitDiagnostics, FitWarning};
 use crate::error::{GpError, Result};
 use crate::fit::FitOptions;
+use crate::forward_substitution::PackedFactor;
 use crate::kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 use crate::log_marginal_likelihood::{LmlWorkspace, validate_jitter};
 use crate::scaling::{InputScaling, OutputScaling};
@@ -16,7 +17,8 @@ use crate::validation::{LeaveOneOut, closed_form_leave_one_out};
 ///
 /// The GP works on scaled inputs x̃ and standardised outputs ỹ ([`InputScaling`],
 /// [`OutputScaling`]); its hyper-parameters are in those units; predictions are returned in
-/// the original units. It stores the factor L of K = c·R + (σ² + jitter)·I and α = K⁻¹ỹ.
+/// the original units. It stores the factor L of K = c·R + (σ² + jitter)·I (packed for the
+/// variance kernel) and α = K⁻¹ỹ.
 #[derive(Debug, Clone)]
 pub struct GaussianProcess {
     pub(crate) kernel: Kernel,
@@ -28,10 +30,10 @@ pub struct GaussianProcess {
     pub(crate) training_outputs: Vec<f64>,
     /// Scaled training inputs, column-major.
     pub(crate) x: ColumnMajor,
-    /// Cholesky factor L (lower triangle, column-major n×n).
-    pub(crate) cholesky: Vec<f64>,
     /// α = K⁻¹ỹ.
     pub(crate) alpha: Vec<f64>,
+    /// L packed for the variance kernel of [`crate::forward_substitution`].
+    pub(crate) packed_factor: PackedFactor,
     pub(crate) log_marginal_likelihood: f64,
     pub(crate) leave_one_out: LeaveOneOut,
     pub(crate) diagnostics: FitDiagnostics,
@@ -215,6 +217,7 @@ impl GaussianProcess {
         diagnostics.warnings = warnings;
         diagnostics.leave_one_out_q2 = leave_one_out.q2;
         let (cholesky, alpha) = ws.into_factor();
+        let packed_factor = PackedFactor::new(&cholesky, n);
         Ok(Self {
             kernel,
             hyperparameters: h,
@@ -224,8 +227,8 @@ impl GaussianProcess {
             training_inputs: x.to_vec(),
             training_outputs: y.to_vec(),
             x: prepared.x,
-            cholesky,
             alpha,
+            packed_factor,
             log_marginal_likelihood: lml,
             leave_one_out,
             diagnostics,

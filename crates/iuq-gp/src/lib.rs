@@ -25,6 +25,7 @@ mod data;
 pub mod diagnostics;
 pub mod error;
 pub mod fit;
+mod forward_substitution;
 pub mod gaussian_process;
 pub mod kernel;
 pub mod log_marginal_likelihood;

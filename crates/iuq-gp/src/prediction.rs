@@ -6,31 +6,32 @@
 //! μ = K*ᵀα,   var_f = c − ‖L⁻¹k*‖² (latent function),   var_y = var_f + σ² (a new observation),
 //!
 //! mapped back to original units (ȳ + s·μ, s²·var). Points are processed in blocks of
-//! [`BLOCK`]: each block builds its n×b slice of K* (vectorised `exp`), takes the means as dot
-//! products with α and the variances from one triangular solve L⁻¹K*_block (faer, a
-//! level-3 operation); blocks run in parallel (rayon) and sequentially inside, so the results
-//! do not depend on the number of threads. No inverse is formed. Negative variances from
-//! round-off are clipped to 0 (as scikit-learn does).
+//! [`BLOCK`], and inside a block in groups of [`LANES`]: each group builds its n×8 slice of K*
+//! (vectorised `exp`), takes the means as dot products with α and the variances from one
+//! packed forward substitution L⁻¹K*_group ([`crate::forward_substitution`]: a register-tiled,
+//! GEMM-shaped kernel); blocks run in parallel (rayon) and sequentially inside. No inverse is
+//! formed. Negative variances from round-off are clipped to 0 (as scikit-learn does).
 //!
-//! Precision: the variance is a difference c − ‖L⁻¹k*‖² and carries a round-off of order
-//! 1e−16·c·n (standardised units) — far below any useful variance, but it means a point's
-//! variance can differ in the last digits between batches of different composition (the
-//! triangular solve of a block rounds differently from that of one column). Means do not
-//! depend on the batch.
+//! Every point's mean and variance are computed by the same operations in the same order
+//! whatever the other points of the batch, so the results depend neither on the batch nor on
+//! the number of threads. Precision: the variance is a difference c − ‖L⁻¹k*‖² and carries a
+//! round-off of order 1e−16·c·n (standardised units) — far below any useful variance.
 
-use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
-use faer::{MatMut, MatRef, Par};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::data::validate_points;
 use crate::error::Result;
+use crate::forward_substitution::LANES;
 use crate::gaussian_process::GaussianProcess;
-use crate::log_marginal_likelihood::{lane_dot, rbf_column};
-use crate::vector_math::multiversion;
+use crate::vector_math::{exp, multiversion};
 
-/// Points per block of the cross-kernel matrix (n×256 doubles: 1 MB at n = 500).
+/// Points per block (the unit of parallel work).
 pub const BLOCK: usize = 256;
+
+/// Groups of [`LANES`] points per call of the packed substitution (64 points: 256 KB of
+/// right-hand sides at n = 500, which stay in the L2 cache).
+const GROUPS: usize = 8;
 
 /// Posterior mean and variances at a batch of points, in original output units.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -68,20 +69,98 @@ impl Prediction {
 }
 
 multiversion! {
-    /// out[t] = Σ_i a[t·n + i]·b[i]: the columns of a column-major n×m block dotted with b.
-    fn column_dots(a: &[f64], n: usize, b: &[f64], out: &mut [f64]) {
-        for (o, col) in out.iter_mut().zip(a.chunks_exact(n)) {
-            *o = lane_dot(col, b);
+    /// The cross-kernel rows of a group of [`LANES`] points, row-major:
+    /// `out[i·LANES + t] = c·exp(Σ_k h_k (x_k[i] − p_k[t])²)` (h_k = −½/l_k², the sum in input
+    /// order, as the training kernel matrix is computed) for the n training points i (`x`
+    /// column-major), and the dot products Σ_i α_i·out[i·LANES + t] (fused multiply-adds in
+    /// increasing i). Vectorised across the points of the group, in three passes (exponents
+    /// input by input, `exp` four rows at a time, scaling and dots) so that the `exp`
+    /// polynomials of neighbouring rows overlap instead of waiting for each other.
+    fn cross_kernel_rows(
+        x: &[f64],
+        n: usize,
+        points: &[[f64; LANES]],
+        neg_half_weights: &[f64],
+        c: f64,
+        alpha: &[f64],
+        out: &mut [f64],
+    ) -> [f64; LANES] {
+        let out = &mut out[..n * LANES];
+        match points.len() {
+            1 => exponents::<1>(x, n, points, neg_half_weights, out),
+            2 => exponents::<2>(x, n, points, neg_half_weights, out),
+            3 => exponents::<3>(x, n, points, neg_half_weights, out),
+            4 => exponents::<4>(x, n, points, neg_half_weights, out),
+            _ => exponents_any(x, n, points, neg_half_weights, out),
         }
+        // Four rows at a time: four independent polynomial chains in flight.
+        let mut chunks = out.chunks_exact_mut(4 * LANES);
+        for chunk in &mut chunks {
+            for v in chunk.iter_mut() {
+                *v = exp(*v);
+            }
+        }
+        for v in chunks.into_remainder() {
+            *v = exp(*v);
+        }
+        let mut dots = [0.0; LANES];
+        for (row, &a) in out.chunks_exact_mut(LANES).zip(alpha) {
+            for (o, d) in row.iter_mut().zip(dots.iter_mut()) {
+                let e = c * *o;
+                *o = e;
+                *d = a.mul_add(e, *d);
+            }
+        }
+        dots
     }
 }
 
-multiversion! {
-    /// out[t] = ‖column t‖² of a column-major n×m block.
-    fn column_squared_norms(a: &[f64], n: usize, out: &mut [f64]) {
-        for (o, col) in out.iter_mut().zip(a.chunks_exact(n)) {
-            *o = lane_dot(col, col);
+/// `out[i·LANES + t] = Σ_k h_k (x_k[i] − p_k[t])²` for D inputs (the inputs' loop unrolled,
+/// points and weights held in registers).
+#[inline(always)]
+fn exponents<const D: usize>(
+    x: &[f64],
+    n: usize,
+    points: &[[f64; LANES]],
+    neg_half_weights: &[f64],
+    out: &mut [f64],
+) {
+    let points: &[[f64; LANES]; D] = points.try_into().expect("D inputs");
+    let weights: &[f64; D] = neg_half_weights.try_into().expect("D weights");
+    let (rows, _) = out.as_chunks_mut::<LANES>();
+    for (i, row) in rows.iter_mut().enumerate().take(n) {
+        let mut s = [0.0; LANES];
+        for k in 0..D {
+            let xk = x[k * n + i];
+            for (s, &pt) in s.iter_mut().zip(&points[k]) {
+                let t = xk - pt;
+                *s += weights[k] * t * t;
+            }
         }
+        *row = s;
+    }
+}
+
+/// [`exponents`] for any number of inputs.
+#[inline(always)]
+fn exponents_any(
+    x: &[f64],
+    n: usize,
+    points: &[[f64; LANES]],
+    neg_half_weights: &[f64],
+    out: &mut [f64],
+) {
+    let (rows, _) = out.as_chunks_mut::<LANES>();
+    for (i, row) in rows.iter_mut().enumerate().take(n) {
+        let mut s = [0.0; LANES];
+        for (k, (p, &w)) in points.iter().zip(neg_half_weights).enumerate() {
+            let xk = x[k * n + i];
+            for (s, &pt) in s.iter_mut().zip(p) {
+                let t = xk - pt;
+                *s += w * t * t;
+            }
+        }
+        *row = s;
     }
 }
 
@@ -114,54 +193,87 @@ impl GaussianProcess {
         points: &[Vec<f64>],
         with_variance: bool,
     ) -> Result<(Vec<f64>, Vec<f64>)> {
-        let d = self.dimension();
-        validate_points(points, "prediction point", Some(d))?;
+        validate_points(points, "prediction point", Some(self.dimension()))?;
         let m = points.len();
-        let n = self.x.n;
         let mut mean = vec![0.0; m];
         let mut variance = vec![0.0; if with_variance { m } else { 0 }];
-        let weights = self.hyperparameters.inverse_squared_length_scales(d);
-        let c = self.hyperparameters.signal_variance;
-        let scaling = self.output_scaling;
-        let block = |index: usize, mean: &mut [f64], variance: Option<&mut [f64]>| {
-            let start = index * BLOCK;
-            let b = mean.len();
-            let mut ks = vec![0.0; n * b];
-            let mut p = vec![0.0; d];
-            for (t, col) in ks.chunks_exact_mut(n).enumerate() {
-                for (k, pk) in p.iter_mut().enumerate() {
-                    *pk = self.input_scaling.apply(k, points[start + t][k]);
-                }
-                rbf_column(&self.x.values, n, 0, &p, &weights, c, col);
-            }
-            column_dots(&ks, n, &self.alpha, mean);
-            for v in mean.iter_mut() {
-                *v = scaling.invert(*v);
-            }
-            if let Some(variance) = variance {
-                let l = MatRef::from_column_major_slice(&self.cholesky, n, n);
-                solve_lower_triangular_in_place(
-                    l,
-                    MatMut::from_column_major_slice_mut(&mut ks, n, b),
-                    Par::Seq,
-                );
-                column_squared_norms(&ks, n, variance);
-                for v in variance.iter_mut() {
-                    *v = (c - *v).max(0.0) * scaling.std * scaling.std;
-                }
-            }
-        };
         if with_variance {
             mean.par_chunks_mut(BLOCK)
                 .zip(variance.par_chunks_mut(BLOCK))
-                .enumerate()
-                .for_each(|(i, (mc, vc))| block(i, mc, Some(vc)));
+                .zip(points.par_chunks(BLOCK))
+                .for_each(|((mc, vc), pc)| self.predict_block(pc, mc, Some(vc)));
         } else {
             mean.par_chunks_mut(BLOCK)
-                .enumerate()
-                .for_each(|(i, mc)| block(i, mc, None));
+                .zip(points.par_chunks(BLOCK))
+                .for_each(|(mc, pc)| self.predict_block(pc, mc, None));
         }
         Ok((mean, variance))
+    }
+
+    /// Means (and latent variances when `variance` is given) at validated `points`, in
+    /// original units, sequentially: groups of [`LANES`] points, each with its n×[`LANES`]
+    /// cross-kernel slice (vectorised `exp`), the means as dot products with α and the
+    /// variances from one packed forward substitution ([`crate::forward_substitution`]).
+    /// A point's results do not depend on the other points.
+    pub(crate) fn predict_block(
+        &self,
+        points: &[Vec<f64>],
+        mean: &mut [f64],
+        mut variance: Option<&mut [f64]>,
+    ) {
+        let d = self.dimension();
+        let n = self.x.n;
+        let neg_half_weights: Vec<f64> = self
+            .hyperparameters
+            .inverse_squared_length_scales(d)
+            .iter()
+            .map(|w| -0.5 * w)
+            .collect();
+        let signal = self.hyperparameters.signal_variance;
+        let scaling = self.output_scaling;
+        let size = self.packed_factor.padded_rows() * LANES;
+        // Rows n.. of every group stay zero (the substitution keeps them zero).
+        let mut rows = vec![0.0; size * if variance.is_some() { GROUPS } else { 1 }];
+        let mut norms = [[0.0; LANES]; GROUPS];
+        let mut scaled = vec![[0.0; LANES]; d];
+        for (c, chunk) in points.chunks(LANES * GROUPS).enumerate() {
+            let groups = chunk.len().div_ceil(LANES);
+            for (g, group) in chunk.chunks(LANES).enumerate() {
+                let b = group.len();
+                let start = c * LANES * GROUPS + g * LANES;
+                // Lanes past the end of a short group repeat its last point (discarded).
+                for t in 0..LANES {
+                    let point = &group[t.min(b - 1)];
+                    for (k, lanes) in scaled.iter_mut().enumerate() {
+                        lanes[t] = self.input_scaling.apply(k, point[k]);
+                    }
+                }
+                let offset = if variance.is_some() { g * size } else { 0 };
+                let dots = cross_kernel_rows(
+                    &self.x.values,
+                    n,
+                    &scaled,
+                    &neg_half_weights,
+                    signal,
+                    &self.alpha,
+                    &mut rows[offset..offset + n * LANES],
+                );
+                for (m, dot) in mean[start..start + b].iter_mut().zip(dots) {
+                    *m = scaling.invert(dot);
+                }
+            }
+            if let Some(variance) = variance.as_deref_mut() {
+                self.packed_factor
+                    .squared_norms(&mut rows[..groups * size], &mut norms[..groups]);
+                let start = c * LANES * GROUPS;
+                for (v, q) in variance[start..start + chunk.len()]
+                    .iter_mut()
+                    .zip(norms.iter().flatten())
+                {
+                    *v = (signal - q).max(0.0) * scaling.std * scaling.std;
+                }
+            }
+        }
     }
 }
 
@@ -171,6 +283,8 @@ mod tests {
     use crate::fit::FitOptions;
     use crate::kernel::{Hyperparameters, Kernel};
     use crate::test_data::spec_data;
+    use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+    use faer::{MatMut, MatRef, Par};
 
     /// scikit-learn's fitted θ on the spec data (standardised y, raw inputs):
     /// GaussianProcessRegressor(C*RBF([.5]*3) + White(1e-3), alpha=1e-10, normalize_y=True,
@@ -259,11 +373,40 @@ mod tests {
         let all = gp.predict(&many).unwrap();
         for i in [0, 5, BLOCK - 1, BLOCK, BLOCK + 36] {
             let one = gp.predict(&many[i..=i]).unwrap();
-            assert!((one.mean[0] - all.mean[i]).abs() <= 1e-14 * (1.0 + all.mean[i].abs()));
-            // The variance c − ‖L⁻¹k*‖² cancels: round-off is relative to c·s², and the
-            // triangular solve of one column rounds differently from that of a block.
-            let scale = gp.hyperparameters().signal_variance * gp.output_scaling().std.powi(2);
-            assert!((one.variance[0] - all.variance[i]).abs() <= 1e-12 * scale);
+            // Every point goes through the same operations whatever its batch.
+            assert_eq!(one.mean[0], all.mean[i], "{i}");
+            assert_eq!(one.variance[0], all.variance[i], "{i}");
+        }
+        // The packed forward substitution agrees with faer's triangular solve to round-off.
+        let n = gp.x.n;
+        let mut ws = crate::log_marginal_likelihood::LmlWorkspace::new(n);
+        ws.factorize(&gp.x, &gp.hyperparameters, gp.jitter).unwrap();
+        let cholesky = ws.into_factor().0;
+        let weights = gp.hyperparameters.inverse_squared_length_scales(3);
+        let c = gp.hyperparameters.signal_variance;
+        let s2 = gp.output_scaling.std.powi(2);
+        for (i, point) in many.iter().enumerate().step_by(17) {
+            let mut col = vec![0.0; n];
+            let scaled: Vec<f64> = (0..3)
+                .map(|k| gp.input_scaling.apply(k, point[k]))
+                .collect();
+            crate::log_marginal_likelihood::rbf_column(
+                &gp.x.values,
+                n,
+                0,
+                &scaled,
+                &weights,
+                c,
+                &mut col,
+            );
+            solve_lower_triangular_in_place(
+                MatRef::from_column_major_slice(&cholesky, n, n),
+                MatMut::from_column_major_slice_mut(&mut col, n, 1),
+                Par::Seq,
+            );
+            let reference = (c - col.iter().map(|v| v * v).sum::<f64>()).max(0.0) * s2;
+            // The variance c − ‖L⁻¹k*‖² cancels: round-off is relative to c·s².
+            assert!((all.variance[i] - reference).abs() <= 1e-12 * c * s2, "{i}");
         }
         assert!(gp.predict(&[]).unwrap().mean.is_empty());
     }
@@ -302,7 +445,10 @@ mod tests {
         };
         let gp = GaussianProcess::with_hyperparameters(&x, &y, h, &FitOptions::default()).unwrap();
         let n = gp.x.n;
-        let l = MatRef::from_column_major_slice(&gp.cholesky, n, n);
+        let mut ws = crate::log_marginal_likelihood::LmlWorkspace::new(n);
+        ws.factorize(&gp.x, &gp.hyperparameters, gp.jitter).unwrap();
+        let cholesky = ws.into_factor().0;
+        let l = MatRef::from_column_major_slice(&cholesky, n, n);
         let mut linv = vec![0.0; n * n];
         faer::linalg::triangular_inverse::invert_lower_triangular(
             MatMut::from_column_major_slice_mut(&mut linv, n, n),

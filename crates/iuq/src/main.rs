@@ -11,6 +11,7 @@ mod report_output;
 mod sampler_section;
 mod study;
 mod table_io;
+mod umbridge_section;
 
 use clap::{Parser, Subcommand};
 
@@ -35,13 +36,29 @@ enum Command {
     /// Gaussian-process surrogates: fit, predict, validate.
     #[command(subcommand)]
     Gp(commands::gp::GpCommand),
-    /// Sobol' sensitivity indices of a study whose model is an expression.
+    /// Sobol' sensitivity indices of a study's model (expression, rbc-shear, umbridge).
     Sobol(commands::sobol::SobolArgs),
     /// Posterior samples and evidence with BASIS (annealed sequential importance sampling).
     Basis(commands::basis::BasisArgs),
     /// In-process timings of numerical kernels, for the side-by-side benchmark scripts.
     #[command(subcommand)]
     Bench(commands::bench::BenchCommand),
+    /// Run the study's design as a campaign of model runs (resumes an interrupted campaign).
+    Run(commands::run::RunArgs),
+    /// Runs of a campaign per status, and its failures with their reasons.
+    Status(commands::status::StatusArgs),
+    /// Run the failed (--failed) or lost (--lost) runs of a campaign again.
+    Retry(commands::retry::RetryArgs),
+    /// Export a campaign's runs (parameters, outputs, status) as tidy CSV or JSON.
+    Export(commands::export::ExportArgs),
+    /// Execute one task of a job array (started by the Slurm and HyperQueue executors).
+    Worker(commands::worker::WorkerArgs),
+    /// The native single red-blood-cell shear simulator: one run, validation, benchmark.
+    #[command(subcommand)]
+    Rbc(commands::rbc::RbcCommand),
+    /// Serve a study's model and its log-posterior to other tools (UM-Bridge 1.0 over HTTP).
+    #[command(subcommand)]
+    Serve(commands::serve::ServeCommand),
 }
 
 fn main() {
@@ -52,6 +69,13 @@ fn main() {
         Command::Sobol(args) => commands::sobol::run(args, cli.json),
         Command::Basis(args) => commands::basis::run(args, cli.json),
         Command::Bench(command) => commands::bench::run(command, cli.json),
+        Command::Run(args) => commands::run::run(args, cli.json),
+        Command::Status(args) => commands::status::run(args, cli.json),
+        Command::Retry(args) => commands::retry::run(args, cli.json),
+        Command::Export(args) => commands::export::run(args, cli.json),
+        Command::Worker(args) => commands::worker::run(args, cli.json),
+        Command::Rbc(command) => commands::rbc::run(command, cli.json),
+        Command::Serve(command) => commands::serve::run(command, cli.json),
     };
     let code = match result {
         Ok(()) => EXIT_SUCCESS,

@@ -21,7 +21,16 @@ pub enum ModelSection {
         /// Output name → formula over the parameter names.
         outputs: toml::Table,
     },
-    /// A kind named by the architecture (`rbc-shear`, `command`, `batch-command`, `umbridge`)
+    /// `kind = "rbc-shear"`: the native single-cell shear simulator
+    /// ([`Study::rbc_shear_model`] builds it; keys in `commands::rbc::rbc_shear_model`).
+    RbcShear {
+        /// The section as written.
+        table: toml::Table,
+    },
+    /// `kind = "umbridge"`: a model on a UM-Bridge 1.0 server ([`Study::umbridge_model`]
+    /// connects to it; keys in [`crate::umbridge_section`]).
+    UmBridge(crate::umbridge_section::UmBridgeSection),
+    /// A kind named by the architecture (`command`, `batch-command`)
     /// whose stage this version does not build yet; verbs that need a model reject it.
     NotBuilt {
         /// The kind as written.
@@ -76,6 +85,12 @@ fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> 
                 outputs: outputs.clone(),
             })
         }
+        "rbc-shear" => Ok(ModelSection::RbcShear {
+            table: table.clone(),
+        }),
+        "umbridge" => Ok(ModelSection::UmBridge(
+            crate::umbridge_section::parse_umbridge_section(table, file)?,
+        )),
         k if MODEL_KINDS.contains(&k) => Ok(ModelSection::NotBuilt {
             kind: k.to_string(),
         }),
@@ -195,7 +210,58 @@ impl Study {
         if let ModelSection::Expression { .. } = study.model {
             study.expression_model()?;
         }
+        if let ModelSection::RbcShear { .. } = study.model {
+            study.rbc_shear_model()?;
+        }
         Ok(study)
+    }
+
+    /// The single-cell shear simulator of a `kind = "rbc-shear"` study, or an input error.
+    pub fn rbc_shear_model(&self) -> Result<iuq_rbc::RbcShearModel> {
+        let file = self.path.display().to_string();
+        match &self.model {
+            ModelSection::RbcShear { table } => crate::commands::rbc::rbc_shear_model(
+                table,
+                &file,
+                &self.path,
+                self.space.names(),
+                self.likelihood.as_ref(),
+            ),
+            _ => Err(input_error(format!(
+                "{file}: key `model.kind`: this command needs kind = \"rbc-shear\""
+            ))),
+        }
+    }
+
+    /// The UM-Bridge model of a `kind = "umbridge"` study, connected (an input error for a
+    /// server that does not fit the study, a failure for an unreachable one).
+    pub fn umbridge_model(&self) -> Result<iuq_umbridge::UmBridgeModel> {
+        let file = self.path.display().to_string();
+        match &self.model {
+            ModelSection::UmBridge(section) => {
+                crate::umbridge_section::connect(section, self.space.names(), &file)
+            }
+            _ => Err(input_error(format!(
+                "{file}: key `model.kind`: this command needs kind = \"umbridge\""
+            ))),
+        }
+    }
+
+    /// The study's model, whatever its kind (expression, rbc-shear, umbridge), or an input
+    /// error when the study has none or one of a kind this version does not build.
+    pub fn model(&self) -> Result<StudyModel> {
+        let file = self.path.display();
+        match &self.model {
+            ModelSection::Expression { .. } => Ok(StudyModel::Expression(self.expression_model()?)),
+            ModelSection::RbcShear { .. } => Ok(StudyModel::RbcShear(self.rbc_shear_model()?)),
+            ModelSection::UmBridge(_) => Ok(StudyModel::UmBridge(self.umbridge_model()?)),
+            ModelSection::NotBuilt { kind } => Err(input_error(format!(
+                "{file}: key `model.kind`: models of kind `{kind}` are not supported by this command"
+            ))),
+            ModelSection::Absent => Err(input_error(format!(
+                "{file}: section `[model]`: missing; this command needs a model"
+            ))),
+        }
     }
 
     /// The expression model of the study, or an input error if the model is of another kind.
@@ -211,6 +277,16 @@ impl Study {
             ModelSection::NotBuilt { kind } => {
                 return Err(input_error(format!(
                     "{file}: key `model.kind`: this command needs kind = \"expression\"; models of kind `{kind}` are not supported by this version"
+                )));
+            }
+            ModelSection::RbcShear { .. } => {
+                return Err(input_error(format!(
+                    "{file}: key `model.kind`: this command needs kind = \"expression\", not \"rbc-shear\""
+                )));
+            }
+            ModelSection::UmBridge(_) => {
+                return Err(input_error(format!(
+                    "{file}: key `model.kind`: this command needs kind = \"expression\", not \"umbridge\""
                 )));
             }
         };
@@ -234,6 +310,40 @@ impl Study {
                 .bad_input(|| format!("{file}: key `model.outputs.{name}`"))?;
         }
         ExpressionModel::new(inputs, &formulas).bad_input(|| format!("{file}: key `model.outputs`"))
+    }
+}
+
+/// A study's model, built ([`Study::model`]).
+pub enum StudyModel {
+    /// `kind = "expression"`.
+    Expression(ExpressionModel),
+    /// `kind = "rbc-shear"`.
+    RbcShear(iuq_rbc::RbcShearModel),
+    /// `kind = "umbridge"`.
+    UmBridge(iuq_umbridge::UmBridgeModel),
+}
+
+impl StudyModel {
+    fn inner(&self) -> &dyn iuq_core::Model {
+        match self {
+            Self::Expression(m) => m,
+            Self::RbcShear(m) => m,
+            Self::UmBridge(m) => m,
+        }
+    }
+}
+
+impl iuq_core::Model for StudyModel {
+    fn input_names(&self) -> &[String] {
+        self.inner().input_names()
+    }
+
+    fn output_names(&self) -> &[String] {
+        self.inner().output_names()
+    }
+
+    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<iuq_core::Outcome>> {
+        self.inner().evaluate_batch(points)
     }
 }
 

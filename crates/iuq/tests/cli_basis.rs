@@ -1,33 +1,11 @@
 //! End-to-end tests of `iuq basis`: real processes, real files.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn iuq(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_iuq"))
-        .args(args)
-        .output()
-        .expect("the iuq binary runs")
-}
+use common::{iuq, json_of, scratch};
 
-fn json_of(output: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "exactly one JSON line expected, got: {stdout}\nstderr: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_str(lines[0]).expect("valid JSON")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-basis-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use std::path::Path;
+use std::process::Command;
 
 fn write(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
@@ -51,7 +29,7 @@ seed = 4
 
 #[test]
 fn log_density_study_writes_samples_stages_summary_and_checkpoint() {
-    let dir = scratch("log-density");
+    let dir = scratch("cli-basis", "log-density");
     let study = dir.join("study.toml");
     write(&study, GAUSSIAN_2D);
     let out = dir.join("out");
@@ -125,7 +103,7 @@ fn linear_data(dir: &Path) {
 
 #[test]
 fn data_study_with_a_prediction_formula_estimates_sigma_m() {
-    let dir = scratch("prediction");
+    let dir = scratch("cli-basis", "prediction");
     linear_data(&dir);
     let study = dir.join("study.toml");
     write(
@@ -174,7 +152,7 @@ seed = 2
 
 #[test]
 fn data_study_with_an_expression_model_compares_outputs_by_order_and_counts_failures() {
-    let dir = scratch("expression-model");
+    let dir = scratch("cli-basis", "expression-model");
     linear_data(&dir);
     let study = dir.join("study.toml");
     // three data points (x = 2, 3, 4); output j ↔ data point j. The sqrt fails for a < 0.5:
@@ -237,7 +215,7 @@ modelling_error = false
 
 #[test]
 fn stopping_and_resuming_gives_the_uninterrupted_result() {
-    let dir = scratch("resume");
+    let dir = scratch("cli-basis", "resume");
     let study = dir.join("study.toml");
     write(
         &study,
@@ -321,7 +299,7 @@ fn stopping_and_resuming_gives_the_uninterrupted_result() {
 
 #[test]
 fn bad_study_files_are_rejected_with_exit_code_2_naming_file_and_key() {
-    let dir = scratch("bad");
+    let dir = scratch("cli-basis", "bad");
     linear_data(&dir);
     let data_study = r#"
 name = "line"

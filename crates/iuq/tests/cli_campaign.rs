@@ -3,6 +3,10 @@
 //! in the middle of a campaign, and fake `sbatch`/`squeue`/`scontrol` and `hq` programs on PATH
 //! (the HyperQueue one prints the JSON shapes of `tests/fixtures/hq` in iuq-campaign).
 
+mod common;
+
+use common::{json_of, scratch};
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
@@ -42,25 +46,6 @@ fn iuq_with_path(args: &[&str], extra_path: Option<(&Path, &Path)>) -> Output {
         c.env("PATH", path).env("FAKE_SCHED_DIR", state);
     }
     c.output().expect("the iuq binary runs")
-}
-
-fn json_of(output: &Output) -> Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "exactly one JSON line expected, got: {stdout}\nstderr: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_str(lines[0]).expect("valid JSON")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-campaign-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
 }
 
 fn executable(path: &Path, text: &str) {
@@ -106,7 +91,7 @@ fn store_of(dir: &Path) -> iuq_campaign::CampaignStore {
 
 #[test]
 fn run_status_export_and_retry_of_a_misbehaving_simulator() {
-    let dir = scratch("verbs");
+    let dir = scratch("cli-campaign", "verbs");
     let points: Vec<(u32, f64)> = (0..8)
         .filter(|m| *m != 1)
         .map(|m| (m, m as f64 + 0.5))
@@ -188,7 +173,7 @@ fn run_status_export_and_retry_of_a_misbehaving_simulator() {
 
 #[test]
 fn bad_study_files_exit_2_naming_file_key_and_reason() {
-    let dir = scratch("bad");
+    let dir = scratch("cli-campaign", "bad");
     let path = study(&dir, &[(0, 1.0)], "max_parallel = 2");
     let text = std::fs::read_to_string(&path).unwrap();
     let cases = [
@@ -222,7 +207,7 @@ fn bad_study_files_exit_2_naming_file_key_and_reason() {
 
 #[test]
 fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results() {
-    let dir = scratch("crash");
+    let dir = scratch("cli-campaign", "crash");
     let points: Vec<(u32, f64)> = (0..200).map(|i| (1, i as f64)).collect();
     let path = study(&dir, &points, "max_parallel = 4");
     let p = path.to_str().unwrap();
@@ -371,7 +356,7 @@ esac
 
 #[test]
 fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_failures() {
-    let dir = scratch("fake-slurm");
+    let dir = scratch("cli-campaign", "fake-slurm");
     let bin = dir.join("bin");
     let state = dir.join("slurm-state");
     std::fs::create_dir_all(&bin).unwrap();
@@ -433,7 +418,7 @@ fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_
 
 #[test]
 fn a_coordinator_killed_while_slurm_runs_its_arrays_reattaches_without_resubmitting() {
-    let dir = scratch("slurm-reattach");
+    let dir = scratch("cli-campaign", "slurm-reattach");
     let bin = dir.join("bin");
     let state = dir.join("slurm-state");
     std::fs::create_dir_all(&bin).unwrap();
@@ -561,7 +546,7 @@ fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) {
 
 #[test]
 fn hyperqueue_executor_with_a_fake_hq_printing_recorded_json() {
-    let dir = scratch("fake-hq");
+    let dir = scratch("cli-campaign", "fake-hq");
     let state = dir.join("hq-state");
     std::fs::create_dir_all(&state).unwrap();
     let hq = dir.join("hq");
@@ -585,7 +570,7 @@ fn hyperqueue_executor_with_a_real_hq_when_hq_bin_is_set() {
         );
         return;
     };
-    let dir = scratch("real-hq");
+    let dir = scratch("cli-campaign", "real-hq");
     let server_dir = dir.join("hq-server");
     let mut server = Command::new(&hq)
         .args(["server", "start", "--server-dir"])

@@ -1,31 +1,10 @@
 //! End-to-end tests of `iuq design` and `iuq sobol`: real processes, real files.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn iuq(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_iuq"))
-        .args(args)
-        .output()
-        .expect("the iuq binary runs")
-}
+use common::{iuq, json_of, scratch};
 
-fn json_of(output: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "exactly one JSON line expected, got: {stdout}"
-    );
-    serde_json::from_str(lines[0]).expect("valid JSON")
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use std::path::Path;
 
 fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
     let text = std::fs::read_to_string(path).unwrap();
@@ -44,7 +23,7 @@ fn read_csv(path: &Path) -> (Vec<String>, Vec<Vec<f64>>) {
 
 #[test]
 fn lhs_design_is_a_latin_hypercube_within_bounds_and_reports_min_distance() {
-    let dir = scratch("lhs");
+    let dir = scratch("cli", "lhs");
     let out = dir.join("lhs.csv");
     let o = iuq(&[
         "design",
@@ -115,7 +94,7 @@ fn lhs_design_is_a_latin_hypercube_within_bounds_and_reports_min_distance() {
 
 #[test]
 fn unscrambled_sobol_points_equal_scipy() {
-    let dir = scratch("sobol");
+    let dir = scratch("cli", "sobol");
     let out = dir.join("sobol.csv");
     let o = iuq(&[
         "design",
@@ -139,7 +118,7 @@ fn unscrambled_sobol_points_equal_scipy() {
 
 #[test]
 fn saltelli_design_has_n_times_d_plus_2_rows() {
-    let dir = scratch("saltelli");
+    let dir = scratch("cli", "saltelli");
     let out = dir.join("s.csv");
     let o = iuq(&[
         "design",
@@ -195,7 +174,7 @@ fn sobol_of_ishigami_matches_the_reference() {
 
 #[test]
 fn bad_input_exits_with_code_2_and_names_file_key_and_reason() {
-    let dir = scratch("bad");
+    let dir = scratch("cli", "bad");
     let study = dir.join("bad.toml");
     std::fs::write(
         &study,

@@ -1,27 +1,10 @@
 //! End-to-end tests of `iuq gp fit|predict|validate`.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn iuq(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_iuq"))
-        .args(args)
-        .output()
-        .expect("the iuq binary runs")
-}
+use common::{iuq, json_of, scratch};
 
-fn json_of(output: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(lines.len(), 1, "one JSON line expected: {stdout}");
-    serde_json::from_str(lines[0]).unwrap()
-}
-
-fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-gp-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+use std::path::Path;
 
 /// The spec's GP reference data: X_i = frac(0.5 + i·α), α = (φ⁻¹, φ⁻², φ⁻³),
 /// y_i = sin(2π x_i1) + x_i2² + 0.5 x_i3 + 0.01 sin(37 i), i = first..first+n−1.
@@ -50,7 +33,7 @@ fn write_data(path: &Path, rows: &[[f64; 4]]) {
 
 #[test]
 fn fit_predict_validate_round_trip() {
-    let dir = scratch("roundtrip");
+    let dir = scratch("cli-gp", "roundtrip");
     let train = dir.join("train.csv");
     let test = dir.join("test.csv");
     write_data(&train, &spec_data(1, 64));
@@ -119,7 +102,7 @@ fn fit_predict_validate_round_trip() {
 
 #[test]
 fn bad_gp_inputs_exit_with_code_2() {
-    let dir = scratch("bad");
+    let dir = scratch("cli-gp", "bad");
     let train = dir.join("train.csv");
     write_data(&train, &spec_data(1, 20));
     let gp = dir.join("gp.json");

@@ -73,13 +73,25 @@ pub struct BasisArgs {
 }
 
 /// The likelihood of a study, with its sampled parameter space.
-struct StudyPosterior {
-    space: ParameterSpace,
-    likelihood: Box<dyn LogLikelihood>,
-    description: Value,
+pub(crate) struct StudyPosterior {
+    /// The sampled parameters (the study's, and σ_m when the modelling error is estimated).
+    pub(crate) space: ParameterSpace,
+    /// ln f(D | θ).
+    pub(crate) likelihood: Box<dyn LogLikelihood>,
+    /// What the likelihood is, for the summary.
+    pub(crate) description: Value,
 }
 
 fn build_posterior(study: &Study) -> Result<StudyPosterior> {
+    build_posterior_with(study, || study.model())
+}
+
+/// The likelihood of `study`, comparing the outputs of the model `model()` builds with the data
+/// (`model` is called only when the `[likelihood]` needs a model: data without `prediction`).
+pub(crate) fn build_posterior_with<M: Model + 'static>(
+    study: &Study,
+    model: impl FnOnce() -> Result<M>,
+) -> Result<StudyPosterior> {
     let file = study.path.display().to_string();
     match parse_likelihood(study)? {
         LikelihoodSection::LogDensity(source) => {
@@ -121,7 +133,7 @@ fn build_posterior(study: &Study) -> Result<StudyPosterior> {
                     .bad_input(|| format!("{file}: section `[likelihood]`"))?;
                 (space, Box::new(likelihood))
             } else {
-                let model = study.expression_model()?;
+                let model = model()?;
                 if model.output_dimension() != n {
                     return Err(input_error(format!(
                         "{file}: key `model.outputs`: the model has {} outputs but the data has {n} points (output j is compared with data point j, in file order; or give `likelihood.prediction = \"formula of the parameters and x\"`)",

@@ -9,7 +9,12 @@ use anyhow::Result;
 use clap::{Args, Subcommand};
 use serde_json::json;
 
-use iuq_core::GaussianKde;
+use iuq_basis::{
+    Basis, BasisSettings, ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, ErrorModel,
+    Observations, PosteriorSummary, PredictionErrorLikelihood, Silent,
+};
+use iuq_core::{GaussianKde, Model, Parameter, ParameterSpace, Prior};
+use iuq_gp::{FitOptions, GpBank};
 
 use crate::input_error::{BadInput, input_error};
 use crate::report_output::{emit, short};
@@ -23,6 +28,10 @@ pub enum BenchCommand {
     Kde(KdeBenchArgs),
     /// Prediction of a saved GP at the points of a CSV file: mean only, and mean with variance.
     GpPredict(GpPredictBenchArgs),
+    /// BASIS (N = 10 000, n_burn = 10) on a 4-parameter posterior whose model is a bank of 8
+    /// GPs (500 training points each) with the GP's predictive std as computational error:
+    /// the issue-3 benchmark (scripts/bench/basis_gp_bank.py runs the Python reference).
+    BasisGpBank(BasisGpBankArgs),
 }
 
 /// Arguments of `iuq bench gp-predict`.
@@ -187,5 +196,320 @@ pub fn run(command: &BenchCommand, json: bool) -> Result<()> {
     match command {
         BenchCommand::Kde(args) => kde(args, json),
         BenchCommand::GpPredict(args) => gp_predict(args, json),
+        BenchCommand::BasisGpBank(args) => basis_gp_bank(args, json),
     }
+}
+
+/// Shear stresses (Pa) of the synthetic elongation-index curve of `iuq bench basis-gp-bank`.
+pub const SHEAR_STRESSES: [f64; 8] = [0.3, 0.6, 1.2, 2.4, 4.8, 9.6, 19.2, 38.4];
+/// The RBC prior box of the benchmark: kLink U(10, 300), kBend U(50, 400), viscosityRatio
+/// U(1, 15).
+const RBC_PRIOR: [(&str, f64, f64); 3] = [
+    ("kLink", 10.0, 300.0),
+    ("kBend", 50.0, 400.0),
+    ("viscosityRatio", 1.0, 15.0),
+];
+/// The parameters the synthetic data are generated at.
+const RBC_TRUTH: [f64; 3] = [120.0, 180.0, 6.0];
+/// Measurement std of every synthetic datum.
+const MEASUREMENT_STD: f64 = 0.008;
+
+/// A smooth stand-in for the elongation index EI(τ) of a red blood cell at shear stress `tau`
+/// (a saturating Hill-type curve, as fitted to ektacytometry data) whose plateau, half-saturation
+/// stress and steepness depend on (kLink, kBend, viscosityRatio). Not a physical model: it only
+/// gives the benchmark's GPs curves of the right shape and smoothness.
+pub fn synthetic_elongation_index(theta: &[f64], tau: f64) -> f64 {
+    let (g, b, v) = (theta[0] / 100.0, theta[1] / 100.0, theta[2]);
+    let plateau = 0.64 - 0.008 * (v - 1.0) - 0.015 * b;
+    let half = 0.35 * g.powf(0.75) * (1.0 + 0.12 * b) * (1.0 + 0.05 * (v - 1.0));
+    let steepness = 0.9 + 0.025 * (v - 1.0) + 0.04 * g.ln();
+    let t = (tau / half).powf(steepness);
+    plateau * t / (1.0 + t)
+}
+
+/// A standard normal deviate keyed by (seed, index) (inverse CDF of a SplitMix64 uniform).
+fn keyed_normal(seed: u64, index: u64) -> f64 {
+    let h = iuq_core::random::splitmix64(iuq_core::random::splitmix64(seed ^ 0x6461_7461) ^ index);
+    let u = ((h >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    iuq_core::normal::quantile(u)
+}
+
+/// Arguments of `iuq bench basis-gp-bank`.
+#[derive(Debug, Args)]
+pub struct BasisGpBankArgs {
+    /// Population size N.
+    #[arg(long, default_value_t = 10_000)]
+    pub samples: usize,
+    /// Discarded MCMC steps per chain and stage (n_burn).
+    #[arg(long, default_value_t = 10)]
+    pub burn: usize,
+    /// Seed of the sampler.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Seed of the training design, the GP fits and the synthetic data.
+    #[arg(long, default_value_t = 0)]
+    pub data_seed: u64,
+    /// Training points per GP (a maximin Latin hypercube on the prior box).
+    #[arg(long, default_value_t = 500)]
+    pub training: usize,
+    /// Worker threads (default: RAYON_NUM_THREADS, else one per core).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Timed sampler runs with the same seed (the median is reported).
+    #[arg(long, default_value_t = 1)]
+    pub repeats: usize,
+    /// Load this GP bank (a `bank.json` written by `--out`) instead of fitting one.
+    #[arg(long)]
+    pub bank: Option<PathBuf>,
+    /// Directory to write `bank.json` (the GP bank) and `data.json` (data, prior, settings,
+    /// reference predictions) for the Python reference.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// How the GP's predictive std enters Σ: relative (the paper's), absolute-times-data (the
+    /// study's code), absolute or none.
+    #[arg(long, default_value = "relative")]
+    pub computational_error: String,
+}
+
+fn basis_gp_bank(args: &BasisGpBankArgs, json: bool) -> Result<()> {
+    if args.repeats == 0 || args.training < 2 {
+        return Err(input_error(
+            "--repeats must be at least 1 and --training at least 2",
+        ));
+    }
+    let computational_error =
+        ComputationalError::from_name(&args.computational_error).ok_or_else(|| {
+            input_error(format!(
+                "--computational-error: unknown convention `{}` (relative, absolute-times-data, absolute, none)",
+                args.computational_error
+            ))
+        })?;
+    let settings = BasisSettings {
+        samples: args.samples,
+        burn_in: args.burn,
+        seed: args.seed,
+        ..Default::default()
+    }
+    .check()
+    .bad_input(|| "--samples/--burn".to_string())?;
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(t) = args.threads {
+        pool = pool.num_threads(t);
+    }
+    let pool = pool.build()?;
+    pool.install(|| basis_gp_bank_in_pool(args, settings, computational_error, json))
+}
+
+fn basis_gp_bank_in_pool(
+    args: &BasisGpBankArgs,
+    settings: iuq_basis::CheckedSettings,
+    computational_error: ComputationalError,
+    json: bool,
+) -> Result<()> {
+    let input_names: Vec<String> = RBC_PRIOR.iter().map(|p| p.0.to_string()).collect();
+    let output_names: Vec<String> = SHEAR_STRESSES.iter().map(|t| format!("EI_{t}Pa")).collect();
+    let bounds: Vec<(f64, f64)> = RBC_PRIOR.iter().map(|p| (p.1, p.2)).collect();
+
+    // The surrogate: 8 GPs on a maximin LHS (fitted, or loaded).
+    let (bank, fit_seconds) = match &args.bank {
+        Some(path) => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| input_error(format!("--bank: cannot read {}: {e}", path.display())))?;
+            let bank =
+                GpBank::from_json_str(&text).bad_input(|| format!("--bank {}", path.display()))?;
+            if bank.input_names() != input_names.as_slice()
+                || bank.output_names() != output_names.as_slice()
+            {
+                return Err(input_error(format!(
+                    "--bank {}: not a bank of this benchmark (inputs {:?}, outputs {:?})",
+                    path.display(),
+                    bank.input_names(),
+                    bank.output_names()
+                )));
+            }
+            (bank, None)
+        }
+        None => {
+            let unit = iuq_doe::latin_hypercube(
+                args.training,
+                3,
+                iuq_doe::LhsMethod::maximin(),
+                args.data_seed,
+            )?;
+            let x = iuq_doe::scale_to_bounds(&unit, &bounds)?;
+            let outputs: Vec<Vec<f64>> = SHEAR_STRESSES
+                .iter()
+                .map(|&tau| {
+                    x.iter()
+                        .map(|p| synthetic_elongation_index(p, tau))
+                        .collect()
+                })
+                .collect();
+            let options = FitOptions {
+                seed: args.data_seed,
+                ..FitOptions::default()
+            };
+            let start = Instant::now();
+            let bank = GpBank::fit(
+                input_names.clone(),
+                output_names.clone(),
+                &x,
+                &outputs,
+                &options,
+            )?;
+            (bank, Some(start.elapsed().as_secs_f64()))
+        }
+    };
+
+    // Synthetic data at the truth, with measurement errors.
+    let values: Vec<f64> = SHEAR_STRESSES
+        .iter()
+        .enumerate()
+        .map(|(j, &tau)| {
+            synthetic_elongation_index(&RBC_TRUTH, tau)
+                + MEASUREMENT_STD * keyed_normal(args.data_seed, j as u64)
+        })
+        .collect();
+    let observations = Observations {
+        values: values.clone(),
+        measurement_std: Some(vec![MEASUREMENT_STD; values.len()]),
+    };
+    let errors = ErrorModel {
+        measurement_error: true,
+        computational_error,
+        modelling_error: Some(DEFAULT_MODELLING_ERROR_PRIOR),
+    };
+    let model_space = ParameterSpace::new(
+        RBC_PRIOR
+            .iter()
+            .map(|p| Parameter {
+                name: p.0.to_string(),
+                prior: Prior::Uniform(p.1, p.2),
+            })
+            .collect(),
+    )?;
+
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| input_error(format!("--out: cannot create {}: {e}", dir.display())))?;
+        // Reference predictions for the Python side's equality check.
+        let check: Vec<Vec<f64>> = (0..5)
+            .map(|i| {
+                bounds
+                    .iter()
+                    .enumerate()
+                    .map(|(k, (lo, hi))| {
+                        let u = (0.5
+                            + (i + 1) as f64 * [0.7548776662, 0.5698402910, 0.4301597090][k])
+                            .rem_euclid(1.0);
+                        lo + u * (hi - lo)
+                    })
+                    .collect()
+            })
+            .collect();
+        let predictions = bank.predict(&check)?;
+        let data = json!({
+            "parameters": RBC_PRIOR.iter().map(|p| json!({"name": p.0, "lower": p.1, "upper": p.2})).collect::<Vec<_>>(),
+            "modelling_error": {"name": iuq_basis::MODELLING_ERROR_NAME, "lower": 0.001, "upper": 0.1},
+            "shear_stresses": SHEAR_STRESSES,
+            "truth": RBC_TRUTH,
+            "observations": values,
+            "measurement_std": vec![MEASUREMENT_STD; values.len()],
+            "computational_error": computational_error.name(),
+            "predictive_std": "with_noise",
+            "settings": settings.settings(),
+            "check": {
+                "points": check,
+                "mean": predictions.iter().map(|p| p.mean.clone()).collect::<Vec<_>>(),
+                "std": predictions.iter().map(|p| p.std_with_noise()).collect::<Vec<_>>(),
+            },
+        });
+        std::fs::write(dir.join("bank.json"), bank.to_json_string()?)?;
+        std::fs::write(dir.join("data.json"), serde_json::to_string_pretty(&data)?)?;
+    }
+
+    let likelihood = PredictionErrorLikelihood::new(bank, observations, errors)?;
+    let space = likelihood.parameter_space(&model_space)?;
+    let basis = Basis::new(&space, &likelihood, settings)?;
+    let mut times = Vec::with_capacity(args.repeats);
+    let mut run = None;
+    for _ in 0..args.repeats {
+        let start = Instant::now();
+        let r = basis.run(&mut Silent)?;
+        times.push(start.elapsed().as_secs_f64());
+        run = Some(r);
+    }
+    let Some(run) = run else {
+        return Err(input_error("--repeats must be at least 1"));
+    };
+    let state = &run.state;
+    let summary = PosteriorSummary::from_state(state)?;
+    let seconds = median(times.clone());
+    let outputs = likelihood.model().output_dimension();
+    let predictions = state.evaluations * outputs;
+    let by_name = |v: &[f64]| -> serde_json::Map<String, serde_json::Value> {
+        summary
+            .names
+            .iter()
+            .zip(v)
+            .map(|(k, x)| (k.clone(), json!(x)))
+            .collect()
+    };
+    let stages: Vec<serde_json::Value> = state
+        .diagnostics
+        .iter()
+        .map(|d| {
+            json!({
+                "stage": d.stage,
+                "exponent": d.exponent,
+                "acceptance_rate": d.acceptance_rate,
+                "evaluations": d.evaluations,
+                "batches": d.batches,
+                "log_evidence": d.log_evidence,
+                "wall_seconds": d.wall_seconds,
+            })
+        })
+        .collect();
+    let value = json!({
+        "kernel": "basis-gp-bank",
+        "threads": rayon::current_num_threads(),
+        "samples": settings.samples,
+        "burn_in": settings.burn_in,
+        "seed": settings.seed,
+        "n_training": args.training,
+        "outputs": outputs,
+        "computational_error": computational_error.name(),
+        "fit_seconds": fit_seconds,
+        "seconds_median": seconds,
+        "seconds": times,
+        "repeats": args.repeats,
+        "stages": state.stages(),
+        "evaluations": state.evaluations,
+        "predictions": predictions,
+        "seconds_per_prediction": seconds / predictions as f64,
+        "log_evidence": state.log_evidence,
+        "stop_reason": run.stop_reason.name(),
+        "failures": state.failures(),
+        "mean": by_name(&summary.mean),
+        "std": by_name(&summary.std),
+        "map": by_name(&summary.map),
+        "stage_diagnostics": stages,
+    });
+    emit(json, &value, || {
+        format!(
+            "BASIS on a GP bank ({outputs} GPs × {} points), N = {}, n_burn = {}: {} s (median of {}), {} stages, {} evaluations, {} predictions ({} s each), ln Z = {}{}",
+            args.training,
+            settings.samples,
+            settings.burn_in,
+            short(seconds),
+            args.repeats,
+            state.stages(),
+            state.evaluations,
+            predictions,
+            short(seconds / predictions as f64),
+            short(state.log_evidence),
+            fit_seconds.map_or(String::new(), |f| format!("; GP fit {} s", short(f))),
+        )
+    });
+    Ok(())
 }

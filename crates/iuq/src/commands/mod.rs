@@ -3,5 +3,12 @@
 pub mod basis;
 pub mod bench;
 pub mod design;
+pub mod export;
 pub mod gp;
+pub mod rbc;
+pub mod retry;
+pub mod run;
+pub mod serve;
 pub mod sobol;
+pub mod status;
+pub mod worker;

@@ -1,4 +1,4 @@
-//! `iuq sobol STUDY`: Sobol' indices of a study's (expression) model over its priors.
+//! `iuq sobol STUDY`: Sobol' indices of a study's model over its priors.
 
 use std::path::PathBuf;
 
@@ -15,7 +15,7 @@ use crate::study::Study;
 /// Arguments of `iuq sobol`.
 #[derive(Debug, Args)]
 pub struct SobolArgs {
-    /// The study file (TOML) whose model is an expression.
+    /// The study file (TOML) with a `[model]` (expression, rbc-shear or umbridge).
     pub study: PathBuf,
     /// Base points N of the Saltelli design (N(d + 2) evaluations per design); default from the
     /// study's `[sensitivity] n`, else 1024.
@@ -38,7 +38,7 @@ pub struct SobolArgs {
 /// Run `iuq sobol`.
 pub fn run(args: &SobolArgs, json: bool) -> Result<()> {
     let study = Study::load(&args.study)?;
-    let model = study.expression_model()?;
+    let model = study.model()?;
     let section = &study.sensitivity;
     let n = args.n.or(section.n).unwrap_or(1024);
     if n < 2 {

@@ -1,0 +1,409 @@
+//! The blocked forward substitution behind predictive variances: ‖L⁻¹k*‖² for groups of
+//! [`LANES`] points at once, at matrix-multiply speed.
+//!
+//! The variance of a prediction needs v = L⁻¹k* (n²/2 fused multiply-adds per point), which
+//! is almost all of the cost of predicting with variance at n ≈ 500. Here the factor L is
+//! stored once per GP in a packed form ([`PackedFactor`]): panels of [`ROWS`] rows, each with
+//! its off-diagonal part −L[panel, 0..r₀] laid out column by column and its negated diagonal
+//! block and reciprocal pivots apart. For a group of [`LANES`] points whose kernel columns are
+//! stored row-major (`v[k·LANES + t]` = k*_t[k]), each panel is one register tile: the
+//! [`ROWS`]×[`LANES`] values start as the kernel rows, take −Σ_{k<r₀} L_ik·v_k (a GEMM-shaped
+//! update, vectors of [`LANES`] points times broadcast factor entries) and then the in-tile
+//! substitution, and are written back as rows of v. Every point therefore gets exactly the
+//! textbook forward substitution
+//!
+//! v_i = (k_i − Σ_{m<i} L_im·v_m)·(1/L_ii),   the sum taken in increasing m by fused multiply-adds,
+//!
+//! and ‖v‖² = Σ over panels (in order) of the panel's Σ_i v_i² (fused multiply-adds in
+//! increasing i). The result for a point does not depend on the other points of its group,
+//! on the batch or on the number of threads, and the AVX-512 path and the portable path
+//! (used on other CPUs) perform the same operations in the same order, so they agree bit for
+//! bit (tested).
+//!
+//! Accuracy: forward substitution is backward stable, like faer's blocked triangular solve it
+//! replaces (tested to agree to round-off). An explicit inverse L⁻¹ would allow a plain matrix
+//! product, but it loses about a digit on ill-conditioned K (cond(K) ≈ 1e13 for a
+//! deterministic simulator at the noise bound σ² = 1e−8: errors of the latent variance ≈ 20×
+//! those of the substitution against an 80-bit reference), so it is not used. Single
+//! precision is useless here: the variance is the difference c − ‖v‖² with ‖v‖² ≈ c, and at
+//! c ≈ 1e3, σ² = 1e−8 an f32 substitution gets it wrong by ≈ c itself (measured: errors of
+//! 5e2 on variances of 3e−9); the project's rule (f64 unless a test shows f32 is enough)
+//! keeps f64.
+
+use crate::vector_math::multiversion;
+
+/// Rows of L per panel (the height of the register tile).
+pub(crate) const ROWS: usize = 24;
+/// Points per group (the width of the register tile: one AVX-512 vector of f64).
+pub(crate) const LANES: usize = 8;
+
+/// The Cholesky factor L (n×n, lower) packed for [`PackedFactor::squared_norms`].
+#[derive(Debug, Clone, Default)]
+pub(crate) struct PackedFactor {
+    panels: usize,
+    /// Panel p (rows r₀ = p·ROWS …): −L[r₀ + i, k] at `off_diagonal[offset(p) + k·ROWS + i]`,
+    /// k < r₀, offset(p) = ROWS²·p(p − 1)/2.
+    off_diagonal: Vec<f64>,
+    /// Panel p: −L[r₀ + i, r₀ + m] at `diagonal[p·ROWS² + i·ROWS + m]` for m < i, else 0.
+    diagonal: Vec<f64>,
+    /// 1/L_ii, 0 for the padding rows i ≥ n.
+    reciprocal: Vec<f64>,
+}
+
+impl PackedFactor {
+    /// Packs the lower triangle of the column-major n×n factor `l`.
+    pub(crate) fn new(l: &[f64], n: usize) -> Self {
+        let panels = n.div_ceil(ROWS);
+        let entry = |i: usize, k: usize| if i < n { -l[k * n + i] } else { 0.0 };
+        let mut off_diagonal =
+            Vec::with_capacity(ROWS * ROWS * panels * panels.saturating_sub(1) / 2);
+        let mut diagonal = vec![0.0; panels * ROWS * ROWS];
+        let mut reciprocal = vec![0.0; panels * ROWS];
+        for p in 0..panels {
+            let r0 = p * ROWS;
+            for k in 0..r0 {
+                off_diagonal.extend((0..ROWS).map(|i| entry(r0 + i, k)));
+            }
+            for i in 0..ROWS {
+                if r0 + i >= n {
+                    continue;
+                }
+                for m in 0..i {
+                    diagonal[p * ROWS * ROWS + i * ROWS + m] = entry(r0 + i, r0 + m);
+                }
+                reciprocal[p * ROWS + i] = 1.0 / l[(r0 + i) * n + r0 + i];
+            }
+        }
+        Self {
+            panels,
+            off_diagonal,
+            diagonal,
+            reciprocal,
+        }
+    }
+
+    /// Rows of the padded right-hand side: n rounded up to a multiple of [`ROWS`].
+    pub(crate) fn padded_rows(&self) -> usize {
+        self.panels * ROWS
+    }
+
+    /// Replaces the groups of [`LANES`] right-hand sides in `v` (`groups` blocks of
+    /// `padded_rows()` rows of [`LANES`] values each, rows ≥ n zero) by L⁻¹·v and writes
+    /// their squared norms to `norms` (one array per group).
+    ///
+    /// Panel by panel: the off-diagonal update of every group in chunks of [`K_CHUNK`]
+    /// columns (so that the chunk of the factor stays in the L1 cache while the groups pass
+    /// through it; a tile's partial sums wait in `v` between chunks, stored exactly), then
+    /// the in-tile substitution of every group. Compiled for AVX-512, AVX2+FMA and the
+    /// baseline, chosen at run time; per value, the operations of
+    /// [`Self::squared_norms_reference`] in the same order.
+    pub(crate) fn squared_norms(&self, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+        let size = self.padded_rows() * LANES;
+        assert_eq!(v.len(), size * norms.len(), "right-hand side size");
+        blocked_squared_norms(self, v, norms);
+    }
+
+    /// The panel slices of panel p: (off-diagonal part, diagonal block, reciprocals).
+    #[inline(always)]
+    fn panel(&self, p: usize) -> (&[f64], &[f64], &[f64]) {
+        let r0 = p * ROWS;
+        let start = ROWS * ROWS * (p * p.saturating_sub(1) / 2);
+        (
+            &self.off_diagonal[start..start + r0 * ROWS],
+            &self.diagonal[p * ROWS * ROWS..(p + 1) * ROWS * ROWS],
+            &self.reciprocal[p * ROWS..(p + 1) * ROWS],
+        )
+    }
+
+    /// The reference: group by group, panel by panel, without chunks or vector extensions.
+    #[cfg(test)]
+    pub(crate) fn squared_norms_reference(&self, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+        let size = self.padded_rows() * LANES;
+        assert_eq!(v.len(), size * norms.len(), "right-hand side size");
+        for (group, total) in v.chunks_exact_mut(size).zip(norms.iter_mut()) {
+            *total = [0.0; LANES];
+            for p in 0..self.panels {
+                let (a, diagonal, reciprocal) = self.panel(p);
+                let r0 = p * ROWS;
+                let (done, rest) = group.split_at_mut(r0 * LANES);
+                let tile = &mut rest[..ROWS * LANES];
+                update(a, done, tile);
+                let s = solve(diagonal, reciprocal, tile);
+                for (t, s) in total.iter_mut().zip(s) {
+                    *t += s;
+                }
+            }
+        }
+    }
+}
+
+/// Columns of the factor per chunk of the off-diagonal update: 128·ROWS doubles = 24 KiB,
+/// half of a 48 KiB L1 data cache.
+const K_CHUNK: usize = 128;
+
+multiversion! {
+    /// [`PackedFactor::squared_norms`] (sizes checked by the caller).
+    fn blocked_squared_norms(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+        let size = packed.padded_rows() * LANES;
+        for total in norms.iter_mut() {
+            *total = [0.0; LANES];
+        }
+        for p in 0..packed.panels {
+            let (a, diagonal, reciprocal) = packed.panel(p);
+            let r0 = p * ROWS;
+            let mut k0 = 0;
+            while k0 < r0 {
+                let k1 = (k0 + K_CHUNK).min(r0);
+                let chunk = &a[k0 * ROWS..k1 * ROWS];
+                for group in v.chunks_exact_mut(size) {
+                    let (done, rest) = group.split_at_mut(r0 * LANES);
+                    update(chunk, &done[k0 * LANES..k1 * LANES], &mut rest[..ROWS * LANES]);
+                }
+                k0 = k1;
+            }
+            for (group, total) in v.chunks_exact_mut(size).zip(norms.iter_mut()) {
+                let tile = &mut group[r0 * LANES..(r0 + ROWS) * LANES];
+                let s = solve(diagonal, reciprocal, tile);
+                for (t, s) in total.iter_mut().zip(s) {
+                    *t += s;
+                }
+            }
+        }
+    }
+}
+
+/// The off-diagonal update of one tile: tile_i −= Σ_k L_ik·v_k, i.e. tile_i =
+/// fma(−L_ik, v_k, tile_i) for the columns k of `a` (ROWS values per column, negated) and the
+/// rows `v` (LANES values per row) in order. The tile of ROWS × LANES values is held in
+/// registers (24 vectors of 8 with AVX-512).
+#[inline(always)]
+fn update(a: &[f64], v: &[f64], tile: &mut [f64]) {
+    let mut acc = [[0.0f64; LANES]; ROWS];
+    for (row, t) in acc.iter_mut().zip(tile.chunks_exact(LANES)) {
+        row.copy_from_slice(t);
+    }
+    for (vk, ak) in v.chunks_exact(LANES).zip(a.chunks_exact(ROWS)) {
+        let vk: &[f64; LANES] = vk.try_into().expect("LANES values");
+        let ak: &[f64; ROWS] = ak.try_into().expect("ROWS values");
+        for (row, &aik) in acc.iter_mut().zip(ak) {
+            for (x, &y) in row.iter_mut().zip(vk) {
+                *x = aik.mul_add(y, *x);
+            }
+        }
+    }
+    for (row, t) in acc.iter().zip(tile.chunks_exact_mut(LANES)) {
+        t.copy_from_slice(row);
+    }
+}
+
+/// Row M of the in-tile substitution: v_M = acc_M·(1/L_MM), then acc_i = fma(−L_iM, v_M,
+/// acc_i) for the rows i > M (unrolled by the const parameter, so that the tile stays in
+/// registers).
+#[inline(always)]
+fn solve_row<const M: usize>(acc: &mut [[f64; LANES]; ROWS], diagonal: &[f64], reciprocal: &[f64]) {
+    let r = reciprocal[M];
+    for x in acc[M].iter_mut() {
+        *x *= r;
+    }
+    let vm = acc[M];
+    for i in M + 1..ROWS {
+        let d = diagonal[i * ROWS + M];
+        for (x, &y) in acc[i].iter_mut().zip(&vm) {
+            *x = d.mul_add(y, *x);
+        }
+    }
+}
+
+/// The in-tile substitution of one tile (after its off-diagonal update): writes v back and
+/// returns Σ_i v_i² over its rows (fused multiply-adds in increasing i).
+#[inline(always)]
+fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES] {
+    let diagonal: &[f64; ROWS * ROWS] = diagonal.try_into().expect("ROWS² values");
+    let reciprocal: &[f64; ROWS] = reciprocal.try_into().expect("ROWS values");
+    let mut acc = [[0.0f64; LANES]; ROWS];
+    for (row, t) in acc.iter_mut().zip(tile.chunks_exact(LANES)) {
+        row.copy_from_slice(t);
+    }
+    macro_rules! rows {
+        ($($m:literal)*) => { $( solve_row::<$m>(&mut acc, diagonal, reciprocal); )* };
+    }
+    rows!(0 1 2 3 4 5 6 7 8 9 10 11 12 13 14 15 16 17 18 19 20 21 22 23);
+    let mut s = [0.0f64; LANES];
+    for (row, t) in acc.iter().zip(tile.chunks_exact_mut(LANES)) {
+        for (x, &y) in s.iter_mut().zip(row) {
+            *x = y.mul_add(y, *x);
+        }
+        t.copy_from_slice(row);
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
+    use faer::{MatMut, MatRef, Par};
+
+    /// A well-conditioned lower factor with n not a multiple of ROWS.
+    fn factor(n: usize) -> Vec<f64> {
+        let mut l = vec![0.0; n * n];
+        for k in 0..n {
+            for i in k..n {
+                let h = ((i * 7919 + k * 104_729) % 1000) as f64 / 1000.0;
+                l[k * n + i] = if i == k {
+                    2.0 + h
+                } else {
+                    0.3 * (h - 0.5) / (1.0 + (i - k) as f64).sqrt()
+                };
+            }
+        }
+        l
+    }
+
+    #[test]
+    fn matches_a_triangular_solve_and_every_path_agrees() {
+        const GROUPS: usize = 3;
+        for n in [1, 5, 24, 25, 61, 130, 300] {
+            let l = factor(n);
+            let packed = PackedFactor::new(&l, n);
+            let rows = packed.padded_rows();
+            let size = rows * LANES;
+            let value =
+                |g: usize, k: usize, t: usize| ((k * 31 + t * 17 + g * 7) % 97) as f64 / 97.0 - 0.3;
+            let mut rhs = vec![0.0; GROUPS * size];
+            for g in 0..GROUPS {
+                for k in 0..n {
+                    for t in 0..LANES {
+                        rhs[g * size + k * LANES + t] = value(g, k, t);
+                    }
+                }
+            }
+            let mut a = rhs.clone();
+            let mut norms = [[0.0; LANES]; GROUPS];
+            packed.squared_norms(&mut a, &mut norms);
+            let mut b = rhs.clone();
+            let mut norms_portable = [[0.0; LANES]; GROUPS];
+            packed.squared_norms_reference(&mut b, &mut norms_portable);
+            assert_eq!(
+                a, b,
+                "n = {n}: the dispatched and the reference path differ"
+            );
+            assert_eq!(norms, norms_portable);
+            for g in 0..GROUPS {
+                // Reference: faer's solve on the column-major copy.
+                let mut cols = vec![0.0; n * LANES];
+                for k in 0..n {
+                    for t in 0..LANES {
+                        cols[t * n + k] = value(g, k, t);
+                    }
+                }
+                solve_lower_triangular_in_place(
+                    MatRef::from_column_major_slice(&l, n, n),
+                    MatMut::from_column_major_slice_mut(&mut cols, n, LANES),
+                    Par::Seq,
+                );
+                for t in 0..LANES {
+                    let mut reference = 0.0;
+                    for k in 0..n {
+                        let x = cols[t * n + k];
+                        let y = a[g * size + k * LANES + t];
+                        assert!(
+                            (y - x).abs() <= 1e-13 * (1.0 + x.abs()),
+                            "n = {n}, group {g}"
+                        );
+                        reference += x * x;
+                    }
+                    let q = norms[g][t];
+                    assert!(
+                        (q - reference).abs() <= 1e-13 * reference,
+                        "n = {n}, group {g}"
+                    );
+                    for k in n..rows {
+                        assert_eq!(a[g * size + k * LANES + t], 0.0);
+                    }
+                }
+            }
+            // A column's result does not depend on its neighbours or on the other groups.
+            let mut single = vec![0.0; size];
+            for k in 0..n {
+                single[k * LANES + 3] = rhs[size + k * LANES + 3];
+            }
+            let mut alone = [[0.0; LANES]];
+            packed.squared_norms(&mut single, &mut alone);
+            assert_eq!(alone[0][3], norms[1][3]);
+            assert_eq!(alone[0][0], 0.0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod timing {
+    use super::*;
+
+    /// CPU seconds of the calling thread (the machine is shared: wall time misleads).
+    fn thread_cpu_seconds() -> f64 {
+        let stat = std::fs::read_to_string("/proc/thread-self/stat").unwrap_or_default();
+        let fields: Vec<&str> = stat
+            .rsplit(')')
+            .next()
+            .unwrap_or("")
+            .split_whitespace()
+            .collect();
+        let ticks = |i: usize| {
+            fields
+                .get(i)
+                .and_then(|v| v.parse::<f64>().ok())
+                .unwrap_or(0.0)
+        };
+        (ticks(11) + ticks(12)) / 100.0
+    }
+
+    /// Throughput of the kernel per CPU second (not a test; `cargo test --release -p iuq-gp
+    /// -- --ignored --nocapture kernel_throughput`).
+    #[test]
+    #[ignore]
+    fn kernel_throughput() {
+        for n in [96usize, 240, 500, 1000] {
+            let mut l = vec![0.0; n * n];
+            for k in 0..n {
+                for i in k..n {
+                    l[k * n + i] = if i == k { 2.0 } else { 0.001 };
+                }
+            }
+            let packed = PackedFactor::new(&l, n);
+            let rows = packed.padded_rows();
+            let rhs: Vec<f64> = (0..rows * LANES)
+                .map(|i| if i / LANES < n { 0.5 } else { 0.0 })
+                .collect();
+            let block = 8;
+            let rhs = rhs.repeat(block);
+            let mut v = rhs.clone();
+            let mut norms = vec![[0.0; LANES]; block];
+            let mut sink = 0.0;
+            let mut rates = Vec::new();
+            for _ in 0..9 {
+                let mut groups = 0usize;
+                let start = thread_cpu_seconds();
+                let wall = std::time::Instant::now();
+                while wall.elapsed().as_secs_f64() < 0.3 {
+                    for _ in 0..4 {
+                        v.copy_from_slice(&rhs);
+                        packed.squared_norms(&mut v, &mut norms);
+                        sink += norms[0][0];
+                    }
+                    groups += 4 * block;
+                }
+                let cpu = thread_cpu_seconds() - start;
+                let wall = wall.elapsed().as_secs_f64();
+                let fma = (groups * LANES) as f64 * (n * n) as f64 / 2.0;
+                rates.push(fma / wall / 1e9);
+                let _ = cpu;
+            }
+            rates.sort_by(f64::total_cmp);
+            println!(
+                "n = {n}: GFMA per wall second: best {:.1}, median {:.1} ({sink:.1})",
+                rates[8], rates[4]
+            );
+        }
+    }
+}

@@ -1,0 +1,434 @@
+//! The one-cell shear experiment and its measuring protocol.
+//!
+//! A 20×20×9.5 µm box (40×40 nodes periodic in x and y, walls 19 lattice units apart in z)
+//! holds one cell lying flat in the flow–vorticity plane, centred at (19, 19, 9). The walls move
+//! with `u_x = ±19·γ̇·dt/2`, `γ̇ = τ/(ρν)` for the ektacytometer's shear stress τ; the fluid starts
+//! at rest. The cell shape is recorded 10 times, evenly spaced in `[t_start, t_max]` with
+//! `t_start = int(7.5/(γ̇·dt))` and `t_max = ceil(1.25·t_start)` (7.5 to 9.4 strain units); the
+//! quantity of interest is the mean of the 10 elongation indices and its computational
+//! uncertainty their sample standard deviation.
+//!
+//! Two protocols:
+//! * [`Protocol::Reference`]: HemoCell's dt = 5e-8 s, so γ̇·dt = 6e-5 at 1.36 Pa and 155k steps;
+//! * [`Protocol::Scaled`]: a fixed lattice shear rate (γ̇·dt = 3e-4 by default, cell Reynolds
+//!   number γ̇R²/ν ≈ 0.08) with every force-like constant of the membrane, the 50 pN cap
+//!   included, multiplied by `s = 3e-4/(γ̇·dt_ref)` so that the capillary number
+//!   `τR/(kLink·kBT/p)`, kBend/kLink and Λ are HemoCell's: 31,250 steps at any stress. Only the
+//!   (small) cell Reynolds number differs, and the fluid's time scale with it.
+
+use std::time::Instant;
+
+use crate::cell_in_flow::CellInFlow;
+use crate::ellipse::elongation_index;
+use crate::error::{RbcError, Result};
+use crate::lattice::{Lattice, Precision, ZBoundary};
+use crate::membrane_forces::{ForceCoefficients, MembraneParameters};
+use crate::mesh::Mesh;
+use crate::units::{CELL_RADIUS, LatticeUnits, shear_rate};
+
+/// Nodes of the shear box in x, y and z (z between the walls).
+pub const SHEAR_DOMAIN: [usize; 3] = [40, 40, 19];
+/// Initial centre of the cell, in lattice units (walls at z = 0 and z = 19).
+pub const CELL_CENTRE: [f64; 3] = [19.0, 19.0, 9.0];
+/// Lattice shear rate γ̇·dt of the scaled protocol.
+pub const DEFAULT_LATTICE_SHEAR_RATE: f64 = 3e-4;
+/// Strain at which measuring starts (`t_start = int(7.5/(γ̇·dt))`).
+pub const START_STRAIN: f64 = 7.5;
+/// `t_max = ceil(1.25·t_start)`.
+pub const WINDOW_FACTOR: f64 = 1.25;
+/// Shapes recorded in the measuring window.
+pub const FRAMES: usize = 10;
+/// Width of the x bins of the contour, in metres (0.5 µm).
+pub const CONTOUR_BIN_WIDTH: f64 = 0.5e-6;
+/// Largest wall speed accepted, in lattice units (keeps the Mach number small).
+pub const MAX_WALL_SPEED: f64 = 0.05;
+
+/// How time is discretised.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case", tag = "kind")]
+pub enum Protocol {
+    /// HemoCell's time step dt = 5e-8 s.
+    Reference,
+    /// A fixed lattice shear rate with the membrane stiffness rescaled to the same capillary
+    /// number.
+    Scaled {
+        /// γ̇·dt in lattice units.
+        lattice_shear_rate: f64,
+    },
+}
+
+impl Default for Protocol {
+    /// [`Protocol::Scaled`] with γ̇·dt = 3e-4.
+    fn default() -> Self {
+        Protocol::Scaled {
+            lattice_shear_rate: DEFAULT_LATTICE_SHEAR_RATE,
+        }
+    }
+}
+
+impl Protocol {
+    /// The protocol's name: `reference` or `scaled`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Protocol::Reference => "reference",
+            Protocol::Scaled { .. } => "scaled",
+        }
+    }
+}
+
+impl std::str::FromStr for Protocol {
+    type Err = RbcError;
+    fn from_str(s: &str) -> Result<Self> {
+        match s {
+            "reference" => Ok(Protocol::Reference),
+            "scaled" => Ok(Protocol::default()),
+            other => Err(RbcError::InvalidData(format!(
+                "unknown protocol `{other}` (expected `reference` or `scaled`)"
+            ))),
+        }
+    }
+}
+
+/// One shear run: the cell's parameters, the stress and how to simulate.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShearExperiment {
+    /// Membrane coefficients (kLink, kBend, kArea, kVolume).
+    pub membrane: MembraneParameters,
+    /// Interior/exterior viscosity ratio Λ.
+    pub viscosity_ratio: f64,
+    /// Shear stress of the ektacytometer in Pa.
+    pub stress: f64,
+    /// Time discretisation.
+    pub protocol: Protocol,
+    /// Strain at the start of the measuring window (7.5; shorter only for quick tests).
+    pub start_strain: f64,
+    /// Number of recorded shapes (10).
+    pub frames: usize,
+    /// Storage precision of the fluid.
+    pub precision: Precision,
+    /// Spread the fluid update over rayon's threads (identical results either way).
+    pub parallel: bool,
+}
+
+impl ShearExperiment {
+    /// The spec's experiment at `stress` Pa for the given cell, scaled protocol.
+    pub fn new(membrane: MembraneParameters, viscosity_ratio: f64, stress: f64) -> Self {
+        Self {
+            membrane,
+            viscosity_ratio,
+            stress,
+            protocol: Protocol::default(),
+            start_strain: START_STRAIN,
+            frames: FRAMES,
+            precision: Precision::default(),
+            parallel: true,
+        }
+    }
+
+    /// The same with another protocol.
+    pub fn with_protocol(mut self, protocol: Protocol) -> Self {
+        self.protocol = protocol;
+        self
+    }
+
+    /// Check every input, naming the offending one.
+    pub fn validate(&self) -> Result<()> {
+        self.membrane.validate()?;
+        if !(self.viscosity_ratio.is_finite() && self.viscosity_ratio > 0.0) {
+            return Err(RbcError::invalid(
+                "viscosityRatio",
+                self.viscosity_ratio,
+                "must be a positive finite number",
+            ));
+        }
+        if !(self.stress.is_finite() && self.stress > 0.0) {
+            return Err(RbcError::invalid(
+                "stress",
+                self.stress,
+                "the shear stress must be a positive finite number of pascals",
+            ));
+        }
+        if let Protocol::Scaled { lattice_shear_rate } = self.protocol {
+            if !(lattice_shear_rate > 0.0 && lattice_shear_rate <= 2e-3) {
+                return Err(RbcError::invalid(
+                    "lattice_shear_rate",
+                    lattice_shear_rate,
+                    "must lie in (0, 2e-3]",
+                ));
+            }
+        }
+        if !(self.start_strain.is_finite() && self.start_strain > 0.0) {
+            return Err(RbcError::invalid(
+                "start_strain",
+                self.start_strain,
+                "must be positive",
+            ));
+        }
+        if self.frames < 2 {
+            return Err(RbcError::invalid(
+                "frames",
+                self.frames as f64,
+                "at least 2 frames are needed for a standard deviation",
+            ));
+        }
+        let setup = self.setup();
+        let wall = 0.5 * SHEAR_DOMAIN[2] as f64 * setup.lattice_shear_rate;
+        if wall > MAX_WALL_SPEED {
+            return Err(RbcError::invalid(
+                "stress",
+                self.stress,
+                format!(
+                    "the wall speed {wall:.3} (lattice units) of the {} protocol exceeds {MAX_WALL_SPEED}; use the scaled protocol",
+                    self.protocol.name()
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The derived lattice quantities of this run.
+    pub fn setup(&self) -> ShearSetup {
+        let units = LatticeUnits::reference();
+        let rate = shear_rate(self.stress);
+        let reference_rate = rate * units.dt;
+        let (lattice_shear_rate, force_scale) = match self.protocol {
+            Protocol::Reference => (reference_rate, 1.0),
+            Protocol::Scaled { lattice_shear_rate } => {
+                (lattice_shear_rate, lattice_shear_rate / reference_rate)
+            }
+        };
+        let coefficients =
+            ForceCoefficients::hemocell(&self.membrane, &units, 1280).scaled(force_scale);
+        let t_start = (self.start_strain / lattice_shear_rate) as u64;
+        let t_max = (WINDOW_FACTOR * t_start as f64).ceil() as u64;
+        let n = self.frames.max(2) as u64;
+        let frames = (0..n)
+            .map(|i| t_start + ((i * (t_max - t_start)) as f64 / (n - 1) as f64).round() as u64)
+            .collect();
+        let radius = CELL_RADIUS / units.dx;
+        ShearSetup {
+            shear_rate: rate,
+            lattice_shear_rate,
+            force_scale,
+            coefficients,
+            relaxation_time: units.relaxation_time(),
+            t_start,
+            t_max,
+            frames,
+            reynolds: lattice_shear_rate * radius * radius / units.viscosity_lu(),
+            bin_width: CONTOUR_BIN_WIDTH / units.dx,
+        }
+    }
+}
+
+/// Derived quantities of one shear run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShearSetup {
+    /// Physical shear rate γ̇ = τ/(ρν) in 1/s.
+    pub shear_rate: f64,
+    /// γ̇·dt in lattice units.
+    pub lattice_shear_rate: f64,
+    /// Factor applied to every force-like constant (1 for the reference protocol).
+    pub force_scale: f64,
+    /// Force coefficients in lattice units, scaled.
+    pub coefficients: ForceCoefficients,
+    /// Exterior relaxation time τ.
+    pub relaxation_time: f64,
+    /// First measuring step.
+    pub t_start: u64,
+    /// Last step.
+    pub t_max: u64,
+    /// Steps at which the shape is recorded.
+    pub frames: Vec<u64>,
+    /// Cell Reynolds number γ̇R²/ν.
+    pub reynolds: f64,
+    /// Contour bin width in lattice units.
+    pub bin_width: f64,
+}
+
+/// A recorded shape.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Frame {
+    /// Time step.
+    pub step: u64,
+    /// Vertex positions (lattice units).
+    pub vertices: Vec<[f64; 3]>,
+    /// Elongation index of this shape.
+    pub elongation_index: f64,
+}
+
+/// The outcome of one shear run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ShearResult {
+    /// Mean of the frames' elongation indices.
+    pub el_mean: f64,
+    /// Their sample standard deviation.
+    pub el_std: f64,
+    /// The recorded shapes.
+    pub frames: Vec<Frame>,
+    /// The mesh's triangles (to write the shapes).
+    pub triangles: Vec<[usize; 3]>,
+    /// Steps simulated.
+    pub steps: u64,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// Million lattice node updates per second over the whole run (membrane included).
+    pub mlups: f64,
+    /// The derived quantities.
+    pub setup: ShearSetup,
+}
+
+impl ShearResult {
+    /// The frames' elongation indices.
+    pub fn el_frames(&self) -> Vec<f64> {
+        self.frames.iter().map(|f| f.elongation_index).collect()
+    }
+}
+
+/// Mean and sample standard deviation (n − 1).
+pub fn mean_and_sample_std(values: &[f64]) -> (f64, f64) {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0).max(1.0);
+    (mean, var.sqrt())
+}
+
+/// Build the shear box with the cell at rest in it.
+pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<CellInFlow> {
+    let [nx, ny, nz] = SHEAR_DOMAIN;
+    let wall = 0.5 * nz as f64 * setup.lattice_shear_rate;
+    let walls = ZBoundary::Walls {
+        bottom: [-wall, 0.0, 0.0],
+        top: [wall, 0.0, 0.0],
+    };
+    let mut lattice = Lattice::new(
+        nx,
+        ny,
+        nz,
+        walls,
+        setup.relaxation_time,
+        experiment.precision,
+    );
+    lattice.set_parallel(experiment.parallel);
+    let mesh = Mesh::red_blood_cell_lu(LatticeUnits::reference().dx, CELL_CENTRE);
+    CellInFlow::new(
+        lattice,
+        mesh,
+        setup.coefficients,
+        Some(experiment.viscosity_ratio),
+    )
+}
+
+/// Run the shear experiment and measure the elongation index.
+///
+/// Fails with the reason when the mesh breaks, a value becomes non-finite, the cell leaves the
+/// channel or a recorded contour admits no ellipse.
+pub fn run_shear(experiment: &ShearExperiment) -> Result<ShearResult> {
+    experiment.validate()?;
+    let setup = experiment.setup();
+    let started = Instant::now();
+    let mut cell = shear_cell(experiment, &setup)?;
+    let mut frames = Vec::with_capacity(setup.frames.len());
+    let mut next = 0;
+    while cell.steps() < setup.t_max {
+        cell.step()?;
+        while next < setup.frames.len() && setup.frames[next] == cell.steps() {
+            let vertices = cell.positions().to_vec();
+            let el = elongation_index(&vertices, setup.bin_width).map_err(|e| match e {
+                RbcError::NoEllipse(reason) => {
+                    RbcError::NoEllipse(format!("at step {}: {reason}", cell.steps()))
+                }
+                other => other,
+            })?;
+            frames.push(Frame {
+                step: cell.steps(),
+                vertices,
+                elongation_index: el,
+            });
+            next += 1;
+        }
+    }
+    let seconds = started.elapsed().as_secs_f64();
+    let el: Vec<f64> = frames.iter().map(|f| f.elongation_index).collect();
+    let (el_mean, el_std) = mean_and_sample_std(&el);
+    let nodes = SHEAR_DOMAIN.iter().product::<usize>() as f64;
+    Ok(ShearResult {
+        el_mean,
+        el_std,
+        frames,
+        triangles: cell.mesh().triangles.clone(),
+        steps: cell.steps(),
+        seconds,
+        mlups: cell.steps() as f64 * nodes / seconds.max(1e-12) / 1e6,
+        setup,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_counts_match_the_spec() {
+        let cell = MembraneParameters::default();
+        for (stress, steps) in [
+            (0.30, 705_000.0),
+            (1.36, 155_000.0),
+            (2.91, 73_000.0),
+            (9.04, 23_000.0),
+        ] {
+            let s = ShearExperiment::new(cell, 5.0, stress)
+                .with_protocol(Protocol::Reference)
+                .setup();
+            assert!(
+                ((s.t_max as f64 - steps) / steps).abs() < 0.02,
+                "{stress}: {}",
+                s.t_max
+            );
+            assert_eq!(s.frames.len(), 10);
+            assert_eq!((s.frames[0], s.frames[9]), (s.t_start, s.t_max));
+            assert_eq!(s.force_scale, 1.0);
+        }
+        let s = ShearExperiment::new(cell, 5.0, 1.36).setup();
+        assert_eq!((s.t_start, s.t_max), (25_000, 31_250));
+        // Same capillary number: force scale × reference lattice shear rate = 3e-4.
+        let reference_rate = shear_rate(1.36) * 5e-8;
+        assert!((s.force_scale * reference_rate - 3e-4).abs() < 1e-15);
+        assert!(s.reynolds < 0.1);
+    }
+
+    #[test]
+    fn bad_inputs_are_named() {
+        let cell = MembraneParameters::default();
+        let e = ShearExperiment::new(cell, 5.0, -1.0)
+            .validate()
+            .unwrap_err();
+        assert!(
+            e.is_input_error() && e.to_string().contains("stress"),
+            "{e}"
+        );
+        let e = ShearExperiment::new(cell, f64::NAN, 1.0)
+            .validate()
+            .unwrap_err();
+        assert!(e.to_string().contains("viscosityRatio"), "{e}");
+        let bad = MembraneParameters {
+            k_link: 0.0,
+            ..cell
+        };
+        let e = ShearExperiment::new(bad, 5.0, 1.0).validate().unwrap_err();
+        assert!(e.to_string().contains("kLink"), "{e}");
+        let e = ShearExperiment::new(cell, 5.0, 500.0)
+            .with_protocol(Protocol::Reference)
+            .validate()
+            .unwrap_err();
+        assert!(e.to_string().contains("wall speed"), "{e}");
+        assert!("fast".parse::<Protocol>().is_err());
+    }
+
+    #[test]
+    fn sample_std_uses_n_minus_one() {
+        let (m, s) = mean_and_sample_std(&[1.0, 2.0, 3.0, 4.0]);
+        assert_eq!(m, 2.5);
+        assert!((s - (5.0f64 / 3.0).sqrt()).abs() < 1e-15);
+    }
+}

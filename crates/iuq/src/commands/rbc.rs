@@ -1,0 +1,770 @@
+//! `iuq rbc …`: the native single red-blood-cell simulator (HemoCell-compatible shear
+//! experiment), its validation and its benchmark; and the `[model] kind = "rbc-shear"` section
+//! of study files.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, anyhow};
+use clap::{Args, Subcommand, ValueEnum};
+use serde_json::json;
+
+use iuq_rbc::benchmark::{LatticeBenchmark, benchmark_lattice, memory_copy_bandwidth};
+use iuq_rbc::lattice::Precision;
+use iuq_rbc::model::{CellParameters, PARAMETER_NAMES, RbcShearModel, RbcShearSettings};
+use iuq_rbc::protocol::{
+    DEFAULT_LATTICE_SHEAR_RATE, Protocol, SHEAR_DOMAIN, START_STRAIN, ShearExperiment, run_shear,
+};
+use iuq_rbc::shape_output::ShapeFormat;
+use iuq_rbc::stretching::{OPTICAL_TWEEZERS_AXIAL, StretchExperiment, run_stretch};
+use iuq_rbc::validation::{validate_shear, validate_stretch};
+use iuq_rbc::{MembraneParameters, RbcError};
+
+use crate::input_error::input_error;
+use crate::report_output::{emit, short};
+use crate::table_io::read_numeric_csv;
+
+/// The verbs of `iuq rbc`.
+#[derive(Debug, Subcommand)]
+pub enum RbcCommand {
+    /// One shear run: the elongation index of a cell at one shear stress.
+    Shear(ShearArgs),
+    /// The optical-tweezers stretching check: the axial diameter under a pulling force.
+    Stretch(StretchArgs),
+    /// Compare with HemoCell's elongation indices and the optical-tweezers data (minutes to
+    /// hours of computing).
+    Validate(ValidateArgs),
+    /// Lattice update rate (MLUPS) and the fraction of the memory copy bandwidth it reaches.
+    Bench(BenchArgs),
+}
+
+/// Time discretisation of a shear run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ProtocolArg {
+    /// HemoCell's time step (5e-8 s): 155k steps at 1.36 Pa.
+    Reference,
+    /// Fixed lattice shear rate, membrane forces rescaled to the same capillary number:
+    /// 31,250 steps at any stress.
+    Scaled,
+}
+
+/// File format of `--shape-out`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShapeFormatArg {
+    /// Legacy VTK polydata (ParaView).
+    Vtk,
+    /// ASCII PLY (MeshLab, Blender).
+    Ply,
+}
+
+/// Storage precision of the fluid populations.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PrecisionArg {
+    /// 4-byte deviations from the rest weights (default; arithmetic in double).
+    Single,
+    /// 8-byte populations.
+    Double,
+}
+
+impl From<PrecisionArg> for Precision {
+    fn from(p: PrecisionArg) -> Self {
+        match p {
+            PrecisionArg::Single => Precision::Single,
+            PrecisionArg::Double => Precision::Double,
+        }
+    }
+}
+
+/// Arguments of `iuq rbc shear`.
+#[derive(Debug, Args)]
+pub struct ShearArgs {
+    /// Link (spectrin) coefficient kLink, in kBT.
+    #[arg(long, default_value_t = 15.0, allow_negative_numbers = true)]
+    pub klink: f64,
+    /// Bending coefficient kBend, in kBT.
+    #[arg(long, default_value_t = 80.0, allow_negative_numbers = true)]
+    pub kbend: f64,
+    /// Interior/exterior viscosity ratio Λ.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    pub viscosity_ratio: f64,
+    /// Local area coefficient kArea, in kBT.
+    #[arg(long, default_value_t = 5.0, allow_negative_numbers = true)]
+    pub karea: f64,
+    /// Volume coefficient kVolume, in kBT.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
+    pub kvolume: f64,
+    /// Shear stress of the ektacytometer, in Pa.
+    #[arg(long, allow_negative_numbers = true)]
+    pub stress: f64,
+    /// Time discretisation.
+    #[arg(long, value_enum, default_value_t = ProtocolArg::Scaled)]
+    pub protocol: ProtocolArg,
+    /// Lattice shear rate γ̇·dt of the scaled protocol.
+    #[arg(long, default_value_t = DEFAULT_LATTICE_SHEAR_RATE, allow_negative_numbers = true)]
+    pub lattice_shear_rate: f64,
+    /// Strain at which the measuring window starts (7.5 in the spec; smaller only for quick
+    /// checks).
+    #[arg(long, default_value_t = START_STRAIN, allow_negative_numbers = true)]
+    pub start_strain: f64,
+    /// Storage precision of the fluid.
+    #[arg(long, value_enum, default_value_t = PrecisionArg::Single)]
+    pub precision: PrecisionArg,
+    /// Write the membrane at each measuring frame into this directory.
+    #[arg(long)]
+    pub shape_out: Option<PathBuf>,
+    /// Format of the shapes written by --shape-out.
+    #[arg(long, value_enum, default_value_t = ShapeFormatArg::Vtk)]
+    pub shape_format: ShapeFormatArg,
+}
+
+/// Map a simulator error to the command line: bad values name the flag (exit code 2), failed
+/// runs are failures of the work (exit code 1).
+fn cli_error(e: RbcError) -> anyhow::Error {
+    match &e {
+        RbcError::InvalidParameter {
+            name,
+            value,
+            reason,
+        } => {
+            let flag = match name.as_str() {
+                "kLink" => "--klink",
+                "kBend" => "--kbend",
+                "kArea" => "--karea",
+                "kVolume" => "--kvolume",
+                "viscosityRatio" => "--viscosity-ratio",
+                "stress" => "--stress",
+                "lattice_shear_rate" => "--lattice-shear-rate",
+                "start_strain" => "--start-strain",
+                "force" => "--force",
+                "force_scale" => "--force-scale",
+                other => other,
+            };
+            input_error(format!("{flag}: invalid value {value}: {reason}"))
+        }
+        RbcError::InvalidData(message) => input_error(message.clone()),
+        _ => anyhow!(e),
+    }
+}
+
+/// Run `iuq rbc …`.
+pub fn run(command: &RbcCommand, json: bool) -> Result<()> {
+    match command {
+        RbcCommand::Shear(args) => shear(args, json),
+        RbcCommand::Stretch(args) => stretch(args, json),
+        RbcCommand::Validate(args) => validate(args, json),
+        RbcCommand::Bench(args) => bench(args, json),
+    }
+}
+
+fn shear(args: &ShearArgs, json: bool) -> Result<()> {
+    let membrane = MembraneParameters {
+        k_link: args.klink,
+        k_bend: args.kbend,
+        k_area: args.karea,
+        k_volume: args.kvolume,
+    };
+    let protocol = match args.protocol {
+        ProtocolArg::Reference => Protocol::Reference,
+        ProtocolArg::Scaled => Protocol::Scaled {
+            lattice_shear_rate: args.lattice_shear_rate,
+        },
+    };
+    let mut experiment =
+        ShearExperiment::new(membrane, args.viscosity_ratio, args.stress).with_protocol(protocol);
+    experiment.start_strain = args.start_strain;
+    experiment.precision = args.precision.into();
+    experiment.validate().map_err(cli_error)?;
+    if let Some(dir) = &args.shape_out {
+        std::fs::create_dir_all(dir).map_err(|e| {
+            input_error(format!("--shape-out: cannot create {}: {e}", dir.display()))
+        })?;
+    }
+    let result = run_shear(&experiment).map_err(cli_error)?;
+    let mut shapes = Vec::new();
+    if let Some(dir) = &args.shape_out {
+        let format = match args.shape_format {
+            ShapeFormatArg::Vtk => ShapeFormat::Vtk,
+            ShapeFormatArg::Ply => ShapeFormat::Ply,
+        };
+        for (i, frame) in result.frames.iter().enumerate() {
+            let path = dir.join(format!(
+                "frame_{i:02}_step_{:07}.{}",
+                frame.step,
+                format.extension()
+            ));
+            let title = format!(
+                "iuq rbc shear: stress {} Pa, step {}, EL {:.4} (lattice units)",
+                args.stress, frame.step, frame.elongation_index
+            );
+            let text = format.render(&result.triangles, &frame.vertices, &title);
+            std::fs::write(&path, text)
+                .map_err(|e| anyhow!("cannot write {}: {e}", path.display()))?;
+            shapes.push(path.display().to_string());
+        }
+    }
+    let el_frames = result.el_frames();
+    let value = json!({
+        "el_mean": result.el_mean,
+        "el_std": result.el_std,
+        "el_frames": el_frames,
+        "steps": result.steps,
+        "seconds": result.seconds,
+        "mlups": result.mlups,
+        "frame_steps": result.frames.iter().map(|f| f.step).collect::<Vec<_>>(),
+        "protocol": protocol.name(),
+        "stress": args.stress,
+        "parameters": {
+            "kLink": args.klink, "kBend": args.kbend, "viscosityRatio": args.viscosity_ratio,
+            "kArea": args.karea, "kVolume": args.kvolume,
+        },
+        "lattice_shear_rate": result.setup.lattice_shear_rate,
+        "force_scale": result.setup.force_scale,
+        "reynolds": result.setup.reynolds,
+        "shapes": shapes,
+    });
+    emit(json, &value, || {
+        let frames: Vec<String> = el_frames.iter().map(|v| format!("{v:.4}")).collect();
+        let mut text = format!(
+            "EL = {} ± {} at {} Pa ({} protocol)\nframes: {}\n{} steps in {} s ({} MLUPS)",
+            short(result.el_mean),
+            short(result.el_std),
+            args.stress,
+            protocol.name(),
+            frames.join(" "),
+            result.steps,
+            short(result.seconds),
+            short(result.mlups)
+        );
+        if !shapes.is_empty() {
+            text.push_str(&format!("\nshapes: {}", shapes.join(", ")));
+        }
+        text
+    });
+    Ok(())
+}
+
+/// Arguments of `iuq rbc stretch`.
+#[derive(Debug, Args)]
+pub struct StretchArgs {
+    /// Pulling force in pN (repeat for several; default: 1.8, 15, 35 and 62).
+    #[arg(long = "force", allow_negative_numbers = true)]
+    pub forces: Vec<f64>,
+    /// Link coefficient kLink, in kBT.
+    #[arg(long, default_value_t = 15.0, allow_negative_numbers = true)]
+    pub klink: f64,
+    /// Bending coefficient kBend, in kBT.
+    #[arg(long, default_value_t = 80.0, allow_negative_numbers = true)]
+    pub kbend: f64,
+    /// Factor on every force (shortens the relaxation; the equilibrium does not depend on it).
+    #[arg(long, default_value_t = 10.0, allow_negative_numbers = true)]
+    pub force_scale: f64,
+}
+
+fn stretch(args: &StretchArgs, json: bool) -> Result<()> {
+    let forces = if args.forces.is_empty() {
+        OPTICAL_TWEEZERS_AXIAL.iter().map(|(f, _)| *f).collect()
+    } else {
+        args.forces.clone()
+    };
+    let experiments: Vec<StretchExperiment> = forces
+        .iter()
+        .map(|&f| {
+            let mut e = StretchExperiment::new(f);
+            e.membrane.k_link = args.klink;
+            e.membrane.k_bend = args.kbend;
+            e.force_scale = args.force_scale;
+            e
+        })
+        .collect();
+    for e in &experiments {
+        e.membrane.validate().map_err(cli_error)?;
+        if !(e.force_pn.is_finite() && e.force_pn >= 0.0) {
+            return Err(input_error(format!(
+                "--force: invalid value {}: must be a non-negative number of pN",
+                e.force_pn
+            )));
+        }
+        if !(e.force_scale.is_finite() && e.force_scale > 0.0) {
+            return Err(input_error(format!(
+                "--force-scale: invalid value {}: must be positive",
+                e.force_scale
+            )));
+        }
+    }
+    let mut rows = Vec::new();
+    for e in &experiments {
+        let r = run_stretch(e).map_err(cli_error)?;
+        rows.push(r);
+    }
+    let value = json!({ "klink": args.klink, "kbend": args.kbend, "results": rows });
+    emit(json, &value, || {
+        let mut text = format!(
+            "{:>10} {:>12} {:>16} {:>10}\n",
+            "force pN", "axial µm", "transverse µm", "steps"
+        );
+        for r in &rows {
+            text.push_str(&format!(
+                "{:>10} {:>12.3} {:>16.3} {:>10}{}\n",
+                r.force_pn,
+                r.axial_um,
+                r.transverse_um,
+                r.steps,
+                if r.converged { "" } else { " (not converged)" }
+            ));
+        }
+        text
+    });
+    Ok(())
+}
+
+/// Which shear validation tables to run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ValidateProtocol {
+    /// The scaled protocol only (7 runs of 31,250 steps).
+    Scaled,
+    /// The reference protocol only (7 runs of 23k–230k steps).
+    Reference,
+    /// Both.
+    Both,
+    /// No shear runs (with --stretch: only the stretching check).
+    None,
+}
+
+/// Arguments of `iuq rbc validate`.
+#[derive(Debug, Args)]
+pub struct ValidateArgs {
+    /// Shear tables to run (kLink = 36.7, kBend = 367, Λ = 5.9 at the seven stresses of
+    /// HemoCell's validation).
+    #[arg(long, value_enum, default_value_t = ValidateProtocol::Scaled)]
+    pub protocol: ValidateProtocol,
+    /// Also run the optical-tweezers stretching check (kLink = 15, kBend = 80).
+    #[arg(long)]
+    pub stretch: bool,
+}
+
+fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
+    let protocols: Vec<Protocol> = match args.protocol {
+        ValidateProtocol::Scaled => vec![Protocol::default()],
+        ValidateProtocol::Reference => vec![Protocol::Reference],
+        ValidateProtocol::Both => vec![Protocol::default(), Protocol::Reference],
+        ValidateProtocol::None => vec![],
+    };
+    let shear_rows: Vec<_> = protocols.into_iter().flat_map(validate_shear).collect();
+    let stretch_rows = if args.stretch {
+        validate_stretch()
+    } else {
+        Vec::new()
+    };
+    let value = json!({ "shear": shear_rows, "stretch": stretch_rows });
+    emit(json, &value, || {
+        let mut text = String::new();
+        if !shear_rows.is_empty() {
+            text.push_str(&format!(
+                "{:<10} {:>8} {:>9} {:>9} {:>8} {:>8}  {}\n",
+                "protocol", "τ Pa", "HemoCell", "EL", "± std", "diff", "note"
+            ));
+            for r in &shear_rows {
+                text.push_str(&format!(
+                    "{:<10} {:>8} {:>9.3} {:>9} {:>8} {:>8}  {}\n",
+                    r.protocol,
+                    r.stress,
+                    r.hemocell,
+                    r.el_mean.map_or("-".into(), |v| format!("{v:.4}")),
+                    r.el_std.map_or("-".into(), |v| format!("{v:.4}")),
+                    r.relative_difference
+                        .map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v)),
+                    r.failure.clone().unwrap_or_default()
+                ));
+            }
+        }
+        if !stretch_rows.is_empty() {
+            text.push_str(&format!(
+                "{:>10} {:>10} {:>10} {:>8}\n",
+                "force pN", "measured", "axial µm", "diff"
+            ));
+            for r in &stretch_rows {
+                text.push_str(&format!(
+                    "{:>10} {:>10.1} {:>10} {:>8}  {}\n",
+                    r.force_pn,
+                    r.reference_axial_um,
+                    r.axial_um.map_or("-".into(), |v| format!("{v:.3}")),
+                    r.relative_difference
+                        .map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v)),
+                    r.failure.clone().unwrap_or_default()
+                ));
+            }
+        }
+        text
+    });
+    Ok(())
+}
+
+/// Arguments of `iuq rbc bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// Steps per timing.
+    #[arg(long, default_value_t = 200)]
+    pub steps: usize,
+    /// Timings (the best is reported).
+    #[arg(long, default_value_t = 5)]
+    pub repeats: usize,
+    /// A box larger than the last-level cache, `NX,NY,NZ`, for the memory-bound figure
+    /// (`0,0,0` to skip).
+    #[arg(long, default_value = "160,160,64")]
+    pub large: String,
+    /// Size of the copied buffer for the bandwidth, in MB.
+    #[arg(long, default_value_t = 512)]
+    pub copy_mb: usize,
+}
+
+fn bench(args: &BenchArgs, json: bool) -> Result<()> {
+    let large: Vec<usize> = args
+        .large
+        .split(',')
+        .map(|s| s.trim().parse::<usize>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|e| input_error(format!("--large: expected NX,NY,NZ: {e}")))?;
+    if large.len() != 3 {
+        return Err(input_error("--large: expected three sizes NX,NY,NZ"));
+    }
+    if args.steps == 0 || args.repeats == 0 || args.copy_mb == 0 {
+        return Err(input_error(
+            "--steps, --repeats and --copy-mb must be positive",
+        ));
+    }
+    let copy_all = memory_copy_bandwidth(args.copy_mb << 20, args.repeats, true);
+    let copy_one = memory_copy_bandwidth(args.copy_mb << 20, args.repeats, false);
+    let mut rows: Vec<LatticeBenchmark> = Vec::new();
+    for precision in [Precision::Single, Precision::Double] {
+        for (parallel, copy) in [(true, copy_all), (false, copy_one)] {
+            for forced in [false, true] {
+                rows.push(benchmark_lattice(
+                    SHEAR_DOMAIN,
+                    args.steps,
+                    args.repeats,
+                    precision,
+                    parallel,
+                    forced,
+                    copy,
+                ));
+            }
+        }
+    }
+    if large.iter().all(|&n| n >= 3) {
+        let domain = [large[0], large[1], large[2]];
+        let steps = (args.steps * SHEAR_DOMAIN.iter().product::<usize>()
+            / domain.iter().product::<usize>())
+        .max(3);
+        for precision in [Precision::Single, Precision::Double] {
+            for (parallel, copy) in [(true, copy_all), (false, copy_one)] {
+                rows.push(benchmark_lattice(
+                    domain,
+                    steps,
+                    args.repeats.min(3),
+                    precision,
+                    parallel,
+                    false,
+                    copy,
+                ));
+            }
+        }
+    }
+    let value = json!({
+        "copy_bandwidth_gb_per_s": { "all_threads": copy_all, "one_thread": copy_one },
+        "copy_buffer_mb": args.copy_mb,
+        "threads": rayon::current_num_threads(),
+        "runs": rows,
+    });
+    emit(json, &value, || {
+        let mut text = format!(
+            "memory copy bandwidth (read + write, {} MB buffer): {} GB/s on {} threads, {} GB/s on one\n",
+            args.copy_mb,
+            short(copy_all),
+            rayon::current_num_threads(),
+            short(copy_one)
+        );
+        text.push_str(&format!(
+            "{:<14} {:<7} {:<9} {:>7} {:>7} {:>8} {:>8} {:>9}\n",
+            "domain", "prec", "kernel", "threads", "MLUPS", "B/update", "GB/s", "fraction"
+        ));
+        for r in &rows {
+            text.push_str(&format!(
+                "{:<14} {:<7} {:<9} {:>7} {:>7.1} {:>8} {:>8.2} {:>8.0}%\n",
+                format!("{}x{}x{}", r.domain[0], r.domain[1], r.domain[2]),
+                r.precision,
+                if r.forced { "forced" } else { "unforced" },
+                r.threads,
+                r.mlups,
+                r.bytes_per_update,
+                r.achieved_gb_per_s,
+                100.0 * r.bandwidth_fraction
+            ));
+        }
+        text
+    });
+    Ok(())
+}
+
+/// Build the model of a study's `[model] kind = "rbc-shear"` section.
+///
+/// Keys: `protocol` (`"scaled"`, default, or `"reference"`), `lattice_shear_rate` (scaled
+/// protocol, default 3e-4), `precision` (`"single"` or `"double"`), `stresses` (Pa; default: the
+/// `x` column of `[likelihood] data`, within its `x_range`), and fixed values for the
+/// parameters of the cell that are not in `[parameters]` (`kLink`, `kBend`, `viscosityRatio`,
+/// `kArea`, `kVolume`; defaults 15, 80, 5, 5, 20). Paths are relative to the study file.
+pub fn rbc_shear_model(
+    table: &toml::Table,
+    file: &str,
+    study_path: &Path,
+    inputs: Vec<String>,
+    likelihood: Option<&toml::Table>,
+) -> Result<RbcShearModel> {
+    let key_error = |key: &str, reason: &str| input_error(format!("{file}: key `{key}`: {reason}"));
+    let number = |key: &str, v: &toml::Value| -> Result<f64> {
+        v.as_float()
+            .or_else(|| v.as_integer().map(|i| i as f64))
+            .ok_or_else(|| key_error(key, "expected a number"))
+    };
+    let mut settings = RbcShearSettings::default();
+    let mut fixed = CellParameters::default();
+    let mut lattice_shear_rate = DEFAULT_LATTICE_SHEAR_RATE;
+    let mut stresses = None;
+    for (key, value) in table {
+        let full = format!("model.{key}");
+        match key.as_str() {
+            "kind" => {}
+            "protocol" => {
+                settings.protocol = match value.as_str() {
+                    Some("scaled") => Protocol::default(),
+                    Some("reference") => Protocol::Reference,
+                    _ => {
+                        return Err(key_error(&full, "expected \"scaled\" or \"reference\""));
+                    }
+                }
+            }
+            "lattice_shear_rate" => lattice_shear_rate = number(&full, value)?,
+            "precision" => {
+                settings.precision = match value.as_str() {
+                    Some("single") => Precision::Single,
+                    Some("double") => Precision::Double,
+                    _ => return Err(key_error(&full, "expected \"single\" or \"double\"")),
+                }
+            }
+            "stresses" => {
+                let list = value
+                    .as_array()
+                    .ok_or_else(|| key_error(&full, "expected a list of stresses in Pa"))?;
+                stresses = Some(
+                    list.iter()
+                        .map(|v| number(&full, v))
+                        .collect::<Result<Vec<f64>>>()?,
+                );
+            }
+            name if PARAMETER_NAMES.contains(&name) => {
+                if inputs.iter().any(|i| i == name) {
+                    return Err(key_error(
+                        &full,
+                        "this parameter is in [parameters]; fix it here or calibrate it, not both",
+                    ));
+                }
+                let v = number(&full, value)?;
+                fixed
+                    .set(name, v)
+                    .map_err(|e| key_error(&full, &e.to_string()))?;
+                let positive = matches!(name, "kLink" | "viscosityRatio");
+                if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
+                    return Err(key_error(
+                        &full,
+                        if positive {
+                            "must be a positive number"
+                        } else {
+                            "must be a non-negative number"
+                        },
+                    ));
+                }
+            }
+            other => {
+                return Err(key_error(
+                    &format!("model.{other}"),
+                    &format!(
+                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, stresses or one of {})",
+                        PARAMETER_NAMES.join(", ")
+                    ),
+                ));
+            }
+        }
+    }
+    if let Protocol::Scaled { .. } = settings.protocol {
+        settings.protocol = Protocol::Scaled { lattice_shear_rate };
+    } else if table.contains_key("lattice_shear_rate") {
+        return Err(key_error(
+            "model.lattice_shear_rate",
+            "only the scaled protocol has a lattice shear rate",
+        ));
+    }
+    settings.fixed = fixed;
+    let stresses = match stresses {
+        Some(s) => s,
+        None => stresses_from_likelihood(file, study_path, likelihood)?,
+    };
+    RbcShearModel::new(inputs, stresses, settings).map_err(|e| match e {
+        RbcError::InvalidParameter {
+            name,
+            value,
+            reason,
+        } => input_error(format!(
+            "{file}: section `[model]`: invalid value {value} for `{name}`: {reason}"
+        )),
+        other => input_error(format!("{file}: section `[model]`: {other}")),
+    })
+}
+
+/// The stresses of `[likelihood] data = { file, x, x_range }`.
+fn stresses_from_likelihood(
+    file: &str,
+    study_path: &Path,
+    likelihood: Option<&toml::Table>,
+) -> Result<Vec<f64>> {
+    let missing = || {
+        input_error(format!(
+            "{file}: key `model.stresses`: missing; give `stresses = [...]` (Pa) or a `[likelihood] data = {{ file, x }}` table"
+        ))
+    };
+    let data = likelihood
+        .and_then(|l| l.get("data"))
+        .and_then(|d| d.as_table())
+        .ok_or_else(missing)?;
+    let data_file = data.get("file").and_then(|f| f.as_str()).ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `likelihood.data.file`: expected a path"
+        ))
+    })?;
+    let x = data.get("x").and_then(|f| f.as_str()).ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `likelihood.data.x`: expected a column name"
+        ))
+    })?;
+    let range = match data.get("x_range") {
+        None => (f64::NEG_INFINITY, f64::INFINITY),
+        Some(v) => {
+            let r: Vec<f64> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+                        .collect()
+                })
+                .unwrap_or_default();
+            if r.len() != 2 {
+                return Err(input_error(format!(
+                    "{file}: key `likelihood.data.x_range`: expected [lower, upper]"
+                )));
+            }
+            (r[0], r[1])
+        }
+    };
+    let relative = study_path
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(data_file);
+    let path = if relative.exists() {
+        relative
+    } else {
+        PathBuf::from(data_file)
+    };
+    let table = read_numeric_csv(&path, false)?;
+    let column = table.column_index(x, &path)?;
+    let stresses: Vec<f64> = table
+        .rows
+        .iter()
+        .map(|r| r[column])
+        .filter(|s| *s >= range.0 && *s <= range.1)
+        .collect();
+    if stresses.is_empty() {
+        return Err(input_error(format!(
+            "{}: no value of column `{x}` lies within x_range",
+            path.display()
+        )));
+    }
+    Ok(stresses)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use iuq_core::Model;
+
+    use crate::study::Study;
+
+    fn parse(text: &str) -> anyhow::Result<Study> {
+        // The study "lives" in this crate's directory, so `../../data/...` finds the repo's data.
+        Study::parse(
+            text,
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("study.toml"),
+        )
+    }
+
+    const HEALTHY: &str = r#"
+name = "rbc-healthy"
+[parameters]
+kLink = { uniform = [10, 300] }
+kBend = { uniform = [50, 400] }
+viscosityRatio = { uniform = [1, 15] }
+[likelihood]
+data = { file = "../../data/ektacytometry_gutierrez2018.csv", x = "stress_pa", y = "el_healthy", y_err = "el_healthy_err", x_range = [0.64, 9.04] }
+[model]
+kind = "rbc-shear"
+"#;
+
+    #[test]
+    fn the_stresses_come_from_the_likelihood_data() {
+        let study = parse(HEALTHY).unwrap();
+        let model = study.rbc_shear_model().unwrap();
+        assert_eq!(
+            model.stresses(),
+            [0.64, 0.93, 1.36, 1.99, 2.91, 4.24, 6.19, 9.04]
+        );
+        assert_eq!(model.input_names(), ["kLink", "kBend", "viscosityRatio"]);
+        assert_eq!(model.output_dimension(), 8);
+        assert!(study.expression_model().is_err());
+    }
+
+    #[test]
+    fn explicit_keys_are_read_and_bad_ones_named() {
+        let text = HEALTHY.replace(
+            "kind = \"rbc-shear\"",
+            "kind = \"rbc-shear\"\nprotocol = \"reference\"\nstresses = [1.0, 2.5]\nkArea = 6\nprecision = \"double\"",
+        );
+        let model = parse(&text).unwrap().rbc_shear_model().unwrap();
+        assert_eq!(model.stresses(), [1.0, 2.5]);
+        assert_eq!(model.settings().fixed.membrane.k_area, 6.0);
+        for (change, key) in [
+            ("protocol = \"fast\"", "model.protocol"),
+            ("stresses = [-1.0]", "[model]"),
+            ("kLink = 20", "model.kLink"),
+            ("kVolume = -2", "model.kVolume"),
+            ("frames = 3", "model.frames"),
+            (
+                "protocol = \"reference\"\nlattice_shear_rate = 1e-4",
+                "model.lattice_shear_rate",
+            ),
+        ] {
+            let text = HEALTHY.replace(
+                "kind = \"rbc-shear\"",
+                &format!("kind = \"rbc-shear\"\n{change}"),
+            );
+            let err = parse(&text).unwrap_err();
+            let message = format!("{err:#}");
+            assert!(crate::input_error::is_input_error(&err), "{message}");
+            assert!(
+                message.contains(key) && message.contains("study.toml"),
+                "{change}: {message}"
+            );
+        }
+        let start = HEALTHY.find("[likelihood]").unwrap();
+        let end = HEALTHY.find("[model]").unwrap();
+        let no_data = format!("{}{}", &HEALTHY[..start], &HEALTHY[end..]);
+        let message = format!("{:#}", parse(&no_data).unwrap_err());
+        assert!(message.contains("model.stresses"), "{message}");
+    }
+}

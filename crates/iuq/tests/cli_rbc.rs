@@ -1,0 +1,158 @@
+//! End-to-end tests of `iuq rbc`: real processes. The shear runs use a short measuring window
+//! (`--start-strain`) so that they take a second or two.
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+fn iuq(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(args)
+        .output()
+        .expect("the iuq binary runs")
+}
+
+fn json_of(output: &Output) -> serde_json::Value {
+    let stdout = String::from_utf8_lossy(&output.stdout);
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "exactly one JSON line expected, got: {stdout}"
+    );
+    serde_json::from_str(lines[0]).expect("valid JSON")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("iuq-cli-rbc-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    dir
+}
+
+#[test]
+fn a_short_shear_run_prints_the_elongation_index_and_writes_shapes() {
+    let dir = scratch("shapes");
+    let o = iuq(&[
+        "rbc",
+        "shear",
+        "--klink",
+        "36.7",
+        "--kbend",
+        "367",
+        "--viscosity-ratio",
+        "5.9",
+        "--stress",
+        "1.36",
+        "--start-strain",
+        "0.05",
+        "--shape-out",
+        dir.to_str().unwrap(),
+        "--shape-format",
+        "ply",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    for key in [
+        "el_mean",
+        "el_std",
+        "el_frames",
+        "steps",
+        "seconds",
+        "mlups",
+    ] {
+        assert!(v.get(key).is_some(), "missing {key}: {v}");
+    }
+    let frames = v["el_frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 10);
+    let mean = frames.iter().map(|f| f.as_f64().unwrap()).sum::<f64>() / 10.0;
+    assert!((mean - v["el_mean"].as_f64().unwrap()).abs() < 1e-12);
+    assert_eq!(v["protocol"], "scaled");
+    assert_eq!(
+        v["steps"].as_u64().unwrap(),
+        (1.25f64 * 166.0).ceil() as u64
+    );
+    let files: Vec<_> = std::fs::read_dir(&dir).unwrap().collect();
+    assert_eq!(files.len(), 10);
+    let first = std::fs::read_to_string(v["shapes"][0].as_str().unwrap()).unwrap();
+    assert!(first.starts_with("ply") && first.contains("element vertex 642"));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_values_are_input_errors_naming_the_flag() {
+    for (args, flag) in [
+        (vec!["--stress", "-1"], "--stress"),
+        (vec!["--stress", "1", "--klink", "0"], "--klink"),
+        (
+            vec!["--stress", "1", "--viscosity-ratio", "nan"],
+            "--viscosity-ratio",
+        ),
+        (vec!["--stress", "1", "--kbend", "-5"], "--kbend"),
+        (
+            vec!["--stress", "400", "--protocol", "reference"],
+            "--stress",
+        ),
+        (
+            vec!["--stress", "1", "--lattice-shear-rate", "0.5"],
+            "--lattice-shear-rate",
+        ),
+    ] {
+        let mut full = vec!["rbc", "shear"];
+        full.extend(args.iter().copied());
+        full.push("--json");
+        let o = iuq(&full);
+        assert_eq!(
+            o.status.code(),
+            Some(2),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let v = json_of(&o);
+        assert_eq!(v["error"]["kind"], "bad_input");
+        let message = v["error"]["message"].as_str().unwrap();
+        assert!(message.contains(flag), "{args:?}: {message}");
+    }
+    // A missing --stress is a usage error (clap also exits with 2).
+    assert_eq!(iuq(&["rbc", "shear"]).status.code(), Some(2));
+    assert_eq!(
+        iuq(&["rbc", "shear", "--stress", "1", "--protocol", "fast"])
+            .status
+            .code(),
+        Some(2)
+    );
+}
+
+#[test]
+fn the_benchmark_reports_mlups_and_the_bandwidth_fraction() {
+    let o = iuq(&[
+        "rbc",
+        "bench",
+        "--steps",
+        "2",
+        "--repeats",
+        "1",
+        "--large",
+        "0,0,0",
+        "--copy-mb",
+        "8",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert!(
+        v["copy_bandwidth_gb_per_s"]["all_threads"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    let runs = v["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 8);
+    for r in runs {
+        assert!(r["mlups"].as_f64().unwrap() > 0.0);
+        assert!(r["bandwidth_fraction"].as_f64().unwrap() > 0.0);
+    }
+    assert_eq!(
+        iuq(&["rbc", "bench", "--large", "1,2"]).status.code(),
+        Some(2)
+    );
+}
