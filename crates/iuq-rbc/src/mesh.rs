@@ -37,7 +37,7 @@ pub struct Mesh {
     /// Neighbours of all vertices, concatenated (see `ring_offsets`).
     pub ring_vertices: Vec<usize>,
     /// Triangles around each vertex: `ring_offsets[i]..ring_offsets[i+1]` indexes
-    /// `ring_triangles` too; `ring_triangles[k]` is the triangle (i, ring[k], ring[k+1]).
+    /// `ring_triangles` too; `ring_triangles[k]` is the triangle `(i, ring[k], ring[k+1])`.
     pub ring_triangles: Vec<usize>,
 }
 
@@ -218,7 +218,7 @@ impl Mesh {
         &self.ring_vertices[self.ring_offsets[i]..self.ring_offsets[i + 1]]
     }
 
-    /// The triangles around vertex `i`, in ring order: the k-th is (i, ring[k], ring[k+1]).
+    /// The triangles around vertex `i`, in ring order: the k-th is `(i, ring[k], ring[k+1])`.
     #[inline]
     pub fn ring_triangles(&self, i: usize) -> &[usize] {
         &self.ring_triangles[self.ring_offsets[i]..self.ring_offsets[i + 1]]
