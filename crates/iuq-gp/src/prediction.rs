@@ -10,7 +10,7 @@
 //! row-major (vectorised across the 8 points, `exp` four rows at a time) and takes the means
 //! as dot products with α; the variances of 8 groups at a time come from one packed forward
 //! substitution L⁻¹K* (`forward_substitution`: a register-tiled, GEMM-shaped kernel at
-//! ≈ 85 % of the core's peak, where faer's general triangular solve reached about half).
+//! ≈ 75 % of the core's peak, where faer's general triangular solve reached ≈ 45 %).
 //! Blocks run in parallel (rayon) and sequentially inside; [`crate::GpBank`] runs the blocks
 //! of all its GPs in one parallel loop. No inverse is formed. Negative variances from
 //! round-off are clipped to 0 (as scikit-learn does).
