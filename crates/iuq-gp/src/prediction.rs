@@ -128,8 +128,12 @@ fn exponents<const D: usize>(
     neg_half_weights: &[f64],
     out: &mut [f64],
 ) {
-    let points: &[[f64; LANES]; D] = points.try_into().expect("D inputs");
-    let weights: &[f64; D] = neg_half_weights.try_into().expect("D weights");
+    let (Ok(points), Ok(weights)) = (
+        <&[[f64; LANES]; D]>::try_from(points),
+        <&[f64; D]>::try_from(neg_half_weights),
+    ) else {
+        return exponents_any(x, n, points, neg_half_weights, out);
+    };
     for (i, row) in out.chunks_exact_mut(LANES).enumerate().take(n) {
         let mut s = [0.0; LANES];
         for k in 0..D {
