@@ -12,7 +12,7 @@ pub mod hyperqueue;
 pub mod local;
 pub mod slurm;
 
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use crate::error::Result;
 use crate::outcome::{OutcomeKind, RunResult, TaskReport};
@@ -173,4 +173,16 @@ pub fn shell_quote(s: &str) -> String {
     } else {
         format!("'{}'", s.replace('\'', "'\\''"))
     }
+}
+
+/// For the schedulers that are polled (Slurm, HyperQueue): sleep until the next poll is due, but
+/// at most `timeout`; true when a poll is due now.
+pub(crate) fn sleep_until_poll_due(
+    last_poll: Option<Instant>,
+    interval: Duration,
+    timeout: Duration,
+) -> bool {
+    let due = last_poll.map_or(Duration::ZERO, |t| interval.saturating_sub(t.elapsed()));
+    std::thread::sleep(due.min(timeout));
+    last_poll.is_none_or(|t| t.elapsed() >= interval)
 }

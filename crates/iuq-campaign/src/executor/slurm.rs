@@ -17,7 +17,7 @@ use crate::atomic_file::write_atomically;
 use crate::error::{CampaignError, Result};
 use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
-    report_matches, run_cli, shell_quote,
+    report_matches, run_cli, shell_quote, sleep_until_poll_due,
 };
 use crate::outcome::{OutcomeKind, unix_now};
 use crate::study::ExecutorKind;
@@ -377,14 +377,7 @@ impl Executor for SlurmExecutor {
         if self.tracked.is_empty() {
             return Ok(Vec::new());
         }
-        let due = self.last_poll.map_or(Duration::ZERO, |t| {
-            self.settings.poll_interval.saturating_sub(t.elapsed())
-        });
-        std::thread::sleep(due.min(timeout));
-        if self
-            .last_poll
-            .is_some_and(|t| t.elapsed() < self.settings.poll_interval)
-        {
+        if !sleep_until_poll_due(self.last_poll, self.settings.poll_interval, timeout) {
             return Ok(Vec::new());
         }
         self.poll(false)
