@@ -343,10 +343,8 @@ pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<Ce
     );
     lattice.set_parallel(experiment.parallel);
     // HemoCell's cell at (19, 19, 9) with its axis along HemoCell's z (the vorticity).
-    let mut mesh = Mesh::red_blood_cell_lu(
-        LatticeUnits::reference().dx,
-        to_hemocell_frame(CELL_CENTRE),
-    );
+    let mut mesh =
+        Mesh::red_blood_cell_lu(LatticeUnits::reference().dx, to_hemocell_frame(CELL_CENTRE));
     for v in &mut mesh.vertices {
         *v = from_hemocell_frame(*v);
     }
@@ -372,8 +370,11 @@ pub fn run_shear(experiment: &ShearExperiment) -> Result<ShearResult> {
     while cell.steps() < setup.t_max {
         cell.step()?;
         while next < setup.frames.len() && setup.frames[next] == cell.steps() {
-            let vertices: Vec<[f64; 3]> =
-                cell.positions().iter().map(|&p| to_hemocell_frame(p)).collect();
+            let vertices: Vec<[f64; 3]> = cell
+                .positions()
+                .iter()
+                .map(|&p| to_hemocell_frame(p))
+                .collect();
             let el = elongation_index(&vertices, setup.bin_width).map_err(|e| match e {
                 RbcError::NoEllipse(reason) => {
                     RbcError::NoEllipse(format!("at step {}: {reason}", cell.steps()))
@@ -479,7 +480,9 @@ mod tests {
         assert!(extent(&x, 1) < 5.0 && extent(&x, 0) > 15.0 && extent(&x, 2) > 15.0);
         let h: Vec<[f64; 3]> = x.iter().map(|&p| to_hemocell_frame(p)).collect();
         let n = h.len() as f64;
-        let centre: Vec<f64> = (0..3).map(|k| h.iter().map(|p| p[k]).sum::<f64>() / n).collect();
+        let centre: Vec<f64> = (0..3)
+            .map(|k| h.iter().map(|p| p[k]).sum::<f64>() / n)
+            .collect();
         for (c, want) in centre.iter().zip([19.0, 19.0, 9.0]) {
             assert!((c - want).abs() < 1e-9, "{centre:?}");
         }
