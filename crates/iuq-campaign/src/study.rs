@@ -490,10 +490,17 @@ impl CampaignStudy {
 
     /// A hash of what determines the result of a run: the parameter names and the model
     /// specification. Stores refuse a study whose model hash differs from theirs.
+    ///
+    /// The study's folder is left out, so a campaign directory moved or cloned with its study
+    /// (e.g. results shipped in a repository) keeps its results.
     pub fn model_hash(&self) -> String {
+        let mut model = serde_json::to_value(&self.model).unwrap_or_default();
+        if let Some(m) = model.as_object_mut() {
+            m.remove("study_dir");
+        }
         let json = serde_json::json!({
             "parameters": self.space.names(),
-            "model": serde_json::to_value(&self.model).unwrap_or_default(),
+            "model": model,
         });
         hex_sha256(json.to_string().as_bytes())
     }

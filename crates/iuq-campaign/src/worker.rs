@@ -135,6 +135,21 @@ fn all_runs(task: &Task, kind: OutcomeKind, reason: &str) -> Vec<RunResult> {
         .collect()
 }
 
+/// The program to start for a command whose first word is `program`: the word `iuq` names the
+/// iuq executable running this worker (campaigns of `iuq rbc shear` then need no `PATH` set-up
+/// and use the same version as the coordinator); anything else is taken as written.
+fn program(program: &str) -> std::ffi::OsString {
+    if program == SELF_PROGRAM {
+        if let Ok(exe) = std::env::current_exe() {
+            return exe.into_os_string();
+        }
+    }
+    program.into()
+}
+
+/// The command word that names the running iuq executable (see [`program`]).
+pub const SELF_PROGRAM: &str = "iuq";
+
 fn last_line(text: &str) -> Option<&str> {
     text.lines().rev().map(str::trim).find(|l| !l.is_empty())
 }
@@ -198,7 +213,7 @@ pub fn execute_task(compiled: &CompiledSpec, task: &Task, durable: bool) -> Task
         stderr: task.directory.join(STDERR_FILE),
         tail_bytes: STDERR_TAIL_BYTES as usize,
     };
-    let mut command = Command::new(&args[0]);
+    let mut command = Command::new(program(&args[0]));
     command
         .args(&args[1..])
         .current_dir(&task.directory)
