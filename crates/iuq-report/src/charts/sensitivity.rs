@@ -1,0 +1,223 @@
+//! Figure 3: Sobol' indices as grouped bars, one panel per output (stress): for every parameter
+//! S1 (solid) and ST (light) of each source side by side, with confidence-interval whiskers.
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::axis::{CategoryAxis, category_label};
+use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
+use crate::figure::{Chart, DrawResult};
+use crate::format::format_tick;
+use crate::model::{SensitivityResult, StudyReport};
+use crate::statistics::extent;
+use crate::style::{AXIS_LABEL_SIZE, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
+
+/// Height of the title and legend strip.
+const HEADER: u32 = 74;
+/// Size of one panel.
+const PANEL: (u32, u32) = (360, 310);
+/// Share of a category's width taken by its bars.
+const GROUP_WIDTH: f64 = 0.84;
+/// Opacity of the ST bars' fill.
+const TOTAL_OPACITY: f64 = 0.3;
+
+/// One panel: the results of all sources for one output.
+struct Panel<'a> {
+    title: String,
+    results: Vec<&'a SensitivityResult>,
+}
+
+/// The sensitivity chart.
+pub(crate) struct SensitivityChart<'a> {
+    /// Parameter names in display order.
+    parameters: Vec<String>,
+    /// Source names in order of first appearance.
+    sources: Vec<String>,
+    panels: Vec<Panel<'a>>,
+    columns: usize,
+}
+
+impl<'a> SensitivityChart<'a> {
+    /// Groups the report's sensitivity results into one panel per output.
+    pub(crate) fn new(report: &'a StudyReport) -> Self {
+        let mut parameters: Vec<String> = Vec::new();
+        let mut sources: Vec<String> = Vec::new();
+        let mut panels: Vec<Panel<'a>> = Vec::new();
+        // Parameters in the study's order first, then any others as they appear.
+        for name in &report.parameters {
+            if report
+                .sensitivity
+                .iter()
+                .any(|r| r.indices.iter().any(|i| &i.parameter == name))
+            {
+                parameters.push(name.clone());
+            }
+        }
+        for result in &report.sensitivity {
+            for index in &result.indices {
+                if !parameters.contains(&index.parameter) {
+                    parameters.push(index.parameter.clone());
+                }
+            }
+            if !sources.contains(&result.source) {
+                sources.push(result.source.clone());
+            }
+            match panels.iter_mut().find(|p| {
+                p.results
+                    .first()
+                    .is_some_and(|r| r.output_label == result.output_label)
+            }) {
+                Some(panel) => panel.results.push(result),
+                None => panels.push(Panel {
+                    title: result.output_label.clone(),
+                    results: vec![result],
+                }),
+            }
+        }
+        panels.sort_by(|a, b| {
+            let x = |p: &Panel| p.results.first().map_or(0.0, |r| r.x);
+            x(a).total_cmp(&x(b))
+        });
+        let columns = panels.len().clamp(1, 3);
+        Self {
+            parameters,
+            sources,
+            panels,
+            columns,
+        }
+    }
+
+    /// Pixel size (width, height) of the figure.
+    pub(crate) fn size(&self) -> (u32, u32) {
+        let rows = self.panels.len().div_ceil(self.columns).max(1) as u32;
+        (PANEL.0 * self.columns as u32, HEADER + PANEL.1 * rows)
+    }
+
+    fn draw_panel<DB: DrawingBackend>(
+        &self,
+        area: &DrawingArea<DB, Shift>,
+        panel: &Panel,
+    ) -> DrawResult<DB> {
+        let values = panel.results.iter().flat_map(|r| {
+            r.indices.iter().flat_map(|i| {
+                [
+                    i.first_order_low,
+                    i.first_order_high,
+                    i.total_low,
+                    i.total_high,
+                    i.first_order,
+                    i.total,
+                ]
+            })
+        });
+        let (lo, hi) = extent(values).unwrap_or((0.0, 1.0));
+        let (y_lo, y_hi) = (lo.min(0.0) - 0.02, hi.max(1.0) + 0.04);
+        let n = self.parameters.len();
+        let mut chart = ChartBuilder::on(area)
+            .caption(panel.title.as_str(), (FONT, AXIS_LABEL_SIZE))
+            .margin(8)
+            .x_label_area_size(40)
+            .y_label_area_size(64)
+            .build_cartesian_2d(CategoryAxis { count: n }, y_lo..y_hi)?;
+        chart
+            .configure_mesh()
+            .disable_x_mesh()
+            .y_desc("Sobol' index")
+            .x_label_formatter(&|v| category_label(&self.parameters, *v))
+            .y_label_formatter(&|v| format_tick(*v))
+            .label_style((FONT, TICK_SIZE))
+            .axis_desc_style((FONT, TICK_SIZE + 1))
+            .bold_line_style(GRID_COLOUR)
+            .light_line_style(TRANSPARENT)
+            .draw()?;
+        let bars_per_group = 2 * self.sources.len().max(1);
+        let width = GROUP_WIDTH / bars_per_group as f64;
+        let mut whiskers = Vec::new();
+        for (p, parameter) in self.parameters.iter().enumerate() {
+            for (s, source) in self.sources.iter().enumerate() {
+                let colour = source_colour(source, s);
+                let Some(index) = panel
+                    .results
+                    .iter()
+                    .filter(|r| &r.source == source)
+                    .flat_map(|r| r.indices.iter())
+                    .find(|i| &i.parameter == parameter)
+                else {
+                    continue;
+                };
+                for (k, (value, low, high)) in [
+                    (
+                        index.first_order,
+                        index.first_order_low,
+                        index.first_order_high,
+                    ),
+                    (index.total, index.total_low, index.total_high),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let slot = k * self.sources.len() + s;
+                    let left = p as f64 - GROUP_WIDTH / 2.0 + slot as f64 * width;
+                    let corners = [(left + 0.08 * width, 0.0), (left + 0.92 * width, value)];
+                    if k == 0 {
+                        chart.draw_series(std::iter::once(Rectangle::new(
+                            corners,
+                            colour.filled(),
+                        )))?;
+                    } else {
+                        chart.draw_series(std::iter::once(Rectangle::new(
+                            corners,
+                            colour.mix(TOTAL_OPACITY).filled(),
+                        )))?;
+                        chart.draw_series(std::iter::once(Rectangle::new(
+                            corners,
+                            colour.stroke_width(1),
+                        )))?;
+                    }
+                    whiskers.push((left + width / 2.0, low, high));
+                }
+            }
+        }
+        chart.draw_series(std::iter::once(PathElement::new(
+            vec![(-0.5, 0.0), (n as f64 - 0.5, 0.0)],
+            BLACK.stroke_width(1),
+        )))?;
+        draw_error_bars(&mut chart, &whiskers, BLACK.stroke_width(1), 3)?;
+        Ok(())
+    }
+}
+
+impl Chart for SensitivityChart<'_> {
+    fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
+        let mut entries = Vec::new();
+        for (s, source) in self.sources.iter().enumerate() {
+            let colour = source_colour(source, s);
+            entries.push((
+                LegendMark::Filled(colour, 1.0),
+                format!("S1 (first order), {source}"),
+            ));
+            entries.push((
+                LegendMark::Outlined(colour, TOTAL_OPACITY),
+                format!("ST (total), {source}"),
+            ));
+        }
+        entries.push((
+            LegendMark::Whisker(BLACK),
+            "confidence interval".to_string(),
+        ));
+        let body = header(
+            area,
+            "Sobol' sensitivity indices per output",
+            &entries,
+            HEADER,
+        )?;
+        for (panel, region) in
+            self.panels
+                .iter()
+                .zip(panel_grid(&body, self.panels.len(), self.columns))
+        {
+            self.draw_panel(&region, panel)?;
+        }
+        Ok(())
+    }
+}

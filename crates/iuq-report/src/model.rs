@@ -1,0 +1,183 @@
+//! The report's input: everything a calibration study produced that the report shows.
+//!
+//! `iuq pipeline` fills these structures and hands them to [`crate::write_report`]; they are
+//! also written verbatim into `report.json`, so every number in the report can be traced back.
+
+use serde::{Deserialize, Serialize};
+
+/// A whole calibration study's results, as the report shows them.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct StudyReport {
+    /// Title of the report, e.g. "RBC calibration — healthy cells".
+    pub title: String,
+    /// The study's name (the `name` key of the study file).
+    pub study_name: String,
+    /// Key/value lines shown in the header: iuq version, command, seed, date, study file hash.
+    pub provenance: Vec<(String, String)>,
+    /// Names of the calibrated parameters, in sample-column order: the model parameters, then
+    /// `sigma_m` when the study has a modelling error. A unit may follow in brackets.
+    pub parameters: Vec<String>,
+    /// The measurements the model was calibrated on.
+    pub data: DataSeries,
+    /// One posterior per source ("GP surrogate", optionally "cell model"); empty omits the
+    /// posterior sections.
+    pub posteriors: Vec<PosteriorResult>,
+    /// Sobol' indices per output and per source ("model runs", "surrogate"); empty omits the
+    /// sensitivity section.
+    pub sensitivity: Vec<SensitivityResult>,
+    /// Quality of the Gaussian-process surrogate, one entry per output; empty omits the section.
+    pub gp_diagnostics: Vec<GpDiagnostic>,
+    /// Counts of model runs and wall time per pipeline stage.
+    pub run_statistics: RunStatistics,
+}
+
+/// The measurements: one output `y` with its measurement std `y_err` at each control value `x`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct DataSeries {
+    /// Label of the control variable with its unit, e.g. "shear stress (Pa)".
+    pub x_label: String,
+    /// Label of the measured output with its unit, e.g. "elongation index EL (–)".
+    pub y_label: String,
+    /// Control values (strictly positive: figures use a logarithmic x axis).
+    pub x: Vec<f64>,
+    /// Measured values.
+    pub y: Vec<f64>,
+    /// Measurement standard deviations (non-negative).
+    pub y_err: Vec<f64>,
+}
+
+/// The posterior of one source (the GP surrogate or the cell model itself).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PosteriorResult {
+    /// The source's name, e.g. "GP surrogate" or "cell model"; also picks its colour.
+    pub source: String,
+    /// Summary statistics, one entry per parameter, in the order of [`StudyReport::parameters`].
+    pub summary: Vec<ParameterSummary>,
+    /// The final estimate of the log evidence (log marginal likelihood).
+    pub log_evidence: f64,
+    /// Final equally weighted posterior samples: one row per sample, columns as
+    /// [`StudyReport::parameters`].
+    pub samples: Vec<Vec<f64>>,
+    /// The sampler's per-stage diagnostics.
+    pub stages: Vec<SamplerStage>,
+    /// The model output propagated through the posterior, one entry per data point (in the
+    /// order of [`DataSeries::x`]).
+    pub propagated: Vec<PropagatedOutput>,
+}
+
+/// Posterior summary of one parameter.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ParameterSummary {
+    /// The parameter's name.
+    pub name: String,
+    /// Maximum a posteriori estimate (the sample of highest posterior density).
+    pub map: f64,
+    /// Posterior mean.
+    pub mean: f64,
+    /// Posterior standard deviation.
+    pub std: f64,
+    /// 5 % quantile.
+    pub q05: f64,
+    /// Median.
+    pub q50: f64,
+    /// 95 % quantile.
+    pub q95: f64,
+}
+
+/// Diagnostics of one BASIS stage (tempering step).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SamplerStage {
+    /// Stage number, 0 for the prior samples.
+    pub stage: usize,
+    /// Annealing (tempering) exponent of the likelihood at this stage, in [0, 1].
+    pub annealing_exponent: f64,
+    /// Coefficient of variation of the plausibility weights.
+    pub cv: f64,
+    /// Acceptance rate of the stage's Markov chains.
+    pub acceptance: f64,
+    /// Running estimate of the log evidence after this stage.
+    pub log_evidence: f64,
+    /// Model (or surrogate) evaluations in this stage.
+    pub evaluations: usize,
+    /// Wall time of the stage in seconds.
+    pub seconds: f64,
+}
+
+/// The model output at one data point, propagated through the posterior.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PropagatedOutput {
+    /// The control value (equal to the matching [`DataSeries::x`]).
+    pub x: f64,
+    /// Model output at each posterior sample.
+    pub samples: Vec<f64>,
+    /// Model output at the MAP estimate.
+    pub map_prediction: f64,
+}
+
+/// Sobol' indices of one output, estimated from one source.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensitivityResult {
+    /// The output's label, e.g. "EL at 1.36 Pa".
+    pub output_label: String,
+    /// The output's control value (shear stress); outputs with equal `x` share a panel.
+    pub x: f64,
+    /// Where the indices come from: "model runs" or "surrogate".
+    pub source: String,
+    /// One entry per parameter.
+    pub indices: Vec<SensitivityIndex>,
+}
+
+/// First-order and total Sobol' indices of one parameter with their confidence intervals.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SensitivityIndex {
+    /// The parameter's name.
+    pub parameter: String,
+    /// First-order index S1.
+    pub first_order: f64,
+    /// Lower end of the S1 confidence interval.
+    pub first_order_low: f64,
+    /// Upper end of the S1 confidence interval.
+    pub first_order_high: f64,
+    /// Total index ST.
+    pub total: f64,
+    /// Lower end of the ST confidence interval.
+    pub total_low: f64,
+    /// Upper end of the ST confidence interval.
+    pub total_high: f64,
+}
+
+/// Quality of the Gaussian process of one output.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GpDiagnostic {
+    /// The output's label, e.g. "EL at 1.36 Pa".
+    pub output_label: String,
+    /// The output's control value (shear stress).
+    pub x: f64,
+    /// Q² on the independent test set.
+    pub q2: f64,
+    /// Leave-one-out Q² on the training set.
+    pub loo_q2: f64,
+    /// Simulated outputs of the test set.
+    pub simulated: Vec<f64>,
+    /// GP predictive means at the test points.
+    pub predicted: Vec<f64>,
+    /// GP predictive standard deviations at the test points.
+    pub predicted_std: Vec<f64>,
+    /// Fitted hyper-parameters as (name, value) pairs.
+    pub hyperparameters: Vec<(String, f64)>,
+}
+
+/// Counts of model runs and wall time per pipeline stage.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RunStatistics {
+    /// Model runs attempted.
+    pub runs: usize,
+    /// Runs that produced an output.
+    pub succeeded: usize,
+    /// Runs that failed.
+    pub failed: usize,
+    /// Failed runs per reason, e.g. ("timeout", 3).
+    pub failures_by_reason: Vec<(String, usize)>,
+    /// Wall time of each pipeline stage in seconds, e.g. ("design", 0.2).
+    pub stage_seconds: Vec<(String, f64)>,
+}

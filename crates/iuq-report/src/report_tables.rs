@@ -1,0 +1,403 @@
+//! The report's tables, built from the study's results and the derived quantities. Every
+//! numeric cell points at its value in `report.json` (`/report/…` for input, `/derived/…` for
+//! computed values).
+
+use crate::derived::DerivedResults;
+use crate::model::StudyReport;
+use crate::tables::{Cell, Column, Table};
+
+/// Propagated output at each data point: measurement, and per source MAP, mean and 95 % band.
+pub(crate) fn propagated(report: &StudyReport, derived: &DerivedResults) -> Table {
+    let data = &report.data;
+    let mut columns = vec![
+        Column::plain(data.x_label.clone()),
+        Column::plain("data"),
+        Column::plain("data std"),
+    ];
+    for prediction in &derived.predictions {
+        for header in ["MAP", "mean", "2.5 %", "97.5 %"] {
+            columns.push(Column::grouped(prediction.source.clone(), header));
+        }
+    }
+    let rows = (0..data.x.len())
+        .map(|i| {
+            let mut row = vec![
+                Cell::number(data.x[i], format!("/report/data/x/{i}")),
+                Cell::number(data.y[i], format!("/report/data/y/{i}")),
+                Cell::number(data.y_err[i], format!("/report/data/y_err/{i}")),
+            ];
+            for (s, prediction) in derived.predictions.iter().enumerate() {
+                let point = &prediction.points[i];
+                let at = |field: &str| format!("/derived/predictions/{s}/points/{i}/{field}");
+                row.push(Cell::number(point.map_prediction, at("map_prediction")));
+                row.push(Cell::number(point.mean, at("mean")));
+                row.push(Cell::number(point.q025, at("q025")));
+                row.push(Cell::number(point.q975, at("q975")));
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "propagated".into(),
+        title: "Propagated output at the data points".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Posterior summary: MAP, mean, std, 5 % and 95 % quantiles per parameter, one column group
+/// per source.
+pub(crate) fn posterior_summary(report: &StudyReport) -> Table {
+    let mut columns = vec![Column::plain("parameter")];
+    for posterior in &report.posteriors {
+        for header in ["MAP", "mean", "std", "5 %", "95 %"] {
+            columns.push(Column::grouped(posterior.source.clone(), header));
+        }
+    }
+    let rows = report
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(p, name)| {
+            let mut row = vec![Cell::text(name.clone())];
+            for (s, posterior) in report.posteriors.iter().enumerate() {
+                let summary = &posterior.summary[p];
+                let at = |field: &str| format!("/report/posteriors/{s}/summary/{p}/{field}");
+                row.push(Cell::number(summary.map, at("map")));
+                row.push(Cell::number(summary.mean, at("mean")));
+                row.push(Cell::number(summary.std, at("std")));
+                row.push(Cell::number(summary.q05, at("q05")));
+                row.push(Cell::number(summary.q95, at("q95")));
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "posterior_summary".into(),
+        title: "Posterior summary".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Per source: number of posterior samples and log evidence.
+pub(crate) fn posterior_evidence(report: &StudyReport, derived: &DerivedResults) -> Table {
+    Table {
+        name: "posterior_evidence".into(),
+        title: "Posterior samples and evidence".into(),
+        columns: vec![
+            Column::plain("source"),
+            Column::plain("samples"),
+            Column::plain("log evidence"),
+        ],
+        rows: report
+            .posteriors
+            .iter()
+            .enumerate()
+            .map(|(s, posterior)| {
+                vec![
+                    Cell::text(posterior.source.clone()),
+                    Cell::count(
+                        derived.posterior_sample_counts[s],
+                        format!("/derived/posterior_sample_counts/{s}"),
+                    ),
+                    Cell::number(
+                        posterior.log_evidence,
+                        format!("/report/posteriors/{s}/log_evidence"),
+                    ),
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// The posterior samples of source `s`, one column per parameter (a download, not shown).
+pub(crate) fn posterior_samples(report: &StudyReport, s: usize, name: String) -> Table {
+    let posterior = &report.posteriors[s];
+    Table {
+        name,
+        title: format!("Posterior samples: {}", posterior.source),
+        columns: report.parameters.iter().map(Column::plain).collect(),
+        rows: posterior
+            .samples
+            .iter()
+            .enumerate()
+            .map(|(k, row)| {
+                row.iter()
+                    .enumerate()
+                    .map(|(p, &v)| {
+                        Cell::number(v, format!("/report/posteriors/{s}/samples/{k}/{p}"))
+                    })
+                    .collect()
+            })
+            .collect(),
+    }
+}
+
+/// Sobol' indices in long form: one row per output, source and parameter.
+pub(crate) fn sensitivity(report: &StudyReport) -> Table {
+    let columns = [
+        "output",
+        "x",
+        "source",
+        "parameter",
+        "S1",
+        "S1 low",
+        "S1 high",
+        "ST",
+        "ST low",
+        "ST high",
+    ]
+    .map(Column::plain)
+    .to_vec();
+    let mut rows = Vec::new();
+    for (r, result) in report.sensitivity.iter().enumerate() {
+        for (k, index) in result.indices.iter().enumerate() {
+            let at = |field: &str| format!("/report/sensitivity/{r}/indices/{k}/{field}");
+            rows.push(vec![
+                Cell::text(result.output_label.clone()),
+                Cell::number(result.x, format!("/report/sensitivity/{r}/x")),
+                Cell::text(result.source.clone()),
+                Cell::text(index.parameter.clone()),
+                Cell::number(index.first_order, at("first_order")),
+                Cell::number(index.first_order_low, at("first_order_low")),
+                Cell::number(index.first_order_high, at("first_order_high")),
+                Cell::number(index.total, at("total")),
+                Cell::number(index.total_low, at("total_low")),
+                Cell::number(index.total_high, at("total_high")),
+            ]);
+        }
+    }
+    Table {
+        name: "sensitivity".into(),
+        title: "Sobol' indices".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Absolute error of each source's MAP prediction at each data point, also in units of the
+/// measurement std.
+pub(crate) fn map_error(report: &StudyReport, derived: &DerivedResults) -> Table {
+    let data = &report.data;
+    let mut columns = vec![
+        Column::plain(data.x_label.clone()),
+        Column::plain("data"),
+        Column::plain("data std"),
+    ];
+    for prediction in &derived.predictions {
+        for header in ["MAP", "|MAP − data|", "|MAP − data| / std"] {
+            columns.push(Column::grouped(prediction.source.clone(), header));
+        }
+    }
+    let rows = (0..data.x.len())
+        .map(|i| {
+            let mut row = vec![
+                Cell::number(data.x[i], format!("/report/data/x/{i}")),
+                Cell::number(data.y[i], format!("/report/data/y/{i}")),
+                Cell::number(data.y_err[i], format!("/report/data/y_err/{i}")),
+            ];
+            for (s, prediction) in derived.predictions.iter().enumerate() {
+                let point = &prediction.points[i];
+                let at = |field: &str| format!("/derived/predictions/{s}/points/{i}/{field}");
+                row.push(Cell::number(point.map_prediction, at("map_prediction")));
+                row.push(Cell::number(point.absolute_error, at("absolute_error")));
+                row.push(match point.error_in_data_std {
+                    Some(value) => Cell::number(value, at("error_in_data_std")),
+                    None => Cell::Empty,
+                });
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "map_error".into(),
+        title: "Error of the MAP prediction".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Q² on the test set and leave-one-out Q² per output.
+pub(crate) fn gp_quality(report: &StudyReport) -> Table {
+    Table {
+        name: "gp_quality".into(),
+        title: "Surrogate quality".into(),
+        columns: ["output", "x", "Q² (test set)", "Q² (leave-one-out)"]
+            .map(Column::plain)
+            .to_vec(),
+        rows: report
+            .gp_diagnostics
+            .iter()
+            .enumerate()
+            .map(|(g, d)| {
+                vec![
+                    Cell::text(d.output_label.clone()),
+                    Cell::number(d.x, format!("/report/gp_diagnostics/{g}/x")),
+                    Cell::number(d.q2, format!("/report/gp_diagnostics/{g}/q2")),
+                    Cell::number(d.loo_q2, format!("/report/gp_diagnostics/{g}/loo_q2")),
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// Fitted hyper-parameters per output, one column per hyper-parameter name (empty where an
+/// output's GP lacks it).
+pub(crate) fn gp_hyperparameters(report: &StudyReport) -> Table {
+    let mut names: Vec<&str> = Vec::new();
+    for diagnostic in &report.gp_diagnostics {
+        for (name, _) in &diagnostic.hyperparameters {
+            if !names.contains(&name.as_str()) {
+                names.push(name);
+            }
+        }
+    }
+    let mut columns = vec![Column::plain("output")];
+    columns.extend(names.iter().map(|n| Column::plain(*n)));
+    let rows = report
+        .gp_diagnostics
+        .iter()
+        .enumerate()
+        .map(|(g, d)| {
+            let mut row = vec![Cell::text(d.output_label.clone())];
+            for name in &names {
+                row.push(
+                    match d.hyperparameters.iter().position(|(n, _)| n == name) {
+                        Some(h) => Cell::number(
+                            d.hyperparameters[h].1,
+                            format!("/report/gp_diagnostics/{g}/hyperparameters/{h}/1"),
+                        ),
+                        None => Cell::Empty,
+                    },
+                );
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "gp_hyperparameters".into(),
+        title: "GP hyper-parameters".into(),
+        columns,
+        rows,
+    }
+}
+
+/// The sampler's stages of every source.
+pub(crate) fn sampler_stages(report: &StudyReport) -> Table {
+    let columns = [
+        "source",
+        "stage",
+        "annealing exponent",
+        "CV",
+        "acceptance",
+        "log evidence",
+        "evaluations",
+        "seconds",
+    ]
+    .map(Column::plain)
+    .to_vec();
+    let mut rows = Vec::new();
+    for (s, posterior) in report.posteriors.iter().enumerate() {
+        for (k, stage) in posterior.stages.iter().enumerate() {
+            let at = |field: &str| format!("/report/posteriors/{s}/stages/{k}/{field}");
+            rows.push(vec![
+                Cell::text(posterior.source.clone()),
+                Cell::count(stage.stage, at("stage")),
+                Cell::number(stage.annealing_exponent, at("annealing_exponent")),
+                Cell::number(stage.cv, at("cv")),
+                Cell::number(stage.acceptance, at("acceptance")),
+                Cell::number(stage.log_evidence, at("log_evidence")),
+                Cell::count(stage.evaluations, at("evaluations")),
+                Cell::number(stage.seconds, at("seconds")),
+            ]);
+        }
+    }
+    Table {
+        name: "sampler_stages".into(),
+        title: "Sampler stages".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Counts of model runs.
+pub(crate) fn run_counts(report: &StudyReport, derived: &DerivedResults) -> Table {
+    let stats = &report.run_statistics;
+    Table {
+        name: "run_counts".into(),
+        title: "Model runs".into(),
+        columns: vec![Column::plain("runs"), Column::plain("count")],
+        rows: vec![
+            vec![
+                Cell::text("total"),
+                Cell::count(stats.runs, "/report/run_statistics/runs"),
+            ],
+            vec![
+                Cell::text("succeeded"),
+                Cell::count(stats.succeeded, "/report/run_statistics/succeeded"),
+            ],
+            vec![
+                Cell::text("failed"),
+                Cell::count(stats.failed, "/report/run_statistics/failed"),
+            ],
+            vec![
+                Cell::text("failed (fraction)"),
+                Cell::number(derived.failure_fraction, "/derived/failure_fraction"),
+            ],
+        ],
+    }
+}
+
+/// Failed runs per reason.
+pub(crate) fn failures_by_reason(report: &StudyReport) -> Table {
+    Table {
+        name: "failures_by_reason".into(),
+        title: "Failed runs by reason".into(),
+        columns: vec![Column::plain("reason"), Column::plain("runs")],
+        rows: report
+            .run_statistics
+            .failures_by_reason
+            .iter()
+            .enumerate()
+            .map(|(k, (reason, count))| {
+                vec![
+                    Cell::text(reason.clone()),
+                    Cell::count(
+                        *count,
+                        format!("/report/run_statistics/failures_by_reason/{k}/1"),
+                    ),
+                ]
+            })
+            .collect(),
+    }
+}
+
+/// Wall time per pipeline stage, and the total.
+pub(crate) fn stage_times(report: &StudyReport, derived: &DerivedResults) -> Table {
+    let mut rows: Vec<Vec<Cell>> = report
+        .run_statistics
+        .stage_seconds
+        .iter()
+        .enumerate()
+        .map(|(k, (stage, seconds))| {
+            vec![
+                Cell::text(stage.clone()),
+                Cell::number(
+                    *seconds,
+                    format!("/report/run_statistics/stage_seconds/{k}/1"),
+                ),
+            ]
+        })
+        .collect();
+    rows.push(vec![
+        Cell::text("total"),
+        Cell::number(derived.total_stage_seconds, "/derived/total_stage_seconds"),
+    ]);
+    Table {
+        name: "stage_times".into(),
+        title: "Wall time per pipeline stage".into(),
+        columns: vec![Column::plain("stage"), Column::plain("seconds")],
+        rows,
+    }
+}

@@ -1,0 +1,322 @@
+//! What the report contains, section by section and in reading order: for each section its
+//! figures (drawn here, SVG and PNG), its tables and its explanatory text.
+
+use std::path::Path;
+
+use crate::charts::corner::CornerChart;
+use crate::charts::data_fit::DataFitChart;
+use crate::charts::gp_diagnostics::GpDiagnosticsChart;
+use crate::charts::map_error::MapErrorChart;
+use crate::charts::sampler_stages::{self, SamplerStagesChart};
+use crate::charts::sensitivity::SensitivityChart;
+use crate::charts::violins::ViolinChart;
+use crate::derived::DerivedResults;
+use crate::error::Result;
+use crate::figure::{Chart, FigureInfo, RenderedFigure, render_png, render_svg};
+use crate::files::write_atomic;
+use crate::model::StudyReport;
+use crate::report_tables as build;
+use crate::tables::Table;
+
+/// One section of the report.
+pub(crate) struct Section {
+    /// HTML anchor.
+    pub id: &'static str,
+    /// Heading.
+    pub title: &'static str,
+    /// A sentence or two on what the section shows.
+    pub text: String,
+    /// Figures, drawn.
+    pub figures: Vec<RenderedFigure>,
+    /// Tables shown in the page.
+    pub tables: Vec<Table>,
+    /// Tables only offered as downloads (too long to show).
+    pub downloads: Vec<Table>,
+}
+
+impl Section {
+    fn new(id: &'static str, title: &'static str, text: impl Into<String>) -> Self {
+        Self {
+            id,
+            title,
+            text: text.into(),
+            figures: Vec::new(),
+            tables: Vec::new(),
+            downloads: Vec::new(),
+        }
+    }
+}
+
+/// A figure to draw: file stem, title, caption, pixel size and the tables holding its numbers.
+struct FigureSpec<'a> {
+    name: &'a str,
+    title: &'a str,
+    caption: String,
+    size: (u32, u32),
+    tables: &'a [&'a str],
+}
+
+/// Draws `chart` as `figures_dir/NAME.svg` and `NAME.png` (atomically) and returns it with its
+/// SVG text for the page.
+fn figure(spec: FigureSpec, chart: &impl Chart, figures_dir: &Path) -> Result<RenderedFigure> {
+    let (width, height) = spec.size;
+    let svg = render_svg(spec.name, width, height, chart)?;
+    write_atomic(
+        &figures_dir.join(format!("{}.svg", spec.name)),
+        svg.as_bytes(),
+    )?;
+    render_png(
+        spec.name,
+        width,
+        height,
+        chart,
+        &figures_dir.join(format!("{}.png", spec.name)),
+    )?;
+    Ok(RenderedFigure {
+        info: FigureInfo {
+            name: spec.name.to_string(),
+            title: spec.title.to_string(),
+            caption: spec.caption,
+            svg: format!("figures/{}.svg", spec.name),
+            png: format!("figures/{}.png", spec.name),
+            width,
+            height,
+            tables: spec.tables.iter().map(|t| t.to_string()).collect(),
+        },
+        svg,
+    })
+}
+
+/// A file-name-safe lower-case form of `text`.
+fn slug(text: &str) -> String {
+    let mut slug = String::new();
+    for c in text.chars() {
+        if c.is_ascii_alphanumeric() {
+            slug.push(c.to_ascii_lowercase());
+        } else if !slug.ends_with('_') {
+            slug.push('_');
+        }
+    }
+    slug.trim_matches('_').to_string()
+}
+
+/// Builds every section of a validated report, drawing its figures into `figures_dir`.
+pub(crate) fn build_sections(
+    report: &StudyReport,
+    derived: &DerivedResults,
+    figures_dir: &Path,
+) -> Result<Vec<Section>> {
+    let mut sections = Vec::new();
+    let has_posteriors = !report.posteriors.is_empty();
+    let y = &report.data.y_label;
+
+    let mut fit = Section::new(
+        "data-fit",
+        "Measurements and calibrated model",
+        if has_posteriors {
+            "The measurements with their standard deviations, and for each source the model output at the MAP estimate and the central 95 % band of the output propagated through the posterior."
+        } else {
+            "The measurements with their standard deviations (no posterior was computed)."
+        },
+    );
+    fit.figures.push(figure(
+        FigureSpec {
+            name: "data_fit",
+            title: "Measurements and calibrated model",
+            caption: format!(
+                "{y} against {}: measurements (black, ± one std), MAP curve (line) and central 95 % band of the propagated output (shaded) for each source.",
+                report.data.x_label
+            ),
+            size: (920, 600),
+            tables: &["propagated"],
+        },
+        &DataFitChart { data: &report.data, derived },
+        figures_dir,
+    )?);
+    fit.tables.push(build::propagated(report, derived));
+    sections.push(fit);
+
+    if has_posteriors {
+        let mut posterior = Section::new(
+            "posterior",
+            "Posterior summary",
+            "Maximum a posteriori estimate, mean, standard deviation and the 5 % and 95 % quantiles of each parameter, one column group per source.",
+        );
+        posterior.tables.push(build::posterior_summary(report));
+        posterior
+            .tables
+            .push(build::posterior_evidence(report, derived));
+        let mut used = Vec::new();
+        for (s, p) in report.posteriors.iter().enumerate() {
+            let mut name = format!("posterior_samples_{}", slug(&p.source));
+            if used.contains(&name) {
+                name = format!("{name}_{s}");
+            }
+            used.push(name.clone());
+            posterior
+                .downloads
+                .push(build::posterior_samples(report, s, name));
+        }
+        sections.push(posterior);
+    }
+
+    if !report.sensitivity.is_empty() {
+        let chart = SensitivityChart::new(report);
+        let mut section = Section::new(
+            "sensitivity",
+            "Sensitivity",
+            "Sobol' indices of each output: the first-order index S1 is the share of the output variance due to the parameter alone, the total index ST includes all its interactions.",
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "sensitivity",
+                title: "Sobol' indices per output",
+                caption: "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group.".to_string(),
+                size: chart.size(),
+                tables: &["sensitivity"],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        section.tables.push(build::sensitivity(report));
+        sections.push(section);
+    }
+
+    if has_posteriors {
+        let chart = CornerChart::new(report);
+        let mut section = Section::new(
+            "corner",
+            "Posterior densities",
+            "Marginal and pairwise posterior densities (Gaussian kernel density estimates, Scott's rule) of the final posterior samples.",
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "corner",
+                title: "Posterior marginals and pairwise densities",
+                caption: "Diagonal: 1-D marginal densities, with the MAP estimate as a thin vertical line. Below: contours enclosing 68 % (thick) and 95 % (thin) of the 2-D density, MAP marked ×. Sources overlaid in their colours.".to_string(),
+                size: chart.size(),
+                tables: &[],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        sections.push(section);
+
+        let chart = ViolinChart::new(report)?;
+        let mut section = Section::new(
+            "propagation",
+            "Propagated uncertainty",
+            format!(
+                "The distribution of the model output ({y}) over the posterior at each stress, with the measurements and the MAP curves."
+            ),
+        );
+        let split = if report.posteriors.len() == 2 {
+            " With two sources each violin is split: the first source on the left, the second on the right."
+        } else {
+            ""
+        };
+        section.figures.push(figure(
+            FigureSpec {
+                name: "violins",
+                title: "Propagated output per stress",
+                caption: format!("Violins: kernel density of the output at the posterior samples, mirrored around each stress.{split} Black: measurements ± one std; lines: MAP curves."),
+                size: (920, 600),
+                tables: &["propagated"],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        sections.push(section);
+
+        let mut section = Section::new(
+            "map-error",
+            "Error of the MAP prediction",
+            "Absolute difference between the MAP prediction and the measurement at each stress, compared with the measurement's standard deviation.",
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "map_error",
+                title: "Absolute error of the MAP prediction",
+                caption: "Bars: |MAP prediction − measurement| per source; black dash: the measurement's standard deviation.".to_string(),
+                size: (920, 460),
+                tables: &["map_error"],
+            },
+            &MapErrorChart { data: &report.data, derived },
+            figures_dir,
+        )?);
+        section.tables.push(build::map_error(report, derived));
+        sections.push(section);
+    }
+
+    if !report.gp_diagnostics.is_empty() {
+        let chart = GpDiagnosticsChart {
+            diagnostics: &report.gp_diagnostics,
+        };
+        let mut section = Section::new(
+            "surrogate",
+            "Surrogate quality",
+            "Each output's Gaussian process against model runs it was not trained on. Q² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²: 1 is a perfect prediction.",
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "gp_diagnostics",
+                title: "GP prediction against simulation",
+                caption: "GP predictive mean against the simulated output on the independent test set, with ± 2 predictive std whiskers and the identity line; Q² on the test set in each title.".to_string(),
+                size: chart.size(),
+                tables: &["gp_quality", "gp_hyperparameters"],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        section.tables.push(build::gp_quality(report));
+        section.tables.push(build::gp_hyperparameters(report));
+        sections.push(section);
+    }
+
+    if report.posteriors.iter().any(|p| !p.stages.is_empty()) {
+        let mut section = Section::new(
+            "sampler",
+            "Sampler diagnostics",
+            "Per stage of the BASIS sampler: the annealing exponent (1 at the posterior), the coefficient of variation of the plausibility weights, the acceptance rate of the Markov chains and the running log-evidence estimate.",
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "sampler_stages",
+                title: "Sampler diagnostics per stage",
+                caption: "Annealing exponent, CV of the weights, acceptance rate and log evidence against the stage, one line per source.".to_string(),
+                size: sampler_stages::SIZE,
+                tables: &["sampler_stages"],
+            },
+            &SamplerStagesChart {
+                posteriors: &report.posteriors,
+            },
+            figures_dir,
+        )?);
+        section.tables.push(build::sampler_stages(report));
+        sections.push(section);
+    }
+
+    let mut runs = Section::new(
+        "runs",
+        "Run statistics",
+        "Model runs of the study, failed runs by reason, and the wall time of each pipeline stage.",
+    );
+    runs.tables.push(build::run_counts(report, derived));
+    if !report.run_statistics.failures_by_reason.is_empty() {
+        runs.tables.push(build::failures_by_reason(report));
+    }
+    runs.tables.push(build::stage_times(report, derived));
+    sections.push(runs);
+    Ok(sections)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::slug;
+
+    #[test]
+    fn slugs_are_file_name_safe() {
+        assert_eq!(slug("GP surrogate"), "gp_surrogate");
+        assert_eq!(slug("cell model (HemoCell)"), "cell_model_hemocell");
+    }
+}

@@ -1,0 +1,272 @@
+//! A small synthetic calibration study for the report's tests and the demo example: an RBC-like
+//! elongation-index curve EL(τ) with two model parameters and a modelling error, posterior
+//! samples from a seeded random generator, one or two sources.
+
+use iuq_report::{
+    DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, Normal};
+use rand_xoshiro::Xoshiro256PlusPlus;
+
+/// The toy model: EL(τ) = 0.68 τ / (τ + kLink/60) − 0.0004 (kBend − 200) / (1 + τ).
+pub fn model(stress: f64, k_link: f64, k_bend: f64) -> f64 {
+    0.68 * stress / (stress + k_link / 60.0) - 0.0004 * (k_bend - 200.0) / (1.0 + stress)
+}
+
+/// Mean, std, quantiles and MAP (the sample nearest the mean, standing in for the density's
+/// mode) of one sample column.
+fn summary(name: &str, column: &[f64], map: f64) -> ParameterSummary {
+    let mut sorted = column.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let n = sorted.len() as f64;
+    let mean = sorted.iter().sum::<f64>() / n;
+    let std = (sorted.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / (n - 1.0)).sqrt();
+    let q = |p: f64| sorted[((p * (n - 1.0)).round() as usize).min(sorted.len() - 1)];
+    ParameterSummary {
+        name: name.to_string(),
+        map,
+        mean,
+        std,
+        q05: q(0.05),
+        q50: q(0.5),
+        q95: q(0.95),
+    }
+}
+
+/// One posterior source with `samples` samples around (kLink, kBend) = `centre`.
+fn posterior(
+    source: &str,
+    centre: (f64, f64),
+    stresses: &[f64],
+    samples: usize,
+    rng: &mut Xoshiro256PlusPlus,
+) -> PosteriorResult {
+    let standard = Normal::new(0.0, 1.0).expect("valid normal");
+    let rows: Vec<Vec<f64>> = (0..samples)
+        .map(|_| {
+            let (a, b): (f64, f64) = (standard.sample(rng), standard.sample(rng));
+            let k_link = centre.0 + 9.0 * a;
+            let k_bend = centre.1 + 35.0 * (0.7 * a + 0.71 * b);
+            let sigma_m = (0.012 + 0.003 * standard.sample(rng)).abs();
+            vec![k_link, k_bend, sigma_m]
+        })
+        .collect();
+    let parameters = ["kLink", "kBend", "sigma_m"];
+    let column = |p: usize| rows.iter().map(|r| r[p]).collect::<Vec<_>>();
+    let map_row = rows
+        .iter()
+        .min_by(|a, b| {
+            let d = |r: &Vec<f64>| {
+                ((r[0] - centre.0) / 9.0).powi(2) + ((r[1] - centre.1) / 35.0).powi(2)
+            };
+            d(a).total_cmp(&d(b))
+        })
+        .cloned()
+        .expect("samples exist");
+    let summary = parameters
+        .iter()
+        .enumerate()
+        .map(|(p, name)| summary(name, &column(p), map_row[p]))
+        .collect();
+    let propagated = stresses
+        .iter()
+        .map(|&x| PropagatedOutput {
+            x,
+            samples: rows.iter().map(|r| model(x, r[0], r[1])).collect(),
+            map_prediction: model(x, map_row[0], map_row[1]),
+        })
+        .collect();
+    let stages = (0..6)
+        .map(|k| SamplerStage {
+            stage: k,
+            annealing_exponent: if k == 5 {
+                1.0
+            } else {
+                (k as f64 / 5.0).powi(3)
+            },
+            cv: if k == 0 {
+                0.0
+            } else {
+                1.0 + 0.1 * rng.random::<f64>()
+            },
+            acceptance: if k == 0 {
+                1.0
+            } else {
+                0.2 + 0.2 * rng.random::<f64>()
+            },
+            log_evidence: -40.0 + 50.0 * (1.0 - (-(k as f64)).exp()),
+            evaluations: samples,
+            seconds: 0.5 + rng.random::<f64>(),
+        })
+        .collect();
+    PosteriorResult {
+        source: source.to_string(),
+        summary,
+        log_evidence: 9.873,
+        samples: rows,
+        stages,
+        propagated,
+    }
+}
+
+/// A synthetic study at the given stresses, with `sources` posterior sources (1: the GP
+/// surrogate, 2: also the cell model) of `samples` samples each.
+pub fn synthetic_report(
+    stresses: &[f64],
+    sources: usize,
+    samples: usize,
+    seed: u64,
+) -> StudyReport {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let truth = (120.0, 210.0);
+    let y: Vec<f64> = stresses
+        .iter()
+        .map(|&x| model(x, truth.0, truth.1) + 0.004 * (rng.random::<f64>() - 0.5))
+        .collect();
+    let y_err: Vec<f64> = stresses
+        .iter()
+        .map(|_| 0.003 + 0.003 * rng.random::<f64>())
+        .collect();
+    let mut posteriors = vec![posterior(
+        "GP surrogate",
+        (118.0, 205.0),
+        stresses,
+        samples,
+        &mut rng,
+    )];
+    if sources > 1 {
+        posteriors.push(posterior(
+            "cell model",
+            (124.0, 190.0),
+            stresses,
+            samples,
+            &mut rng,
+        ));
+    }
+    let mut sensitivity = Vec::new();
+    for &x in stresses {
+        for source in ["model runs", "surrogate"] {
+            let share = 0.55 + 0.35 * (x / (x + 2.0));
+            let noise = |rng: &mut Xoshiro256PlusPlus| 0.03 * (rng.random::<f64>() - 0.5);
+            let index = |parameter: &str, s1: f64, rng: &mut Xoshiro256PlusPlus| {
+                let s1 = s1 + noise(rng);
+                let st = s1 + 0.04 + noise(rng).abs();
+                SensitivityIndex {
+                    parameter: parameter.to_string(),
+                    first_order: s1,
+                    first_order_low: s1 - 0.05,
+                    first_order_high: s1 + 0.05,
+                    total: st,
+                    total_low: st - 0.04,
+                    total_high: st + 0.06,
+                }
+            };
+            let indices = vec![
+                index("kLink", share, &mut rng),
+                index("kBend", 0.92 - share, &mut rng),
+            ];
+            sensitivity.push(SensitivityResult {
+                output_label: format!("EL at {x} Pa"),
+                x,
+                source: source.to_string(),
+                indices,
+            });
+        }
+    }
+    let gp_diagnostics = stresses
+        .iter()
+        .map(|&x| {
+            let simulated: Vec<f64> = (0..30)
+                .map(|_| {
+                    model(
+                        x,
+                        40.0 + 250.0 * rng.random::<f64>(),
+                        50.0 + 350.0 * rng.random::<f64>(),
+                    )
+                })
+                .collect();
+            let predicted_std: Vec<f64> = (0..30)
+                .map(|_| 0.002 + 0.004 * rng.random::<f64>())
+                .collect();
+            let predicted = simulated
+                .iter()
+                .zip(&predicted_std)
+                .map(|(s, sd)| s + sd * (rng.random::<f64>() - 0.5) * 2.0)
+                .collect();
+            GpDiagnostic {
+                output_label: format!("EL at {x} Pa"),
+                x,
+                q2: 0.99 - 0.01 * rng.random::<f64>(),
+                loo_q2: 0.985 - 0.01 * rng.random::<f64>(),
+                simulated,
+                predicted,
+                predicted_std,
+                hyperparameters: vec![
+                    (
+                        "signal variance".to_string(),
+                        0.02 + 0.01 * rng.random::<f64>(),
+                    ),
+                    (
+                        "length scale kLink".to_string(),
+                        80.0 + 40.0 * rng.random::<f64>(),
+                    ),
+                    (
+                        "length scale kBend".to_string(),
+                        300.0 + 100.0 * rng.random::<f64>(),
+                    ),
+                    (
+                        "noise variance".to_string(),
+                        1e-6 * (1.0 + rng.random::<f64>()),
+                    ),
+                ],
+            }
+        })
+        .collect();
+    StudyReport {
+        title: "RBC calibration — healthy cells (synthetic)".to_string(),
+        study_name: "rbc-healthy-synthetic".to_string(),
+        provenance: vec![
+            ("iuq version".to_string(), "0.1.0".to_string()),
+            (
+                "command".to_string(),
+                "iuq pipeline examples/rbc-healthy.toml --out report".to_string(),
+            ),
+            ("seed".to_string(), seed.to_string()),
+            ("date".to_string(), "2025-01-01T00:00:00Z".to_string()),
+            (
+                "study file hash".to_string(),
+                "sha256:0123456789abcdef".to_string(),
+            ),
+        ],
+        parameters: vec![
+            "kLink".to_string(),
+            "kBend".to_string(),
+            "sigma_m".to_string(),
+        ],
+        data: DataSeries {
+            x_label: "shear stress (Pa)".to_string(),
+            y_label: "elongation index EL (–)".to_string(),
+            x: stresses.to_vec(),
+            y,
+            y_err,
+        },
+        posteriors,
+        sensitivity,
+        gp_diagnostics,
+        run_statistics: RunStatistics {
+            runs: 120,
+            succeeded: 114,
+            failed: 6,
+            failures_by_reason: vec![("timeout".to_string(), 4), ("diverged".to_string(), 2)],
+            stage_seconds: vec![
+                ("design".to_string(), 0.31),
+                ("model runs".to_string(), 3600.5),
+                ("GP fit".to_string(), 12.25),
+                ("Sobol' indices".to_string(), 4.125),
+                ("BASIS sampling".to_string(), 35.2),
+            ],
+        },
+    }
+}

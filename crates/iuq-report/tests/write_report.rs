@@ -1,0 +1,344 @@
+//! End-to-end tests of `write_report` on a small synthetic study: the files it writes, their
+//! formats, the agreement of the page's numbers with `report.json`, and the rejection of bad
+//! input without touching an existing page.
+
+mod synthetic;
+
+use std::path::{Path, PathBuf};
+
+use iuq_report::{ReportDocument, ReportError, format_number, write_report};
+use serde_json::Value;
+
+/// Three stresses, 200 samples, both sources.
+fn small_report() -> iuq_report::StudyReport {
+    synthetic::synthetic_report(&[0.64, 1.99, 6.19], 2, 200, 42)
+}
+
+/// A fresh, empty directory for one test, removed when dropped.
+struct Scratch(PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = Path;
+
+    fn deref(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn fresh_dir(name: &str) -> Scratch {
+    let dir = std::env::temp_dir().join(format!("iuq-report-test-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    Scratch(dir)
+}
+
+const FIGURES: [&str; 7] = [
+    "data_fit",
+    "sensitivity",
+    "corner",
+    "violins",
+    "map_error",
+    "gp_diagnostics",
+    "sampler_stages",
+];
+
+const TABLES: [&str; 13] = [
+    "propagated",
+    "posterior_summary",
+    "posterior_evidence",
+    "posterior_samples_gp_surrogate",
+    "posterior_samples_cell_model",
+    "sensitivity",
+    "map_error",
+    "gp_quality",
+    "gp_hyperparameters",
+    "sampler_stages",
+    "run_counts",
+    "failures_by_reason",
+    "stage_times",
+];
+
+fn read_document(dir: &Path) -> (ReportDocument, Value) {
+    let text = std::fs::read_to_string(dir.join("report.json")).unwrap();
+    (
+        serde_json::from_str(&text).unwrap(),
+        serde_json::from_str(&text).unwrap(),
+    )
+}
+
+/// No temporary file is left anywhere under `dir`.
+fn assert_no_temporaries(dir: &Path) {
+    for sub in [dir.to_path_buf(), dir.join("figures"), dir.join("tables")] {
+        let Ok(entries) = std::fs::read_dir(&sub) else {
+            continue;
+        };
+        for entry in entries {
+            let name = entry.unwrap().file_name().to_string_lossy().into_owned();
+            assert!(
+                !name.starts_with('.'),
+                "temporary file left: {}",
+                sub.join(name).display()
+            );
+        }
+    }
+}
+
+#[test]
+fn writes_every_figure_table_and_page() {
+    let dir = fresh_dir("files");
+    let report = small_report();
+    let files = write_report(&report, &dir).unwrap();
+    for name in FIGURES {
+        for extension in ["svg", "png"] {
+            let path = dir.join("figures").join(format!("{name}.{extension}"));
+            assert!(path.is_file(), "missing {}", path.display());
+            assert!(files.figures.contains(&path));
+        }
+    }
+    for name in TABLES {
+        for extension in ["csv", "json"] {
+            let path = dir.join("tables").join(format!("{name}.{extension}"));
+            assert!(path.is_file(), "missing {}", path.display());
+            assert!(files.tables.contains(&path));
+        }
+    }
+    assert_eq!(files.figures.len(), 2 * FIGURES.len());
+    assert_eq!(files.tables.len(), 2 * TABLES.len());
+    assert!(files.html.is_file() && files.json.is_file());
+    let (document, _) = read_document(&dir);
+    assert!(
+        document.report == report,
+        "report.json does not round-trip the input"
+    );
+    assert_eq!(document.figures.len(), FIGURES.len());
+    assert_no_temporaries(&dir);
+}
+
+#[test]
+fn figures_are_svg_and_png_of_the_declared_size() {
+    let dir = fresh_dir("formats");
+    write_report(&small_report(), &dir).unwrap();
+    let (document, _) = read_document(&dir);
+    for figure in &document.figures {
+        let svg = std::fs::read_to_string(dir.join(&figure.svg)).unwrap();
+        assert!(
+            svg.starts_with("<svg"),
+            "{} does not start with <svg",
+            figure.svg
+        );
+        assert!(svg.trim_end().ends_with("</svg>"));
+        assert!(svg.len() > 5_000, "{} is nearly empty", figure.svg);
+        assert!(svg.contains("<text"), "{} has no text", figure.svg);
+        assert!(svg.contains(&format!("width=\"{}\"", figure.width)));
+
+        let png = std::fs::read(dir.join(&figure.png)).unwrap();
+        assert_eq!(
+            &png[..8],
+            b"\x89PNG\r\n\x1a\n",
+            "{} is not a PNG",
+            figure.png
+        );
+        assert_eq!(&png[12..16], b"IHDR");
+        let width = u32::from_be_bytes([png[16], png[17], png[18], png[19]]);
+        let height = u32::from_be_bytes([png[20], png[21], png[22], png[23]]);
+        assert_eq!(
+            (width, height),
+            (figure.width, figure.height),
+            "{}",
+            figure.png
+        );
+        assert!(png.len() > 10_000, "{} is nearly empty", figure.png);
+    }
+}
+
+/// Every `<td … data-value="V" data-pointer="P">TEXT</td>` of the page.
+fn numeric_cells(html: &str) -> Vec<(f64, String, String)> {
+    let mut cells = Vec::new();
+    let mut rest = html;
+    while let Some(start) = rest.find("data-value=\"") {
+        rest = &rest[start + "data-value=\"".len()..];
+        let end = rest.find('"').unwrap();
+        let value: f64 = rest[..end].parse().unwrap();
+        rest = &rest[end..];
+        let pointer_start = rest.find("data-pointer=\"").unwrap() + "data-pointer=\"".len();
+        rest = &rest[pointer_start..];
+        let pointer_end = rest.find('"').unwrap();
+        let pointer = rest[..pointer_end].to_string();
+        let text_start = rest.find('>').unwrap() + 1;
+        let text_end = rest.find("</td>").unwrap();
+        cells.push((value, pointer, rest[text_start..text_end].to_string()));
+        rest = &rest[text_end..];
+    }
+    cells
+}
+
+#[test]
+fn html_numbers_equal_report_json_numbers() {
+    let dir = fresh_dir("numbers");
+    write_report(&small_report(), &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    let (_, json) = read_document(&dir);
+    let cells = numeric_cells(&html);
+    assert!(cells.len() > 100, "only {} numeric cells", cells.len());
+    for (value, pointer, text) in &cells {
+        let json_value = json
+            .pointer(pointer)
+            .and_then(Value::as_f64)
+            .unwrap_or_else(|| panic!("{pointer} is not a number in report.json"));
+        assert_eq!(*value, json_value, "at {pointer}");
+        assert_eq!(text, &format_number(*value), "display of {pointer}");
+    }
+    // Every numeric cell of the page's tables is among them: no number escapes the check.
+    let plain_numeric_cells = html.matches("<td class=\"num\">").count();
+    let empty_cells = html.matches("<td class=\"num\">–</td>").count();
+    assert_eq!(plain_numeric_cells, empty_cells);
+}
+
+#[test]
+fn the_page_is_self_contained() {
+    let dir = fresh_dir("self-contained");
+    write_report(&small_report(), &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    for forbidden in [
+        "<script",
+        "<link",
+        " src=",
+        "url(",
+        "@import",
+        "href=\"http",
+    ] {
+        assert!(!html.contains(forbidden), "page contains {forbidden}");
+    }
+    // Sections in the order of the report.
+    let order = [
+        "data-fit",
+        "posterior",
+        "sensitivity",
+        "corner",
+        "propagation",
+        "map-error",
+        "surrogate",
+        "sampler",
+        "runs",
+    ];
+    let positions: Vec<usize> = order
+        .iter()
+        .map(|id| {
+            html.find(&format!("<section id=\"{id}\">"))
+                .unwrap_or_else(|| panic!("no section {id}"))
+        })
+        .collect();
+    assert!(positions.windows(2).all(|w| w[0] < w[1]));
+    assert_eq!(html.matches("<svg").count(), FIGURES.len());
+    for name in FIGURES {
+        assert!(html.contains(&format!("href=\"figures/{name}.png\"")));
+    }
+}
+
+#[test]
+fn empty_posteriors_and_sensitivity_omit_their_sections() {
+    let dir = fresh_dir("omitted");
+    let mut report = small_report();
+    report.posteriors.clear();
+    report.sensitivity.clear();
+    write_report(&report, &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    for id in [
+        "posterior",
+        "sensitivity",
+        "corner",
+        "propagation",
+        "map-error",
+        "sampler",
+    ] {
+        assert!(
+            !html.contains(&format!("<section id=\"{id}\">")),
+            "section {id} present"
+        );
+    }
+    assert!(html.contains("<section id=\"data-fit\">"));
+    assert!(html.contains("<section id=\"surrogate\">"));
+    assert!(dir.join("figures/data_fit.png").is_file());
+    assert!(!dir.join("figures/corner.svg").exists());
+}
+
+#[test]
+fn a_single_source_renders() {
+    let dir = fresh_dir("single");
+    let report = synthetic::synthetic_report(&[0.64, 1.99, 6.19], 1, 200, 3);
+    write_report(&report, &dir).unwrap();
+    assert!(dir.join("figures/violins.png").is_file());
+}
+
+/// Writing `bad` into a directory holding a good report fails with an invalid-input error
+/// naming `field`, and leaves the good page untouched.
+fn assert_rejected(name: &str, bad: iuq_report::StudyReport, field: &str) {
+    let dir = fresh_dir(name);
+    write_report(&small_report(), &dir).unwrap();
+    let before = std::fs::read(dir.join("report.html")).unwrap();
+    match write_report(&bad, &dir) {
+        Err(ReportError::InvalidInput { field: f, reason }) => {
+            assert!(
+                f.contains(field),
+                "error names `{f}` ({reason}), expected `{field}`"
+            );
+        }
+        other => panic!("expected an invalid-input error, got {other:?}"),
+    }
+    assert_eq!(std::fs::read(dir.join("report.html")).unwrap(), before);
+    assert_no_temporaries(&dir);
+
+    // Into an empty directory: no page at all.
+    let empty = fresh_dir(&format!("{name}-empty"));
+    assert!(write_report(&bad, &empty).is_err());
+    assert!(!empty.join("report.html").exists());
+    assert!(!empty.join("report.json").exists());
+}
+
+#[test]
+fn mismatched_lengths_are_rejected() {
+    let mut bad = small_report();
+    bad.data.y.pop();
+    assert_rejected("short-y", bad, "data.y");
+
+    let mut bad = small_report();
+    bad.posteriors[1].propagated.pop();
+    assert_rejected("short-propagated", bad, "posteriors[1].propagated");
+
+    let mut bad = small_report();
+    bad.posteriors[0].samples[17].pop();
+    assert_rejected("short-sample", bad, "posteriors[0].samples[17]");
+
+    let mut bad = small_report();
+    bad.gp_diagnostics[2].predicted_std.push(0.1);
+    assert_rejected("long-std", bad, "gp_diagnostics[2].predicted_std");
+}
+
+#[test]
+fn non_finite_values_and_empty_samples_are_rejected() {
+    let mut bad = small_report();
+    bad.posteriors[0].samples[5][1] = f64::NAN;
+    assert_rejected("nan-sample", bad, "posteriors[0].samples[5][1]");
+
+    let mut bad = small_report();
+    bad.posteriors[1].samples.clear();
+    assert_rejected("no-samples", bad, "posteriors[1].samples");
+
+    let mut bad = small_report();
+    bad.data.x[0] = 0.0;
+    assert_rejected("zero-stress", bad, "data.x[0]");
+
+    let mut bad = small_report();
+    bad.posteriors[0].propagated[1].samples[3] = f64::INFINITY;
+    assert_rejected(
+        "infinite-output",
+        bad,
+        "posteriors[0].propagated[1].samples[3]",
+    );
+}
