@@ -7,6 +7,7 @@
 mod commands;
 mod input_error;
 mod likelihood_section;
+mod pipeline;
 mod report_output;
 mod sampler_section;
 mod study;
@@ -31,6 +32,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The calibration study end to end: model runs, GPs, Sobol' indices, BASIS, report.
+    Pipeline(commands::pipeline::PipelineArgs),
     /// Space-filling designs (Latin hypercube, Sobol', Saltelli) written as CSV.
     Design(commands::design::DesignArgs),
     /// Gaussian-process surrogates: fit, predict, validate.
@@ -64,6 +67,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Pipeline(args) => commands::pipeline::run(args, cli.json),
         Command::Design(args) => commands::design::run(args, cli.json),
         Command::Gp(command) => commands::gp::run(command, cli.json),
         Command::Sobol(args) => commands::sobol::run(args, cli.json),

@@ -115,6 +115,9 @@ pub struct SensitivitySection {
     pub resamples: Option<usize>,
     /// Confidence level of the intervals.
     pub confidence: Option<f64>,
+    /// Base points N of the Saltelli design run on the model itself by `iuq pipeline` (0 or
+    /// absent: indices from the surrogate only).
+    pub model_n: Option<usize>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -139,6 +142,8 @@ struct StudyFile {
     executor: Option<toml::Table>,
     #[serde(default)]
     design: Option<toml::Table>,
+    #[serde(default)]
+    model_sampler: Option<toml::Table>,
 }
 
 /// A study read from a file.
@@ -158,6 +163,12 @@ pub struct Study {
     pub likelihood: Option<toml::Table>,
     /// The `[sampler]` section as written (read by the inference verbs).
     pub sampler: Option<toml::Table>,
+    /// The `[surrogate]` section as written (read by `iuq pipeline`).
+    pub surrogate: Option<toml::Table>,
+    /// The `[model_sampler]` section as written: BASIS directly on the model in `iuq pipeline`.
+    pub model_sampler: Option<toml::Table>,
+    /// The `[executor]` section as written (campaigns of model runs).
+    pub executor: Option<toml::Table>,
 }
 
 impl Study {
@@ -172,7 +183,7 @@ impl Study {
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
         let file = path.display();
         let raw: StudyFile = toml::from_str(text).bad_input(|| format!("{file}"))?;
-        let _ = (&raw.description, &raw.surrogate, &raw.executor, &raw.design);
+        let _ = (&raw.description, &raw.design);
         if raw.name.trim().is_empty() {
             return Err(input_error(format!(
                 "{file}: key `name`: must not be empty"
@@ -206,6 +217,9 @@ impl Study {
             sensitivity: raw.sensitivity.unwrap_or_default(),
             likelihood: raw.likelihood,
             sampler: raw.sampler,
+            surrogate: raw.surrogate,
+            model_sampler: raw.model_sampler,
+            executor: raw.executor,
         };
         if let ModelSection::Expression { .. } = study.model {
             study.expression_model()?;

@@ -333,44 +333,41 @@ fn marginals(state: &BasisState, space: &ParameterSpace) -> Value {
     json!({"one_dimensional": one, "two_dimensional": two})
 }
 
-/// Run `iuq basis`.
-pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
-    let study = Study::load(&args.study)?;
-    let posterior = build_posterior(&study)?;
-    let overrides = SamplerOverrides {
-        samples: args.samples,
-        burn: args.burn,
-        max_chain: args.max_chain,
-        seed: args.seed,
-    };
-    let settings = parse_sampler(&study, &overrides)?;
-    let checkpoint = match &args.resume {
-        None => None,
-        Some(dir) => {
-            let path = dir.join("checkpoint.json");
-            let text = std::fs::read_to_string(&path).map_err(|e| {
-                input_error(format!("--resume: cannot read {}: {e}", path.display()))
-            })?;
-            let state = from_json(&text).bad_input(|| format!("--resume: {}", path.display()))?;
-            Some(state)
-        }
-    };
-    let out = match (&args.out, &args.resume) {
-        (Some(out), _) => out.clone(),
-        (None, Some(dir)) => dir.clone(),
-        (None, None) => PathBuf::from(format!("{}-basis", study.name)),
-    };
-    std::fs::create_dir_all(&out)
-        .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
+/// A finished (or stopped) BASIS run with its summary.
+pub(crate) struct SampledPosterior {
+    /// The run (final state and stop reason).
+    pub(crate) run: iuq_basis::BasisRun,
+    /// MAP, mean, std and quantiles.
+    pub(crate) summary: PosteriorSummary,
+    /// Wall-clock seconds of this invocation.
+    pub(crate) seconds: f64,
+}
 
+/// Sample `posterior` with BASIS and write every result file into `out` (checkpoint after each
+/// stage, `stages.json/csv`, `samples.csv`, `marginals.json`, `summary.json`); `checkpoint`
+/// resumes an earlier run. `study_name`/`study_file` label the summary; `label` prefixes the
+/// progress lines.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn sample_posterior(
+    study_name: &str,
+    study_file: &Path,
+    posterior: &StudyPosterior,
+    settings: iuq_basis::CheckedSettings,
+    out: &Path,
+    checkpoint: Option<BasisState>,
+    resume_dir: Option<&Path>,
+    stop_after: Option<usize>,
+) -> Result<SampledPosterior> {
+    let out = out.to_path_buf();
+    std::fs::create_dir_all(&out)
+        .map_err(|e| input_error(format!("cannot create {}: {e}", out.display())))?;
     let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), settings)
-        .bad_input(|| format!("{}", args.study.display()))?;
+        .bad_input(|| format!("{}", study_file.display()))?;
     if let Some(state) = &checkpoint {
         basis.check_compatible(state).bad_input(|| {
             format!(
                 "--resume: {} does not belong to this study and these settings",
-                args.resume
-                    .as_deref()
+                resume_dir
                     .unwrap_or(Path::new("."))
                     .join("checkpoint.json")
                     .display()
@@ -394,7 +391,7 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
     let mut reporter = StageReporter {
         out: out.clone(),
         bar,
-        stop_after: args.stop_after,
+        stop_after,
         started: Instant::now(),
     };
     let result = match checkpoint {
@@ -447,30 +444,9 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
             (name.clone(), Value::Object(by_p))
         })
         .collect();
-    let value = json!({
-        "study": study.name,
-        "log_evidence": state.log_evidence,
-        "stages": state.stages(),
-        "evaluations": state.evaluations,
-        "stop_reason": run.stop_reason.name(),
-        "stop_message": run.stop_reason.to_string(),
-        "converged": converged,
-        "exponent": state.exponent,
-        "samples": state.samples.len(),
-        "map": by_name(names, &summary.map),
-        "mean": by_name(names, &summary.mean),
-        "std": by_name(names, &summary.std),
-        "map_log_likelihood": summary.map_log_likelihood,
-        "map_log_prior": summary.map_log_prior,
-        "failures": state.failures(),
-        "failure_reasons": state.failure_reasons(),
-        "out_of_support": state.out_of_support(),
-        "out": out.display().to_string(),
-        "wall_seconds": reporter.started.elapsed().as_secs_f64(),
-    });
     let summary_file = json!({
-        "study": study.name,
-        "study_file": study.path.display().to_string(),
+        "study": study_name,
+        "study_file": study_file.display().to_string(),
         "likelihood": posterior.description,
         "settings": state.settings,
         "parameters": names,
@@ -496,6 +472,78 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
         &out.join("summary.json"),
         serde_json::to_string_pretty(&summary_file)?.as_bytes(),
     )?;
+    Ok(SampledPosterior {
+        seconds: reporter.started.elapsed().as_secs_f64(),
+        run,
+        summary,
+    })
+}
+
+/// Run `iuq basis`.
+pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
+    let study = Study::load(&args.study)?;
+    let posterior = build_posterior(&study)?;
+    let overrides = SamplerOverrides {
+        samples: args.samples,
+        burn: args.burn,
+        max_chain: args.max_chain,
+        seed: args.seed,
+    };
+    let settings = parse_sampler(&study, &overrides)?;
+    let checkpoint = match &args.resume {
+        None => None,
+        Some(dir) => {
+            let path = dir.join("checkpoint.json");
+            let text = std::fs::read_to_string(&path).map_err(|e| {
+                input_error(format!("--resume: cannot read {}: {e}", path.display()))
+            })?;
+            let state = from_json(&text).bad_input(|| format!("--resume: {}", path.display()))?;
+            Some(state)
+        }
+    };
+    let out = match (&args.out, &args.resume) {
+        (Some(out), _) => out.clone(),
+        (None, Some(dir)) => dir.clone(),
+        (None, None) => PathBuf::from(format!("{}-basis", study.name)),
+    };
+    std::fs::create_dir_all(&out)
+        .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
+
+    let sampled = sample_posterior(
+        &study.name,
+        &study.path,
+        &posterior,
+        settings,
+        &out,
+        checkpoint,
+        args.resume.as_deref(),
+        args.stop_after,
+    )?;
+    let (run, summary) = (&sampled.run, &sampled.summary);
+    let state = &run.state;
+    let names = &state.parameter_names;
+    let converged = run.stop_reason == StopReason::Converged;
+    let value = json!({
+        "study": study.name,
+        "log_evidence": state.log_evidence,
+        "stages": state.stages(),
+        "evaluations": state.evaluations,
+        "stop_reason": run.stop_reason.name(),
+        "stop_message": run.stop_reason.to_string(),
+        "converged": converged,
+        "exponent": state.exponent,
+        "samples": state.samples.len(),
+        "map": by_name(names, &summary.map),
+        "mean": by_name(names, &summary.mean),
+        "std": by_name(names, &summary.std),
+        "map_log_likelihood": summary.map_log_likelihood,
+        "map_log_prior": summary.map_log_prior,
+        "failures": state.failures(),
+        "failure_reasons": state.failure_reasons(),
+        "out_of_support": state.out_of_support(),
+        "out": out.display().to_string(),
+        "wall_seconds": sampled.seconds,
+    });
     if !converged {
         eprintln!("basis: {}", run.stop_reason);
     }

@@ -35,6 +35,9 @@ pub enum RbcCommand {
     Validate(ValidateArgs),
     /// Lattice update rate (MLUPS) and the fraction of the memory copy bandwidth it reaches.
     Bench(BenchArgs),
+    /// The elongation index of membrane frames from files (vertex CSV, VTK or PLY), e.g.
+    /// HemoCell's output decoded by `examples/hemocell/decode-el.py`.
+    Elongation(super::rbc_elongation::ElongationArgs),
 }
 
 /// Time discretisation of a shear run.
@@ -152,6 +155,7 @@ pub fn run(command: &RbcCommand, json: bool) -> Result<()> {
         RbcCommand::Stretch(args) => stretch(args, json),
         RbcCommand::Validate(args) => validate(args, json),
         RbcCommand::Bench(args) => bench(args, json),
+        RbcCommand::Elongation(args) => super::rbc_elongation::run(args, json),
     }
 }
 
@@ -205,6 +209,8 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
     let value = json!({
         "el_mean": result.el_mean,
         "el_std": result.el_std,
+        // The same as one value with its computational std, the form campaign decoders read.
+        "el": { "value": result.el_mean, "std": result.el_std },
         "el_frames": el_frames,
         "steps": result.steps,
         "seconds": result.seconds,
@@ -542,6 +548,8 @@ pub fn rbc_shear_model(
                 }
             }
             "lattice_shear_rate" => lattice_shear_rate = number(&full, value)?,
+            // Quick checks and tests only: the spec's window starts at 7.5 strain units.
+            "start_strain" => settings.start_strain = number(&full, value)?,
             "precision" => {
                 settings.precision = match value.as_str() {
                     Some("single") => Precision::Single,
@@ -586,7 +594,7 @@ pub fn rbc_shear_model(
                 return Err(key_error(
                     &format!("model.{other}"),
                     &format!(
-                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, stresses or one of {})",
+                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, start_strain, stresses or one of {})",
                         PARAMETER_NAMES.join(", ")
                     ),
                 ));

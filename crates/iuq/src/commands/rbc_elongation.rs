@@ -1,0 +1,378 @@
+//! `iuq rbc elongation FILE…`: the elongation index of membrane shapes written by another
+//! simulator (HemoCell, through `examples/hemocell/decode-el.py`) or by `iuq rbc shear
+//! --shape-out`, measured exactly as the native simulator measures its own frames.
+//!
+//! Each file is one frame: a vertex CSV (a header with columns `x`, `y`, `z`, one vertex per
+//! row), a legacy ASCII VTK polydata file (`.vtk`) or an ASCII PLY file (`.ply`). Coordinates
+//! are in HemoCell's frame (x flow, y gradient, z vorticity) and in lattice units (dx = 0.5 µm),
+//! micrometres or metres (`--unit`). Each frame's EL is
+//! [`iuq_rbc::ellipse::elongation_index`] of its vertices with 0.5 µm bins; the result is
+//! `{"el": {"value": mean, "std": sample std}, "el_frames": [...], "frames": n}`, the form a
+//! campaign's JSON decoder reads.
+//!
+//! Exit codes: 2 for a file that cannot be read or parsed (missing, bad header, a non-finite
+//! number, no vertices) or fewer than 2 frames; 1 when a valid shape admits no ellipse.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Result, anyhow};
+use clap::{Args, ValueEnum};
+use serde_json::json;
+
+use iuq_rbc::ellipse::elongation_index;
+use iuq_rbc::protocol::{CONTOUR_BIN_WIDTH, mean_and_sample_std};
+
+use crate::input_error::input_error;
+use crate::report_output::{emit, short};
+use crate::table_io::{read_numeric_csv, write_atomically};
+
+/// The lattice spacing of the shear experiment, in metres (HemoCell's `dx`).
+pub const LATTICE_SPACING_M: f64 = 0.5e-6;
+
+/// Unit of the coordinates in the shape files.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CoordinateUnit {
+    /// Lattice units of 0.5 µm (what `iuq rbc shear --shape-out` writes).
+    Lattice,
+    /// Micrometres.
+    Um,
+    /// Metres (HemoCell's output in SI units).
+    M,
+}
+
+impl CoordinateUnit {
+    /// The factor that turns a coordinate in this unit into lattice units.
+    pub fn to_lattice(self) -> f64 {
+        match self {
+            Self::Lattice => 1.0,
+            Self::Um => 1e-6 / LATTICE_SPACING_M,
+            Self::M => 1.0 / LATTICE_SPACING_M,
+        }
+    }
+}
+
+/// Arguments of `iuq rbc elongation`.
+#[derive(Debug, Args)]
+pub struct ElongationArgs {
+    /// Membrane frames, one per file: vertex CSV (`x,y,z` header), `.vtk` or `.ply`.
+    #[arg(required = true)]
+    pub files: Vec<PathBuf>,
+    /// Unit of the coordinates.
+    #[arg(long, value_enum, default_value_t = CoordinateUnit::Lattice)]
+    pub unit: CoordinateUnit,
+    /// Also write the result (the JSON object) to this file, atomically.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+/// Run `iuq rbc elongation`.
+pub fn run(args: &ElongationArgs, json: bool) -> Result<()> {
+    if args.files.len() < 2 {
+        return Err(input_error(format!(
+            "{} frame given; at least 2 are needed for a mean and a sample standard deviation",
+            args.files.len()
+        )));
+    }
+    let scale = args.unit.to_lattice();
+    let bin_width = CONTOUR_BIN_WIDTH / LATTICE_SPACING_M;
+    let mut el_frames = Vec::with_capacity(args.files.len());
+    for path in &args.files {
+        let mut vertices = read_vertices(path)?;
+        for v in &mut vertices {
+            for c in v.iter_mut() {
+                *c *= scale;
+            }
+        }
+        let el = elongation_index(&vertices, bin_width)
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        el_frames.push(el);
+    }
+    let (mean, std) = mean_and_sample_std(&el_frames);
+    let value = json!({
+        "el": { "value": mean, "std": std },
+        "el_frames": el_frames,
+        "frames": el_frames.len(),
+    });
+    if let Some(out) = &args.out {
+        write_atomically(out, format!("{value}\n").as_bytes())?;
+    }
+    emit(json, &value, || {
+        let frames: Vec<String> = el_frames.iter().map(|v| format!("{v:.4}")).collect();
+        format!(
+            "EL = {} ± {} over {} frames\nframes: {}",
+            short(mean),
+            short(std),
+            el_frames.len(),
+            frames.join(" ")
+        )
+    });
+    Ok(())
+}
+
+/// The vertices of one shape file, in the file's own unit. The format follows the extension
+/// (`.vtk`, `.ply`, anything else is read as CSV).
+pub fn read_vertices(path: &Path) -> Result<Vec<[f64; 3]>> {
+    let extension = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    let vertices = match extension.as_str() {
+        "vtk" => parse_vtk(&read_text(path)?).map_err(|e| bad(path, &e))?,
+        "ply" => parse_ply(&read_text(path)?).map_err(|e| bad(path, &e))?,
+        _ => read_csv_vertices(path)?,
+    };
+    if vertices.is_empty() {
+        return Err(bad(path, "the file holds no vertices"));
+    }
+    if let Some(i) = vertices
+        .iter()
+        .position(|v| v.iter().any(|c| !c.is_finite()))
+    {
+        return Err(bad(
+            path,
+            &format!("vertex {i} has a non-finite coordinate {:?}", vertices[i]),
+        ));
+    }
+    Ok(vertices)
+}
+
+fn bad(path: &Path, reason: &str) -> anyhow::Error {
+    input_error(format!("{}: {reason}", path.display()))
+}
+
+fn read_text(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|e| bad(path, &format!("cannot read: {e}")))
+}
+
+fn read_csv_vertices(path: &Path) -> Result<Vec<[f64; 3]>> {
+    let table = read_numeric_csv(path, false)?;
+    let mut index = [0usize; 3];
+    for (slot, name) in index.iter_mut().zip(["x", "y", "z"]) {
+        *slot = table
+            .columns
+            .iter()
+            .position(|c| c.eq_ignore_ascii_case(name))
+            .ok_or_else(|| {
+                bad(
+                    path,
+                    &format!(
+                        "bad header: no column `{name}` (expected `x,y,z`; columns: {})",
+                        table.columns.join(", ")
+                    ),
+                )
+            })?;
+    }
+    Ok(table
+        .rows
+        .iter()
+        .map(|r| [r[index[0]], r[index[1]], r[index[2]]])
+        .collect())
+}
+
+fn parse_number(token: &str, what: &str) -> std::result::Result<f64, String> {
+    let v: f64 = token
+        .parse()
+        .map_err(|_| format!("{what}: `{token}` is not a number"))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(format!("{what}: `{token}` is not a finite number"))
+    }
+}
+
+/// The points of a legacy ASCII VTK file (`POINTS n type` followed by 3n numbers).
+fn parse_vtk(text: &str) -> std::result::Result<Vec<[f64; 3]>, String> {
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, l)) if l.starts_with("# vtk DataFile") => {}
+        _ => return Err("bad header: not a legacy VTK file (`# vtk DataFile …`)".into()),
+    }
+    let _title = lines.next();
+    match lines.next() {
+        Some((_, l)) if l.trim().eq_ignore_ascii_case("ASCII") => {}
+        Some((_, l)) if l.trim().eq_ignore_ascii_case("BINARY") => {
+            return Err("binary VTK is not supported; write ASCII".into());
+        }
+        _ => return Err("bad header: the third line must be ASCII".into()),
+    }
+    let (line_no, count) = loop {
+        let Some((i, line)) = lines.next() else {
+            return Err("no POINTS section".into());
+        };
+        let mut words = line.split_whitespace();
+        if words
+            .next()
+            .is_some_and(|w| w.eq_ignore_ascii_case("POINTS"))
+        {
+            let count = words
+                .next()
+                .and_then(|w| w.parse::<usize>().ok())
+                .ok_or_else(|| format!("line {}: expected `POINTS n type`", i + 1))?;
+            break (i + 1, count);
+        }
+    };
+    let mut numbers = Vec::with_capacity(3 * count);
+    for (i, line) in lines {
+        if numbers.len() >= 3 * count {
+            break;
+        }
+        for token in line.split_whitespace() {
+            if numbers.len() >= 3 * count {
+                break;
+            }
+            numbers.push(parse_number(token, &format!("line {}", i + 1))?);
+        }
+    }
+    if numbers.len() < 3 * count {
+        return Err(format!(
+            "POINTS (line {line_no}) announces {count} points but only {} coordinates follow",
+            numbers.len()
+        ));
+    }
+    Ok(numbers
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect())
+}
+
+/// The vertices of an ASCII PLY file (`x`, `y`, `z` properties of the `vertex` element, which
+/// must come first).
+fn parse_ply(text: &str) -> std::result::Result<Vec<[f64; 3]>, String> {
+    let mut lines = text.lines().enumerate();
+    match lines.next() {
+        Some((_, l)) if l.trim() == "ply" => {}
+        _ => return Err("bad header: not a PLY file (first line `ply`)".into()),
+    }
+    let mut ascii = false;
+    let mut element: Option<String> = None;
+    let mut first_element: Option<String> = None;
+    let mut vertex_count = None;
+    let mut properties: Vec<String> = Vec::new();
+    loop {
+        let Some((i, line)) = lines.next() else {
+            return Err("bad header: no `end_header` line".into());
+        };
+        let words: Vec<&str> = line.split_whitespace().collect();
+        match words.as_slice() {
+            ["end_header"] => break,
+            ["format", "ascii", ..] => ascii = true,
+            ["format", other, ..] => {
+                return Err(format!(
+                    "line {}: format `{other}` is not supported; write ASCII PLY",
+                    i + 1
+                ));
+            }
+            ["element", name, count] => {
+                if first_element.is_none() {
+                    first_element = Some((*name).to_string());
+                }
+                if *name == "vertex" {
+                    vertex_count =
+                        Some(count.parse::<usize>().map_err(|_| {
+                            format!("line {}: `{count}` is not a vertex count", i + 1)
+                        })?);
+                }
+                element = Some((*name).to_string());
+            }
+            ["property", .., name] if element.as_deref() == Some("vertex") => {
+                properties.push((*name).to_string());
+            }
+            _ => {}
+        }
+    }
+    if !ascii {
+        return Err("bad header: no `format ascii 1.0` line".into());
+    }
+    let count = vertex_count.ok_or("bad header: no `element vertex n` line")?;
+    if first_element.as_deref() != Some("vertex") {
+        return Err("the `vertex` element must be the first element".into());
+    }
+    let mut index = [0usize; 3];
+    for (slot, name) in index.iter_mut().zip(["x", "y", "z"]) {
+        *slot = properties
+            .iter()
+            .position(|p| p == name)
+            .ok_or_else(|| format!("bad header: the vertex element has no property `{name}`"))?;
+    }
+    let mut vertices = Vec::with_capacity(count);
+    for _ in 0..count {
+        let Some((i, line)) = lines.next() else {
+            return Err(format!(
+                "the header announces {count} vertices but only {} follow",
+                vertices.len()
+            ));
+        };
+        let what = format!("line {}", i + 1);
+        let tokens: Vec<&str> = line.split_whitespace().collect();
+        if tokens.len() < properties.len() {
+            return Err(format!(
+                "{what}: {} values, the vertex element has {} properties",
+                tokens.len(),
+                properties.len()
+            ));
+        }
+        vertices.push([
+            parse_number(tokens[index[0]], &what)?,
+            parse_number(tokens[index[1]], &what)?,
+            parse_number(tokens[index[2]], &what)?,
+        ]);
+    }
+    Ok(vertices)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use iuq_rbc::shape_output::{to_ply, to_vtk};
+
+    fn tetrahedron() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+        (
+            vec![
+                [0.5, -1.25, 3.0],
+                [1.0e-3, 0.0, 0.0],
+                [0.0, 1.0 / 3.0, 0.0],
+                [0.0, 0.0, 1e7],
+            ],
+            vec![[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn vtk_and_ply_of_the_writers_read_back_exactly() {
+        let (v, t) = tetrahedron();
+        assert_eq!(parse_vtk(&to_vtk(&t, &v, "tet")).unwrap(), v);
+        assert_eq!(parse_ply(&to_ply(&t, &v, "tet")).unwrap(), v);
+    }
+
+    #[test]
+    fn truncated_and_malformed_shapes_are_reported() {
+        let (v, t) = tetrahedron();
+        let vtk = to_vtk(&t, &v, "tet");
+        let cut: String = vtk.lines().take(6).collect::<Vec<_>>().join("\n");
+        assert!(parse_vtk(&cut).unwrap_err().contains("announces 4 points"));
+        assert!(
+            parse_vtk(&vtk.replace("1e-3", "nan").replace("0.001", "nan"))
+                .unwrap_err()
+                .contains("not a finite number")
+        );
+        assert!(parse_vtk("hello").unwrap_err().contains("bad header"));
+        let ply = to_ply(&t, &v, "tet");
+        assert!(
+            parse_ply(&ply.replace("ascii", "binary_little_endian"))
+                .unwrap_err()
+                .contains("not supported")
+        );
+        assert!(
+            parse_ply(&ply.replace("property double y", "property double w"))
+                .unwrap_err()
+                .contains("no property `y`")
+        );
+    }
+
+    #[test]
+    fn units_convert_to_lattice_units() {
+        assert_eq!(CoordinateUnit::Lattice.to_lattice(), 1.0);
+        assert_eq!(CoordinateUnit::Um.to_lattice(), 2.0);
+        assert!((CoordinateUnit::M.to_lattice() - 2e6).abs() < 1e-6);
+    }
+}

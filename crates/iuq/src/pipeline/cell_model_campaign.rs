@@ -1,0 +1,261 @@
+//! The cell model as a campaign: every `rbc-shear` run of a pipeline is one `iuq rbc shear`
+//! process of the campaign executor (local, Slurm or HyperQueue), so runs survive crashes and
+//! restarts, run on a cluster when the study says so, and are stored once in the campaign's
+//! SQLite file, where later pipelines (and fresh clones of a repository that ships the file)
+//! find them.
+//!
+//! The campaign's parameters are the study's calibrated parameters plus `stress` (Pa); its one
+//! output `el` is the run's mean elongation index with the frames' standard deviation as the
+//! computational std. The command is machine-independent (`iuq` names the running executable,
+//! see `iuq_campaign::worker`), so the store's model hash is the same on every machine.
+
+use std::path::Path;
+
+use anyhow::Result;
+use toml::{Table, Value};
+
+use iuq_campaign::{CampaignModel, CampaignStudy};
+use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
+
+use crate::commands::run::{campaign_error, open_campaign};
+use crate::input_error::input_error;
+use crate::study::Study;
+
+/// Name of the stress parameter of the campaign.
+pub const STRESS: &str = "stress";
+
+/// Command-line flag of `iuq rbc shear` for each model parameter the study may calibrate or fix.
+const PARAMETER_FLAGS: [(&str, &str); 5] = [
+    ("kLink", "--klink"),
+    ("kBend", "--kbend"),
+    ("viscosityRatio", "--viscosity-ratio"),
+    ("kArea", "--karea"),
+    ("kVolume", "--kvolume"),
+];
+
+/// Keys of the `[model]` section of kind `rbc-shear` passed on to `iuq rbc shear`.
+const SETTING_FLAGS: [(&str, &str); 4] = [
+    ("protocol", "--protocol"),
+    ("lattice_shear_rate", "--lattice-shear-rate"),
+    ("precision", "--precision"),
+    ("start_strain", "--start-strain"),
+];
+
+fn value_text(v: &Value) -> Option<String> {
+    match v {
+        Value::String(s) => Some(s.clone()),
+        Value::Integer(i) => Some(i.to_string()),
+        Value::Float(f) => Some(f.to_string()),
+        _ => None,
+    }
+}
+
+/// The text of the campaign study that runs `study`'s cell model at the given stresses.
+pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
+    let file = study.path.display().to_string();
+    let crate::study::ModelSection::RbcShear { table } = &study.model else {
+        return Err(input_error(format!(
+            "{file}: key `model.kind`: `iuq pipeline` builds the calibration study of the cell model; expected kind = \"rbc-shear\""
+        )));
+    };
+    let (lo, hi) = stresses
+        .iter()
+        .fold((f64::MAX, f64::MIN), |(a, b), s| (a.min(*s), b.max(*s)));
+    if stresses.is_empty() || stresses.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+        return Err(input_error(format!(
+            "{file}: section `[likelihood]`: no positive shear stress selected from the data"
+        )));
+    }
+    let mut parameters = Table::new();
+    for p in study.space.parameters() {
+        let prior = Value::try_from(p.prior)
+            .map_err(|e| anyhow::anyhow!("cannot write the prior of `{}`: {e}", p.name))?;
+        parameters.insert(p.name.clone(), prior);
+    }
+    let mut stress = Table::new();
+    stress.insert(
+        "uniform".into(),
+        Value::Array(vec![Value::Float(0.5 * lo), Value::Float(2.0 * hi)]),
+    );
+    parameters.insert(STRESS.into(), Value::Table(stress));
+
+    let mut command: Vec<Value> = ["iuq", "rbc", "shear", "--json"]
+        .iter()
+        .map(|s| Value::String((*s).into()))
+        .collect();
+    let mut push = |flag: &str, value: String| {
+        command.push(Value::String(flag.into()));
+        command.push(Value::String(value));
+    };
+    for (name, flag) in PARAMETER_FLAGS {
+        if study.space.index_of(name).is_some() {
+            push(flag, format!("{{{{ {name} }}}}"));
+        } else if let Some(v) = table.get(name).and_then(value_text) {
+            push(flag, v);
+        }
+    }
+    for (key, flag) in SETTING_FLAGS {
+        if let Some(v) = table.get(key).and_then(value_text) {
+            push(flag, v);
+        }
+    }
+    push("--stress", format!("{{{{ {STRESS} }}}}"));
+
+    let mut model = Table::new();
+    model.insert("kind".into(), Value::String("command".into()));
+    model.insert("command".into(), Value::Array(command));
+    model.insert(
+        "outputs".into(),
+        Value::Array(vec![Value::String("el".into())]),
+    );
+    let mut keys = Table::new();
+    keys.insert("el".into(), Value::String("/el".into()));
+    let mut output = Table::new();
+    output.insert(
+        "file".into(),
+        Value::String(iuq_campaign::run_directory::STDOUT_FILE.into()),
+    );
+    output.insert("format".into(), Value::String("json".into()));
+    output.insert("keys".into(), Value::Table(keys));
+    model.insert("output".into(), Value::Table(output));
+    model.insert("timeout".into(), Value::String("6h".into()));
+    // One thread per run: the executor runs as many runs at once as there are cores, and a run's
+    // result does not depend on its thread count.
+    let mut env = Table::new();
+    env.insert("RAYON_NUM_THREADS".into(), Value::String("1".into()));
+    model.insert("env".into(), Value::Table(env));
+
+    let mut root = Table::new();
+    root.insert("name".into(), Value::String(study.name.clone()));
+    root.insert(
+        "description".into(),
+        Value::String(format!(
+            "Cell-model runs of the study {} (written by iuq pipeline; do not edit)",
+            study.path.display()
+        )),
+    );
+    root.insert("parameters".into(), Value::Table(parameters));
+    root.insert("model".into(), Value::Table(model));
+    if let Some(executor) = &study.executor {
+        root.insert("executor".into(), Value::Table(executor.clone()));
+    }
+    Ok(toml::to_string(&root)?)
+}
+
+/// Open the campaign of `study`'s cell model at `stresses` (creating or resuming its store).
+pub fn open_cell_campaign(
+    study: &Study,
+    stresses: &[f64],
+    max_parallel: Option<usize>,
+) -> Result<CampaignModel> {
+    let text = campaign_study_text(study, stresses)?;
+    let campaign_study = CampaignStudy::parse(&text, &study.path).map_err(campaign_error)?;
+    let (campaign, resumed) = open_campaign(campaign_study, max_parallel)?;
+    if resumed.requeued + resumed.ingested + resumed.reattached > 0 {
+        eprintln!(
+            "pipeline: resumed the campaign in {} ({} runs requeued, {} results ingested, {} reattached)",
+            campaign.directory().display(),
+            resumed.requeued,
+            resumed.ingested,
+            resumed.reattached
+        );
+    }
+    Ok(CampaignModel::new(campaign))
+}
+
+/// The cell model at a list of stresses as a [`Model`] of the calibrated parameters: output j
+/// is the elongation index at stress j. A point's runs (one per stress) go into the same
+/// campaign batch; the point fails when one of its runs fails, with that run's reason.
+pub struct CellModelAtStresses {
+    campaign: std::sync::Arc<CampaignModel>,
+    stresses: Vec<f64>,
+    inputs: Vec<String>,
+    outputs: Vec<String>,
+}
+
+impl CellModelAtStresses {
+    /// The model of `campaign` (parameters: `inputs` then `stress`) at `stresses`.
+    pub fn new(
+        campaign: std::sync::Arc<CampaignModel>,
+        inputs: Vec<String>,
+        stresses: Vec<f64>,
+    ) -> Self {
+        let outputs = stresses.iter().map(|s| output_name(*s)).collect();
+        Self {
+            campaign,
+            stresses,
+            inputs,
+            outputs,
+        }
+    }
+}
+
+/// The name of the output at stress `s` (Pa).
+pub fn output_name(s: f64) -> String {
+    format!("el_{s}Pa")
+}
+
+impl Model for CellModelAtStresses {
+    fn input_names(&self) -> &[String] {
+        &self.inputs
+    }
+
+    fn output_names(&self) -> &[String] {
+        &self.outputs
+    }
+
+    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        let m = self.stresses.len();
+        let runs: Vec<Vec<f64>> = points
+            .iter()
+            .flat_map(|p| {
+                self.stresses.iter().map(move |s| {
+                    let mut x = p.clone();
+                    x.push(*s);
+                    x
+                })
+            })
+            .collect();
+        let outcomes = self.campaign.evaluate_batch(&runs)?;
+        Ok(outcomes
+            .chunks(m)
+            .map(|group| {
+                let mut values = Vec::with_capacity(m);
+                let mut stds = Vec::with_capacity(m);
+                for (o, s) in group.iter().zip(&self.stresses) {
+                    match o {
+                        Ok(e) => {
+                            values.push(e.outputs[0]);
+                            stds.push(e.computational_std.as_ref().map_or(0.0, |v| v[0]));
+                        }
+                        Err(f) => {
+                            return Err(EvaluationFailure::new(format!("at {s} Pa: {}", f.reason)));
+                        }
+                    }
+                }
+                Ok(Evaluation::with_std(values, stds))
+            })
+            .collect())
+    }
+}
+
+/// Whether the campaign directory of `study` exists (results may be reused).
+pub fn campaign_directory(study: &Study) -> std::path::PathBuf {
+    let stem = study
+        .path
+        .file_stem()
+        .map_or_else(|| "study".into(), |s| s.to_string_lossy().into_owned());
+    study
+        .executor
+        .as_ref()
+        .and_then(|t| t.get("directory"))
+        .and_then(Value::as_str)
+        .map(|d| study.path.parent().unwrap_or(Path::new(".")).join(d))
+        .unwrap_or_else(|| {
+            study
+                .path
+                .parent()
+                .unwrap_or(Path::new("."))
+                .join(format!("{stem}.campaign"))
+        })
+}

@@ -1,0 +1,365 @@
+//! From the pipeline's results to the report: posterior summaries, the propagation of each
+//! posterior to the outputs, GP diagnostics, Sobol' indices and run statistics, handed to
+//! `iuq_report::write_report`, plus `DIR/pipeline.json` with the summary numbers.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde_json::{Value, json};
+
+use iuq_gp::GpBank;
+use iuq_report::{
+    DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport, write_report,
+};
+use iuq_sensitivity::SensitivityReport;
+
+use crate::commands::basis::SampledPosterior;
+use crate::likelihood_section::DataLikelihood;
+use crate::pipeline::settings::PipelineSettings;
+use crate::study::Study;
+use crate::table_io::write_atomically;
+
+/// The runs of one stress: training and test sets (successful runs) and the failures.
+#[derive(Debug, Clone)]
+pub struct StressRuns {
+    /// Shear stress in Pa.
+    pub stress: f64,
+    /// Parameters of the successful training runs.
+    pub training_x: Vec<Vec<f64>>,
+    /// Their elongation indices.
+    pub training_y: Vec<f64>,
+    /// Their computational stds.
+    pub training_std: Vec<f64>,
+    /// Parameters of the successful test runs.
+    pub test_x: Vec<Vec<f64>>,
+    /// Their elongation indices.
+    pub test_y: Vec<f64>,
+    /// Their computational stds.
+    pub test_std: Vec<f64>,
+    /// Reasons of the failed runs.
+    pub failures: Vec<String>,
+}
+
+/// Everything the pipeline computed, borrowed for the report.
+pub struct PipelineOutcome<'a> {
+    /// The study.
+    pub study: &'a Study,
+    /// Its data.
+    pub data: &'a DataLikelihood,
+    /// Its pipeline settings.
+    pub settings: &'a PipelineSettings,
+    /// Runs per stress.
+    pub stress_runs: &'a [StressRuns],
+    /// (Q2 on the test set, leave-one-out Q2) per stress.
+    pub gp_checks: &'a [(f64, f64)],
+    /// The GP bank (one GP per stress).
+    pub bank: &'a GpBank,
+    /// Sobol' indices on the surrogate.
+    pub surrogate_sobol: &'a SensitivityReport,
+    /// Sobol' indices from model runs.
+    pub model_sobol: Option<&'a SensitivityReport>,
+    /// The posterior on the GP bank.
+    pub gp_posterior: &'a SampledPosterior,
+    /// The posterior on the cell model.
+    pub model_posterior: Option<&'a SampledPosterior>,
+}
+
+/// The `p` quantile of `sorted` (linear interpolation between order statistics).
+fn quantile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let h = p * (sorted.len() - 1) as f64;
+    let lo = h.floor() as usize;
+    let hi = (lo + 1).min(sorted.len() - 1);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// The model parameters' part of posterior samples (σ_m, when estimated, is the last column).
+fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
+    samples.iter().map(|s| s[..d].to_vec()).collect()
+}
+
+fn posterior_result(
+    source: &str,
+    sampled: &SampledPosterior,
+    bank: &GpBank,
+    stresses: &[f64],
+    d: usize,
+) -> Result<PosteriorResult> {
+    let state = &sampled.run.state;
+    let names = &state.parameter_names;
+    let summary = names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let mut column: Vec<f64> = state.samples.iter().map(|s| s[k]).collect();
+            column.sort_by(f64::total_cmp);
+            ParameterSummary {
+                name: name.clone(),
+                map: sampled.summary.map[k],
+                mean: sampled.summary.mean[k],
+                std: sampled.summary.std[k],
+                q05: quantile(&column, 0.05),
+                q50: quantile(&column, 0.5),
+                q95: quantile(&column, 0.95),
+            }
+        })
+        .collect();
+    let stages = state
+        .diagnostics
+        .iter()
+        .map(|g| SamplerStage {
+            stage: g.stage,
+            annealing_exponent: g.exponent,
+            cv: g.cv,
+            acceptance: g.acceptance_rate,
+            log_evidence: g.log_evidence,
+            evaluations: g.evaluations,
+            seconds: g.wall_seconds,
+        })
+        .collect();
+    // Propagation through the surrogate (for both posteriors: a run of the cell model per
+    // posterior sample would cost as much as the whole sampling again).
+    let theta = model_part(&state.samples, d);
+    let map = vec![sampled.summary.map[..d].to_vec()];
+    let mut propagated = Vec::with_capacity(stresses.len());
+    for (gp, s) in bank.gps().iter().zip(stresses) {
+        let samples = gp.predict_mean(&theta)?;
+        let at_map = gp.predict_mean(&map)?;
+        propagated.push(PropagatedOutput {
+            x: *s,
+            samples,
+            map_prediction: at_map[0],
+        });
+    }
+    Ok(PosteriorResult {
+        source: source.into(),
+        summary,
+        log_evidence: state.log_evidence,
+        samples: state.samples.clone(),
+        stages,
+        propagated,
+    })
+}
+
+fn sensitivity_results(
+    report: &SensitivityReport,
+    source: &str,
+    stresses: &[f64],
+) -> Vec<SensitivityResult> {
+    report
+        .outputs
+        .iter()
+        .zip(stresses)
+        .map(|(o, s)| SensitivityResult {
+            output_label: format!("EL at {s} Pa"),
+            x: *s,
+            source: source.into(),
+            indices: report
+                .inputs
+                .iter()
+                .enumerate()
+                .map(|(k, p)| SensitivityIndex {
+                    parameter: p.clone(),
+                    first_order: o.first_order[k],
+                    first_order_low: o.first_order[k] - o.first_order_conf[k],
+                    first_order_high: o.first_order[k] + o.first_order_conf[k],
+                    total: o.total[k],
+                    total_low: o.total[k] - o.total_conf[k],
+                    total_high: o.total[k] + o.total_conf[k],
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+fn posterior_json(p: &PosteriorResult) -> Value {
+    let rows: Vec<Value> = p
+        .summary
+        .iter()
+        .map(|s| json!({"parameter": s.name, "map": s.map, "mean": s.mean, "std": s.std, "q05": s.q05, "q95": s.q95}))
+        .collect();
+    json!({"source": p.source, "log_evidence": p.log_evidence, "stages": p.stages.len(), "parameters": rows})
+}
+
+/// Build the report of `outcome`, write it into `out`, and return the posterior tables as JSON.
+/// `stage_seconds` gets the wall time of this last stage (started at `started`).
+pub fn write_pipeline_report(
+    outcome: &PipelineOutcome<'_>,
+    out: &Path,
+    stage_seconds: &mut [(String, f64)],
+    started: Instant,
+) -> Result<Value> {
+    let study = outcome.study;
+    let d = study.space.dimension();
+    let stresses: Vec<f64> = outcome.stress_runs.iter().map(|r| r.stress).collect();
+    let mut posteriors = vec![posterior_result(
+        "GP surrogate",
+        outcome.gp_posterior,
+        outcome.bank,
+        &stresses,
+        d,
+    )?];
+    if let Some(m) = outcome.model_posterior {
+        posteriors.push(posterior_result(
+            "cell model",
+            m,
+            outcome.bank,
+            &stresses,
+            d,
+        )?);
+    }
+    let mut sensitivity = Vec::new();
+    if let Some(m) = outcome.model_sobol {
+        sensitivity.extend(sensitivity_results(m, "model runs", &stresses));
+    }
+    sensitivity.extend(sensitivity_results(
+        outcome.surrogate_sobol,
+        "surrogate",
+        &stresses,
+    ));
+    let mut gp_diagnostics = Vec::new();
+    for ((r, gp), (q2, loo)) in outcome
+        .stress_runs
+        .iter()
+        .zip(outcome.bank.gps())
+        .zip(outcome.gp_checks)
+    {
+        let prediction = gp.predict(&r.test_x)?;
+        let h = gp.hyperparameters();
+        let mut hyperparameters = vec![("signal variance".to_string(), h.signal_variance)];
+        let lengths = gp.length_scales_in_input_units();
+        for (name, l) in study.space.names().iter().zip(&lengths) {
+            hyperparameters.push((format!("length scale {name}"), *l));
+        }
+        hyperparameters.push(("noise variance".to_string(), h.noise_variance));
+        gp_diagnostics.push(GpDiagnostic {
+            output_label: format!("EL at {} Pa", r.stress),
+            x: r.stress,
+            q2: *q2,
+            loo_q2: *loo,
+            simulated: r.test_y.clone(),
+            predicted: prediction.mean.clone(),
+            predicted_std: prediction.std(),
+            hyperparameters,
+        });
+    }
+    let mut failures: BTreeMap<String, usize> = BTreeMap::new();
+    let mut runs = 0;
+    let mut failed = 0;
+    for r in outcome.stress_runs {
+        runs += r.training_y.len() + r.test_y.len() + r.failures.len();
+        failed += r.failures.len();
+        for f in &r.failures {
+            *failures.entry(short_reason(f)).or_default() += 1;
+        }
+    }
+    if let Some(m) = outcome.model_sobol {
+        runs += m.evaluations;
+        failed += m.failed_evaluations;
+        for (reason, n) in &m.failure_reasons {
+            *failures.entry(short_reason(reason)).or_default() += n;
+        }
+    }
+    if let Some(m) = outcome.model_posterior {
+        let state = &m.run.state;
+        runs += state.evaluations * stresses.len();
+        failed += state.failures();
+        for (reason, n) in state.failure_reasons() {
+            *failures.entry(short_reason(&reason)).or_default() += n;
+        }
+    }
+    let data = outcome.data;
+    let y_err = data
+        .observations
+        .measurement_std
+        .clone()
+        .unwrap_or_else(|| vec![0.0; data.x.len()]);
+    let provenance = vec![
+        (
+            "iuq version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        ),
+        (
+            "command".to_string(),
+            std::env::args().collect::<Vec<_>>().join(" "),
+        ),
+        ("study file".to_string(), study.path.display().to_string()),
+        ("data".to_string(), data.file.display().to_string()),
+        (
+            "training design".to_string(),
+            format!(
+                "maximin LHS, {} runs per stress, seed {} + stress index",
+                outcome.settings.training_runs, outcome.settings.training_seed
+            ),
+        ),
+        (
+            "test design".to_string(),
+            format!(
+                "scrambled Sobol', {} runs per stress, seed {}",
+                outcome.settings.test_runs, outcome.settings.test_seed
+            ),
+        ),
+        (
+            "sampler".to_string(),
+            format!(
+                "BASIS, N = {}, seed {}",
+                outcome.gp_posterior.run.state.samples.len(),
+                outcome.gp_posterior.run.state.settings.seed
+            ),
+        ),
+        (
+            "propagation".to_string(),
+            "GP surrogate means at every posterior sample (both posteriors)".to_string(),
+        ),
+    ];
+    if let Some(last) = stage_seconds.last_mut() {
+        last.1 = started.elapsed().as_secs_f64();
+    }
+    let report = StudyReport {
+        title: format!("Calibration study `{}`", study.name),
+        study_name: study.name.clone(),
+        provenance,
+        parameters: outcome.gp_posterior.run.state.parameter_names.clone(),
+        data: DataSeries {
+            x_label: "shear stress (Pa)".into(),
+            y_label: "elongation index EL (–)".into(),
+            x: data.x.clone(),
+            y: data.observations.values.clone(),
+            y_err,
+        },
+        posteriors,
+        sensitivity,
+        gp_diagnostics,
+        run_statistics: RunStatistics {
+            runs,
+            succeeded: runs - failed,
+            failed,
+            failures_by_reason: failures.into_iter().collect(),
+            stage_seconds: stage_seconds.to_vec(),
+        },
+    };
+    write_report(&report, out).context("writing the report")?;
+    let summary = json!({
+        "posteriors": report.posteriors.iter().map(posterior_json).collect::<Vec<_>>(),
+        "q2": report.gp_diagnostics.iter().map(|g| json!({"stress": g.x, "q2": g.q2, "loo_q2": g.loo_q2})).collect::<Vec<_>>(),
+        "sensitivity": crate::commands::pipeline::sobol_json(outcome.surrogate_sobol),
+        "model_sensitivity": outcome.model_sobol.map(crate::commands::pipeline::sobol_json),
+    });
+    write_atomically(
+        &out.join("pipeline.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    Ok(summary["posteriors"].clone())
+}
+
+/// The first line of a failure reason, without the step number, so equal causes count together.
+fn short_reason(reason: &str) -> String {
+    let line = reason.lines().next().unwrap_or(reason);
+    let line = line.split(": ").last().unwrap_or(line);
+    line.chars().take(120).collect()
+}

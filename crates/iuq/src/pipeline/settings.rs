@@ -1,0 +1,165 @@
+//! The settings of `iuq pipeline`, read from the study file's `[surrogate]` and `[sensitivity]`
+//! sections (the sampler's come from `[sampler]` and `[model_sampler]`).
+//!
+//! ```toml
+//! [surrogate]
+//! design = { kind = "lhs", n = 24, seed = 11 }   # training runs per stress: maximin LHS
+//! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per stress: scrambled Sobol'
+//! [sensitivity]
+//! n = 1024        # Saltelli base points on the surrogate
+//! model_n = 8     # Saltelli base points run on the model itself (0: skip)
+//! seed = 3
+//! ```
+
+use anyhow::Result;
+
+use crate::input_error::input_error;
+use crate::study::Study;
+
+/// Settings of the surrogate and sensitivity stages.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct PipelineSettings {
+    /// Training runs per stress (maximin Latin hypercube).
+    pub training_runs: usize,
+    /// Seed of the training designs (stress j uses `training_seed + j`).
+    pub training_seed: u64,
+    /// Random designs of which the maximin criterion keeps the best.
+    pub maximin_candidates: usize,
+    /// Test runs per stress (scrambled Sobol').
+    pub test_runs: usize,
+    /// Seed of the test design's scrambling.
+    pub test_seed: u64,
+    /// Saltelli base points on the surrogate.
+    pub surrogate_sobol_n: usize,
+    /// Saltelli base points on the model (0: none).
+    pub model_sobol_n: usize,
+    /// Seed of the Sobol' analyses.
+    pub sobol_seed: u64,
+    /// Confidence level of the Sobol' intervals.
+    pub confidence: f64,
+    /// Bootstrap resamples of the Sobol' intervals.
+    pub resamples: usize,
+}
+
+fn integer(table: &toml::Table, key: &str, full: &str, file: &str, default: u64) -> Result<u64> {
+    match table.get(key) {
+        None => Ok(default),
+        Some(v) => v
+            .as_integer()
+            .filter(|i| *i >= 0)
+            .map(|i| i as u64)
+            .ok_or_else(|| {
+                input_error(format!(
+                    "{file}: key `{full}.{key}`: expected a non-negative integer"
+                ))
+            }),
+    }
+}
+
+/// Read one design table (`{ kind, n, seed }`) of `[surrogate]`.
+fn design(
+    surrogate: &toml::Table,
+    key: &str,
+    kind: &str,
+    file: &str,
+    defaults: (u64, u64),
+) -> Result<(usize, u64)> {
+    let full = format!("surrogate.{key}");
+    let Some(value) = surrogate.get(key) else {
+        return Ok((defaults.0 as usize, defaults.1));
+    };
+    let table = value.as_table().ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `{full}`: expected a table such as {{ kind = \"{kind}\", n = 24, seed = 1 }}"
+        ))
+    })?;
+    if let Some(k) = table
+        .keys()
+        .find(|k| !["kind", "n", "seed"].contains(&k.as_str()))
+    {
+        return Err(input_error(format!(
+            "{file}: key `{full}.{k}`: unknown key (expected kind, n, seed)"
+        )));
+    }
+    match table.get("kind").map(|v| v.as_str()) {
+        None => {}
+        Some(Some(k)) if k == kind => {}
+        Some(_) => {
+            return Err(input_error(format!(
+                "{file}: key `{full}.kind`: expected \"{kind}\" (the {key} design of the pipeline)"
+            )));
+        }
+    }
+    let n = integer(table, "n", &full, file, defaults.0)? as usize;
+    if n < 2 {
+        return Err(input_error(format!(
+            "{file}: key `{full}.n`: at least 2 runs per stress are needed, got {n}"
+        )));
+    }
+    Ok((n, integer(table, "seed", &full, file, defaults.1)?))
+}
+
+/// Read and check the pipeline's settings of `study`.
+pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
+    let file = study.path.display().to_string();
+    let empty = toml::Table::new();
+    let surrogate = study.surrogate.as_ref().unwrap_or(&empty);
+    if let Some(k) = surrogate
+        .keys()
+        .find(|k| !["design", "test", "maximin_candidates"].contains(&k.as_str()))
+    {
+        return Err(input_error(format!(
+            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates)"
+        )));
+    }
+    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1))?;
+    let (test_runs, test_seed) = design(surrogate, "test", "sobol", &file, (8, 2))?;
+    let maximin_candidates = integer(surrogate, "maximin_candidates", "surrogate", &file, 100)?;
+    if maximin_candidates == 0 {
+        return Err(input_error(format!(
+            "{file}: key `surrogate.maximin_candidates`: must be at least 1"
+        )));
+    }
+    let s = &study.sensitivity;
+    let surrogate_sobol_n = s.n.unwrap_or(1024);
+    if surrogate_sobol_n < 2 {
+        return Err(input_error(format!(
+            "{file}: key `sensitivity.n`: at least 2 base points are needed, got {surrogate_sobol_n}"
+        )));
+    }
+    let model_sobol_n = s.model_n.unwrap_or(0);
+    if model_sobol_n == 1 {
+        return Err(input_error(format!(
+            "{file}: key `sensitivity.model_n`: 0 (none) or at least 2 base points, got 1"
+        )));
+    }
+    let confidence = s.confidence.unwrap_or(0.95);
+    if !(confidence > 0.0 && confidence < 1.0) {
+        return Err(input_error(format!(
+            "{file}: key `sensitivity.confidence`: {confidence} must lie strictly between 0 and 1"
+        )));
+    }
+    if s.replicates.is_some() {
+        return Err(input_error(format!(
+            "{file}: key `sensitivity.replicates`: the pipeline uses bootstrap intervals (set `resamples`)"
+        )));
+    }
+    let resamples = s.resamples.unwrap_or(100);
+    if resamples < 2 {
+        return Err(input_error(format!(
+            "{file}: key `sensitivity.resamples`: at least 2 are needed, got {resamples}"
+        )));
+    }
+    Ok(PipelineSettings {
+        training_runs,
+        training_seed,
+        maximin_candidates: maximin_candidates as usize,
+        test_runs,
+        test_seed,
+        surrogate_sobol_n,
+        model_sobol_n,
+        sobol_seed: s.seed.unwrap_or(0),
+        confidence,
+        resamples,
+    })
+}

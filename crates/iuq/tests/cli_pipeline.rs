@@ -1,0 +1,243 @@
+//! End-to-end test of `iuq pipeline` on a small configuration of the real cell model: two
+//! stresses, a few training and test runs, Sobol' indices from model runs and from the
+//! surrogate, BASIS on the GP bank and on the cell model through the campaign, and the report.
+//!
+//! The cell-model runs are real (`iuq rbc shear` processes of the campaign executor) but short:
+//! `start_strain = 0.05` ends each run after about 170 lattice steps instead of the spec's 7.5
+//! strain units, so the numbers are not the study's, only the machinery is.
+
+mod common;
+
+use std::collections::HashSet;
+use std::path::Path;
+
+use common::{iuq, json_of, scratch};
+
+const DATA: &str =
+    "stress_pa,el_healthy,el_healthy_err\n0.64,0.151,0.005\n1.36,0.268,0.004\n2.91,0.389,0.004\n";
+
+fn small_study(dir: &Path, extra: &str) -> std::path::PathBuf {
+    std::fs::write(dir.join("data.csv"), DATA).unwrap();
+    let text = format!(
+        r#"name = "rbc-small"
+[parameters]
+kLink = {{ uniform = [10, 300] }}
+kBend = {{ uniform = [50, 400] }}
+viscosityRatio = {{ uniform = [1, 15] }}
+[likelihood]
+data = {{ file = "data.csv", x = "stress_pa", y = "el_healthy", y_err = "el_healthy_err", x_range = [1.0, 3.0] }}
+modelling_error = {{ uniform = [0.001, 0.1] }}
+[model]
+kind = "rbc-shear"
+start_strain = 0.05
+[surrogate]
+design = {{ kind = "lhs", n = 5, seed = 11 }}
+test = {{ kind = "sobol", n = 3, seed = 12 }}
+[sensitivity]
+n = 256
+model_n = 2
+resamples = 20
+[sampler]
+samples = 300
+burn = 2
+seed = 1
+[model_sampler]
+samples = 8
+seed = 2
+[executor]
+kind = "local"
+max_parallel = 2
+{extra}"#
+    );
+    let path = dir.join("small.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn numbers(value: &serde_json::Value, into: &mut HashSet<u64>) {
+    match value {
+        serde_json::Value::Number(n) => {
+            if let Some(f) = n.as_f64() {
+                into.insert(f.to_bits());
+            }
+        }
+        serde_json::Value::Array(a) => a.iter().for_each(|v| numbers(v, into)),
+        serde_json::Value::Object(o) => o.values().for_each(|v| numbers(v, into)),
+        _ => {}
+    }
+}
+
+#[test]
+fn the_pipeline_writes_every_artefact_and_the_html_shows_the_json_numbers() {
+    let dir = scratch("pipeline", "small");
+    let study = small_study(&dir, "");
+    let out = dir.join("report");
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--model-posterior",
+        "--json",
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let summary = json_of(&output);
+    assert_eq!(summary["runs"], 16); // (5 training + 3 test) × 2 stresses
+
+    for file in [
+        "report.html",
+        "report.json",
+        "pipeline.json",
+        "gp-bank.json",
+        "model-runs.csv",
+        "basis-gp/samples.csv",
+        "basis-gp/summary.json",
+        "basis-model/checkpoint.json",
+        "basis-model/summary.json",
+    ] {
+        assert!(out.join(file).is_file(), "{file} is missing");
+    }
+    for figure in [
+        "data_fit",
+        "corner",
+        "sensitivity",
+        "violins",
+        "map_error",
+        "gp_diagnostics",
+        "sampler_stages",
+    ] {
+        let svg = std::fs::read_to_string(out.join(format!("figures/{figure}.svg"))).unwrap();
+        assert!(svg.contains("<svg"), "{figure}.svg");
+        let png = std::fs::read(out.join(format!("figures/{figure}.png"))).unwrap();
+        assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n", "{figure}.png");
+    }
+    let tables: Vec<_> = std::fs::read_dir(out.join("tables"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert!(tables.iter().any(|t| t.ends_with(".csv")), "{tables:?}");
+    assert!(tables.iter().any(|t| t.ends_with(".json")), "{tables:?}");
+
+    // Every number of the HTML tables is a number of report.json, bit for bit.
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let mut known = HashSet::new();
+    numbers(&report, &mut known);
+    let mut shown = 0;
+    for piece in html.split("data-value=\"").skip(1) {
+        let text = &piece[..piece.find('"').unwrap()];
+        let v: f64 = text.parse().unwrap_or_else(|_| panic!("data-value {text}"));
+        assert!(
+            known.contains(&v.to_bits()),
+            "{v} is in the HTML but not in report.json"
+        );
+        shown += 1;
+    }
+    assert!(shown > 50, "only {shown} numbers in the HTML tables");
+    assert!(
+        !html.contains("src=\"http") && !html.contains("href=\"http"),
+        "self-contained"
+    );
+
+    // The posterior table printed on stdout is the report's.
+    let report = &report["report"];
+    let posteriors = report["posteriors"].as_array().unwrap();
+    assert_eq!(posteriors.len(), 2);
+    for (printed, reported) in summary["posterior"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(posteriors)
+    {
+        assert_eq!(printed["source"], reported["source"]);
+        for (row, s) in printed["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .zip(reported["summary"].as_array().unwrap())
+        {
+            for key in ["map", "mean", "std"] {
+                assert_eq!(row[key], s[key], "{key} of {}", s["name"]);
+            }
+        }
+    }
+    let parameters: Vec<&str> = report["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| p.as_str().unwrap())
+        .collect();
+    assert_eq!(parameters, ["kLink", "kBend", "viscosityRatio", "sigma_m"]);
+    // Sobol' indices from both sources, for both stresses.
+    let sources: HashSet<&str> = report["sensitivity"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["source"].as_str().unwrap())
+        .collect();
+    assert_eq!(sources, HashSet::from(["model runs", "surrogate"]));
+
+    // A second pipeline reuses every stored run: no new process of the cell model.
+    let again = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        dir.join("again").to_str().unwrap(),
+        "--runs-only",
+        "--json",
+    ]);
+    assert!(again.status.success());
+    let campaign = dir.join("small.campaign/runs");
+    let before = std::fs::read_dir(&campaign).unwrap().count();
+    assert_eq!(json_of(&again)["failed"], 0);
+    assert_eq!(std::fs::read_dir(&campaign).unwrap().count(), before);
+}
+
+#[test]
+fn bad_pipeline_settings_are_input_errors() {
+    let dir = scratch("pipeline", "bad");
+    for (extra, key) in [
+        (
+            "[surrogate]\ndesign = { kind = \"sobol\", n = 5 }\n",
+            "surrogate.design.kind",
+        ),
+        ("[surrogate]\ntest = { n = 1 }\n", "surrogate.test.n"),
+        ("[surrogate]\nsize = 3\n", "surrogate.size"),
+        ("[sensitivity]\nmodel_n = 1\n", "sensitivity.model_n"),
+    ] {
+        let sub = dir.join(key.replace('.', "-"));
+        std::fs::create_dir_all(&sub).unwrap();
+        let base = small_study(&sub, "");
+        // Replace the section the case is about.
+        let text = std::fs::read_to_string(&base).unwrap();
+        let section = extra.lines().next().unwrap();
+        let start = text.find(section).unwrap();
+        let end = text[start + section.len()..]
+            .find("\n[")
+            .map_or(text.len(), |i| start + section.len() + i + 1);
+        let text = format!("{}{}{}", &text[..start], extra, &text[end..]);
+        std::fs::write(&base, text).unwrap();
+        let output = iuq(&["pipeline", base.to_str().unwrap(), "--runs-only"]);
+        assert_eq!(output.status.code(), Some(2), "{key}");
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            stderr.contains(key) && stderr.contains("small.toml"),
+            "{key}: {stderr}"
+        );
+    }
+    // A study whose model is not the cell model.
+    let path = dir.join("expr.toml");
+    std::fs::write(
+        &path,
+        "name = \"e\"\n[parameters]\nx = { uniform = [0, 1] }\n[likelihood]\nlog_density = \"-x^2\"\n[model]\nkind = \"expression\"\noutputs = { f = \"x\" }\n",
+    )
+    .unwrap();
+    let output = iuq(&["pipeline", path.to_str().unwrap()]);
+    assert_eq!(output.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&output.stderr).contains("likelihood"));
+}

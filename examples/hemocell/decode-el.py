@@ -1,0 +1,214 @@
+#!/usr/bin/env python3
+"""Decode the elongation index of a HemoCell oneCellShear run for iuq.
+
+Reads the membrane vertex positions HemoCell wrote as HDF5 at the measuring iterations in
+[--from, --to], one frame per iteration, merged over all MPI ranks; writes each frame as a vertex
+CSV in micrometres (header x,y,z); and measures the frames with `iuq rbc elongation --unit um`,
+which writes {"el": {"value": mean, "std": sample std}, "el_frames": [...], "frames": n} to
+--out (the file the campaign's JSON decoder reads).
+
+HemoCell's layout (HemoCell >= 2, and the IUQ study's version):
+    <hdf5 dir>/<iteration, 12 digits>/<cell type>.<iteration, 12 digits>.p.<rank>.h5
+with a dataset `Position` (n x 3); HemoCell 1 wrote <hdf5 dir>/<type>.<iteration>.p.<rank>.h5
+without the per-iteration folder. Both are read, whatever the zero padding. Positions are in
+lattice units, or in metres when the case sets `outputInSiUnits` (oneCellShear does, and some
+HemoCell versions still write lattice units then): `--unit auto` tells them apart by magnitude
+(a cell a few micrometres across has every coordinate below 1e-3 in metres, and lattice
+coordinates of several units in a 40 x 40 x 20 box).
+
+A rank writes every cell that has a vertex in its part of the domain, complete (its envelope
+holds the rest), so a cell on a rank boundary appears in several files: vertices are merged by
+(`Cell Id`, `Vertex Id`) when HemoCell wrote those datasets, else exact duplicate rows are
+dropped (the copies are synchronised, hence bit-identical).
+
+Exit status: 0 with --out written; 1 when the run produced no usable frames (no output in the
+window, a deleted cell, non-finite positions: the membrane broke) or `iuq` reported a failure;
+2 for bad arguments. Needs Python 3, numpy and h5py; the `iuq` binary is $IUQ or `iuq` on PATH.
+"""
+
+import argparse
+import os
+import re
+import shutil
+import subprocess
+import sys
+
+try:
+    import h5py
+    import numpy as np
+except ImportError as _missing:  # reported by main() with a hint
+    h5py = np = None
+    IMPORT_ERROR = _missing
+else:
+    IMPORT_ERROR = None
+
+FILE_PATTERN = re.compile(r"^(?P<type>.+)\.(?P<iteration>\d+)\.p\.(?P<rank>\d+)\.h5$")
+
+
+class DecodeError(Exception):
+    """A run whose output cannot give an elongation index (exit status 1)."""
+
+
+def fail(message, status=1):
+    print(f"decode-el.py: {message}", file=sys.stderr)
+    sys.exit(status)
+
+
+def scan(hdf5_dir):
+    """Map (cell type, iteration) -> [(rank, path)] for every HemoCell particle file."""
+    found = {}
+    candidates = []
+    for entry in sorted(os.listdir(hdf5_dir)):
+        path = os.path.join(hdf5_dir, entry)
+        if os.path.isdir(path) and entry.isdigit():
+            candidates.extend(os.path.join(path, name) for name in sorted(os.listdir(path)))
+        elif os.path.isfile(path):
+            candidates.append(path)
+    for path in candidates:
+        match = FILE_PATTERN.match(os.path.basename(path))
+        if match is None:
+            continue
+        key = (match["type"], int(match["iteration"]))
+        found.setdefault(key, []).append((int(match["rank"]), path))
+    return found
+
+
+def choose_cell_type(found, requested):
+    types = sorted({t for t, _ in found if t.lower() != "fluid"})
+    if requested:
+        if requested not in types:
+            raise DecodeError(
+                f"no files of cell type {requested!r} (cell types found: {', '.join(types) or 'none'})"
+            )
+        return requested
+    for preferred in ("RBC_HO", "RBC"):
+        if preferred in types:
+            return preferred
+    if len(types) == 1:
+        return types[0]
+    raise DecodeError(
+        "cannot tell which cell type is the red blood cell; give --cell-type "
+        f"(cell types found: {', '.join(types) or 'none'})"
+    )
+
+
+def read_frame(files):
+    """Positions of one iteration merged over the ranks, and the file's dx attribute."""
+    blocks, ids, dx = [], [], None
+    with_ids = True
+    for rank, path in sorted(files):
+        try:
+            with h5py.File(path, "r") as f:
+                if dx is None and "dx" in f.attrs:
+                    dx = float(np.asarray(f.attrs["dx"]).reshape(-1)[0])
+                if "Position" not in f:
+                    continue
+                position = np.asarray(f["Position"], dtype=float)
+                if position.size == 0:
+                    continue
+                if position.ndim != 2 or position.shape[1] != 3:
+                    raise DecodeError(f"{path}: dataset Position has shape {position.shape}, expected (n, 3)")
+                blocks.append(position)
+                if "Cell Id" in f and "Vertex Id" in f:
+                    cell = np.asarray(f["Cell Id"], dtype=float).reshape(-1)
+                    vertex = np.asarray(f["Vertex Id"], dtype=float).reshape(-1)
+                    if len(cell) == len(position) and len(vertex) == len(position):
+                        ids.append(np.stack([cell, vertex], axis=1))
+                        continue
+                with_ids = False
+        except OSError as e:
+            raise DecodeError(f"{path}: cannot read as HDF5: {e}") from e
+    if not blocks:
+        return np.zeros((0, 3)), dx
+    positions = np.concatenate(blocks)
+    if with_ids and ids:
+        keys = np.concatenate(ids)
+        if len(np.unique(keys[:, 0])) > 1:
+            raise DecodeError(f"{len(np.unique(keys[:, 0]))} cells in the output; oneCellShear has one")
+        _, first = np.unique(keys, axis=0, return_index=True)
+    else:
+        _, first = np.unique(positions, axis=0, return_index=True)
+    return positions[np.sort(first)], dx
+
+
+def detect_unit(positions):
+    return "m" if float(np.max(np.abs(positions))) < 1e-3 else "lattice"
+
+
+def main(argv=None):
+    parser = argparse.ArgumentParser(
+        description="Elongation index of a HemoCell oneCellShear run, measured by `iuq rbc elongation`."
+    )
+    parser.add_argument("hdf5_dir", help="HemoCell's HDF5 output folder (tmp/hdf5)")
+    parser.add_argument("--from", dest="start", type=int, required=True, help="t_start: first iteration of the window")
+    parser.add_argument("--to", dest="end", type=int, required=True, help="t_max: last iteration of the window")
+    parser.add_argument("--frames", type=int, default=None,
+                        help="keep the last N output iterations of the window (default: all)")
+    parser.add_argument("--cell-type", default=None, help="file prefix of the cell (default: RBC_HO, RBC, or the only one)")
+    parser.add_argument("--unit", choices=["auto", "m", "lattice", "um"], default="auto",
+                        help="unit of Position (default: auto, metres or lattice units by magnitude)")
+    parser.add_argument("--dx", type=float, default=None,
+                        help="lattice spacing in metres for lattice-unit positions (default: the files' dx attribute, else 0.5e-6)")
+    parser.add_argument("--csv-dir", default="el-frames", help="where the per-frame CSV files go (default: el-frames)")
+    parser.add_argument("--out", default="el.json", help="the result file (default: el.json)")
+    args = parser.parse_args(argv)
+    if args.end < args.start:
+        fail(f"--to {args.end} lies before --from {args.start}", 2)
+    if args.frames is not None and args.frames < 2:
+        fail("--frames must be at least 2", 2)
+    if not os.path.isdir(args.hdf5_dir):
+        fail(f"{args.hdf5_dir}: no such folder (did HemoCell run and write HDF5 output?)")
+    if IMPORT_ERROR is not None:
+        fail(f"needs numpy and h5py ({IMPORT_ERROR}); install them with `python3 -m pip install numpy h5py`", 2)
+
+    try:
+        found = scan(args.hdf5_dir)
+        cell_type = choose_cell_type(found, args.cell_type)
+        iterations = sorted(i for t, i in found if t == cell_type)
+        window = [i for i in iterations if args.start <= i <= args.end]
+        if args.frames is not None and len(window) > args.frames:
+            window = window[-args.frames:]
+        if len(window) < 2:
+            raise DecodeError(
+                f"{len(window)} output iteration(s) of {cell_type} in [{args.start}, {args.end}] under "
+                f"{args.hdf5_dir}; at least 2 are needed (iterations found: "
+                f"{', '.join(map(str, iterations)) or 'none'}; did the run stop early?)"
+            )
+        os.makedirs(args.csv_dir, exist_ok=True)
+        csv_files = []
+        for k, iteration in enumerate(window):
+            positions, dx_attribute = read_frame(found[(cell_type, iteration)])
+            if len(positions) == 0:
+                raise DecodeError(
+                    f"iteration {iteration}: no membrane vertices in the output (HemoCell deleted the cell: it broke or left the domain)"
+                )
+            if not np.all(np.isfinite(positions)):
+                raise DecodeError(f"iteration {iteration}: non-finite vertex positions (the membrane broke)")
+            unit = detect_unit(positions) if args.unit == "auto" else args.unit
+            if unit == "m":
+                um = positions * 1e6
+            elif unit == "lattice":
+                dx = args.dx or (dx_attribute if dx_attribute and dx_attribute > 0 else 0.5e-6)
+                um = positions * (dx * 1e6)
+            else:
+                um = positions
+            path = os.path.join(args.csv_dir, f"frame_{k:02d}_iter_{iteration:012d}.csv")
+            with open(path, "w") as f:
+                f.write("x,y,z\n")
+                for x, y, z in um.tolist():
+                    f.write(f"{x!r},{y!r},{z!r}\n")
+            csv_files.append(path)
+            print(f"decode-el.py: iteration {iteration}: {len(positions)} vertices ({unit}) -> {path}", file=sys.stderr)
+    except DecodeError as e:
+        fail(str(e))
+
+    iuq = os.environ.get("IUQ") or shutil.which("iuq")
+    if not iuq:
+        fail("the iuq binary was not found: set IUQ=/path/to/iuq or put iuq on PATH", 2)
+    command = [iuq, "--json", "rbc", "elongation", "--unit", "um", "--out", args.out, *csv_files]
+    result = subprocess.run(command)
+    return result.returncode
+
+
+if __name__ == "__main__":
+    sys.exit(main())
