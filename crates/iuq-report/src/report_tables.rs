@@ -3,17 +3,31 @@
 //! computed values).
 
 use crate::derived::DerivedResults;
-use crate::model::StudyReport;
+use crate::model::{DataSeries, StudyReport};
 use crate::tables::{Cell, Column, Table};
+
+/// The leading columns of the tables per data point: the abscissa, the measurement, its std.
+fn data_columns(data: &DataSeries) -> Vec<Column> {
+    vec![
+        Column::plain(data.x_label.clone()),
+        Column::plain("data"),
+        Column::plain("data std"),
+    ]
+}
+
+/// The cells of [`data_columns`] for data point `i`, pointing into `report.json`.
+fn data_cells(data: &DataSeries, i: usize) -> Vec<Cell> {
+    vec![
+        Cell::number(data.x[i], format!("/report/data/x/{i}")),
+        Cell::number(data.y[i], format!("/report/data/y/{i}")),
+        Cell::number(data.y_err[i], format!("/report/data/y_err/{i}")),
+    ]
+}
 
 /// Propagated output at each data point: measurement, and per source MAP, mean and 95 % band.
 pub(crate) fn propagated(report: &StudyReport, derived: &DerivedResults) -> Table {
     let data = &report.data;
-    let mut columns = vec![
-        Column::plain(data.x_label.clone()),
-        Column::plain("data"),
-        Column::plain("data std"),
-    ];
+    let mut columns = data_columns(data);
     for prediction in &derived.predictions {
         for header in ["MAP", "mean", "2.5 %", "97.5 %"] {
             columns.push(Column::grouped(prediction.source.clone(), header));
@@ -21,11 +35,7 @@ pub(crate) fn propagated(report: &StudyReport, derived: &DerivedResults) -> Tabl
     }
     let rows = (0..data.x.len())
         .map(|i| {
-            let mut row = vec![
-                Cell::number(data.x[i], format!("/report/data/x/{i}")),
-                Cell::number(data.y[i], format!("/report/data/y/{i}")),
-                Cell::number(data.y_err[i], format!("/report/data/y_err/{i}")),
-            ];
+            let mut row = data_cells(data, i);
             for (s, prediction) in derived.predictions.iter().enumerate() {
                 let point = &prediction.points[i];
                 let at = |field: &str| format!("/derived/predictions/{s}/points/{i}/{field}");
@@ -180,11 +190,7 @@ pub(crate) fn sensitivity(report: &StudyReport) -> Table {
 /// measurement std.
 pub(crate) fn map_error(report: &StudyReport, derived: &DerivedResults) -> Table {
     let data = &report.data;
-    let mut columns = vec![
-        Column::plain(data.x_label.clone()),
-        Column::plain("data"),
-        Column::plain("data std"),
-    ];
+    let mut columns = data_columns(data);
     for prediction in &derived.predictions {
         for header in ["MAP", "|MAP − data|", "|MAP − data| / std"] {
             columns.push(Column::grouped(prediction.source.clone(), header));
@@ -192,11 +198,7 @@ pub(crate) fn map_error(report: &StudyReport, derived: &DerivedResults) -> Table
     }
     let rows = (0..data.x.len())
         .map(|i| {
-            let mut row = vec![
-                Cell::number(data.x[i], format!("/report/data/x/{i}")),
-                Cell::number(data.y[i], format!("/report/data/y/{i}")),
-                Cell::number(data.y_err[i], format!("/report/data/y_err/{i}")),
-            ];
+            let mut row = data_cells(data, i);
             for (s, prediction) in derived.predictions.iter().enumerate() {
                 let point = &prediction.points[i];
                 let at = |field: &str| format!("/derived/predictions/{s}/points/{i}/{field}");
