@@ -459,7 +459,9 @@ impl CampaignStore {
     }
 
     /// Record a design (a batch of points) and the runs it needs; identical vectors share one
-    /// run. Returns the run id of each point, in order.
+    /// run. Returns the run id of each point, in order. A design already recorded under the same
+    /// label with the same runs is not recorded again, so rerunning a study leaves its store as
+    /// it was.
     pub fn add_design(&mut self, label: &str, points: &[Vec<f64>]) -> Result<Vec<i64>> {
         if let Some((i, _)) = points
             .iter()
@@ -477,6 +479,9 @@ impl CampaignStore {
             path: path.clone(),
             source: e,
         };
+        if let Some(ids) = self.recorded_design(label, points).map_err(err)? {
+            return Ok(ids);
+        }
         let tx = self.connection.transaction().map_err(err)?;
         let mut ids = Vec::with_capacity(points.len());
         {
@@ -512,6 +517,48 @@ impl CampaignStore {
         }
         tx.commit().map_err(err)?;
         Ok(ids)
+    }
+
+    /// The run ids of a design of this study recorded under `label` with exactly the runs of
+    /// `points`, if there is one.
+    fn recorded_design(
+        &self,
+        label: &str,
+        points: &[Vec<f64>],
+    ) -> rusqlite::Result<Option<Vec<i64>>> {
+        let mut find = self
+            .connection
+            .prepare_cached("SELECT id FROM runs WHERE parameter_key = ?1")?;
+        let mut ids = Vec::with_capacity(points.len());
+        for point in points {
+            match find
+                .query_row([parameter_key(point)], |r| r.get::<_, i64>(0))
+                .optional()?
+            {
+                Some(id) => ids.push(id),
+                None => return Ok(None),
+            }
+        }
+        let mut designs = self.connection.prepare_cached(
+            "SELECT id FROM designs WHERE study_id = ?1 AND label = ?2 AND size = ?3 ORDER BY id",
+        )?;
+        let candidates: Vec<i64> = designs
+            .query_map(params![self.study_id, label, points.len() as i64], |r| {
+                r.get(0)
+            })?
+            .collect::<rusqlite::Result<_>>()?;
+        let mut members = self.connection.prepare_cached(
+            "SELECT run_id FROM design_points WHERE design_id = ?1 ORDER BY position",
+        )?;
+        for design in candidates {
+            let runs: Vec<i64> = members
+                .query_map([design], |r| r.get(0))?
+                .collect::<rusqlite::Result<_>>()?;
+            if runs == ids {
+                return Ok(Some(ids));
+            }
+        }
+        Ok(None)
     }
 
     /// Runs that are pending, oldest first, at most `limit`.
@@ -986,6 +1033,20 @@ output = { file = "r.json", format = "json" }
         assert_eq!(ids, vec![3, 1]);
         assert_eq!(store.counts(None).unwrap().pending, 3);
         assert!(store.add_design("c", &[vec![f64::NAN]]).is_err());
+        // The same design again (a rerun of the study) adds nothing; another label or order does.
+        let designs = |store: &CampaignStore| -> i64 {
+            store
+                .connection
+                .query_row("SELECT COUNT(*) FROM designs", [], |r| r.get(0))
+                .unwrap()
+        };
+        assert_eq!(designs(&store), 2);
+        let again = store.add_design("b", &[vec![0.25], vec![0.5]]).unwrap();
+        assert_eq!(again, vec![3, 1]);
+        assert_eq!(designs(&store), 2);
+        store.add_design("b", &[vec![0.5], vec![0.25]]).unwrap();
+        store.add_design("d", &[vec![0.25], vec![0.5]]).unwrap();
+        assert_eq!(designs(&store), 4);
         let _ = std::fs::remove_dir_all(&dir);
     }
 
