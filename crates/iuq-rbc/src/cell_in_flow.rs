@@ -15,7 +15,9 @@ use crate::error::{RbcError, Result};
 use crate::immersed_boundary::ImmersedBoundary;
 use crate::interior::InteriorViscosity;
 use crate::lattice::{Lattice, LatticeGeometry, ZBoundary};
-use crate::membrane_forces::{ForceCoefficients, MembraneForces, ReferenceState, StrainSummary};
+use crate::membrane_forces::{
+    ForceCoefficients, ForceTerms, MembraneForces, ReferenceState, StrainSummary,
+};
 use crate::mesh::{Mesh, add};
 
 /// Steps between two ray-parity re-taggings of the whole interior.
@@ -114,6 +116,12 @@ impl CellInFlow {
         )?;
         locate(&mut cell.ibm, cell.lattice.geometry(), &cell.positions, 0)?;
         Ok(cell)
+    }
+
+    /// Evaluate the membrane forces with `terms` from now on (e.g. HemoCell's behaviour past a
+    /// singularity, [`crate::membrane_forces::PastSingularity`]).
+    pub fn set_force_terms(&mut self, terms: ForceTerms) {
+        self.membrane.set_terms(terms);
     }
 
     /// Apply a constant external force to each vertex (added after the cap), e.g. the optical

@@ -57,6 +57,6 @@ pub mod units;
 pub mod validation;
 
 pub use error::{RbcError, Result};
-pub use membrane_forces::MembraneParameters;
+pub use membrane_forces::{MembraneParameters, PastSingularity};
 pub use model::{CellParameters, RbcShearModel, RbcShearSettings};
 pub use protocol::{Protocol, ShearExperiment, ShearResult, run_shear};

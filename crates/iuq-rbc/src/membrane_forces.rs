@@ -212,6 +212,42 @@ fn umbrella(mesh: &Mesh, x: &[[f64; 3]], normals: &[[f64; 3]], i: usize) -> ([f6
     (normal, dot(normal, sub(centre, x[i])))
 }
 
+/// What a strain at or beyond a singularity of its force law means.
+///
+/// The force laws `x + x/|s − x²|` are singular at `x² = s`. The spec (and the default here)
+/// takes reaching it as a broken mesh; HemoCell built with `FORCE_LIMIT` (the 50 pN cap) keeps
+/// the absolute value in the denominator and carries on: past the singularity the force still
+/// restores, with a magnitude that falls as the strain grows, and the cap bounds it near the
+/// singularity.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PastSingularity {
+    /// The run fails with [`RbcError::MeshBroken`] (the spec's definition of a broken mesh).
+    #[default]
+    Fail,
+    /// The forces are evaluated as HemoCell's `FORCE_LIMIT` build does; only non-finite values
+    /// and shapes without an ellipse fail.
+    CarryOn,
+}
+
+impl PastSingularity {
+    /// The name used in study files and on the command line (`fail`, `carry-on`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Fail => "fail",
+            Self::CarryOn => "carry-on",
+        }
+    }
+
+    /// The policy called `name` (see [`PastSingularity::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        match name {
+            "fail" => Some(Self::Fail),
+            "carry-on" => Some(Self::CarryOn),
+            _ => None,
+        }
+    }
+}
+
 /// Which force terms to evaluate (all by default); the tests look at them one by one.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ForceTerms {
@@ -225,6 +261,8 @@ pub struct ForceTerms {
     pub bending: bool,
     /// The per-vertex force cap.
     pub cap: bool,
+    /// Whether a strain past a singularity breaks the mesh.
+    pub past_singularity: PastSingularity,
 }
 
 impl Default for ForceTerms {
@@ -235,6 +273,7 @@ impl Default for ForceTerms {
             volume: true,
             bending: true,
             cap: true,
+            past_singularity: PastSingularity::Fail,
         }
     }
 }
@@ -281,6 +320,11 @@ impl MembraneForces {
         self
     }
 
+    /// Select the terms from now on.
+    pub fn set_terms(&mut self, terms: ForceTerms) {
+        self.terms = terms;
+    }
+
     /// The coefficients in use.
     pub fn coefficients(&self) -> &ForceCoefficients {
         &self.coefficients
@@ -312,6 +356,7 @@ impl MembraneForces {
             });
         }
         let broken = |reason: String| RbcError::MeshBroken { step, reason };
+        let fail_at_singularity = t.past_singularity == PastSingularity::Fail;
 
         if t.link {
             for (e, &[a, b]) in mesh.edges.iter().enumerate() {
@@ -321,7 +366,7 @@ impl MembraneForces {
                 let eps = (len - l0) / l0;
                 let eps2 = eps * eps;
                 summary.max_link_strain = summary.max_link_strain.max(eps.abs());
-                if eps2 >= LINK_SINGULAR_STRAIN_SQ {
+                if fail_at_singularity && eps2 >= LINK_SINGULAR_STRAIN_SQ {
                     return Err(broken(format!(
                         "edge {a}-{b} strain {eps:.3} beyond the link singularity |ε| = 3"
                     )));
@@ -342,7 +387,7 @@ impl MembraneForces {
                 let alpha = (self.areas[k] - a0) / a0;
                 let alpha2 = alpha * alpha;
                 summary.max_area_strain = summary.max_area_strain.max(alpha.abs());
-                if alpha2 >= AREA_SINGULAR_SQ {
+                if fail_at_singularity && alpha2 >= AREA_SINGULAR_SQ {
                     return Err(broken(format!(
                         "triangle {k} area change {alpha:.3} beyond the area singularity |α| = 0.3"
                     )));
@@ -364,7 +409,7 @@ impl MembraneForces {
         summary.volume_strain = nu;
         if t.volume {
             let nu2 = nu * nu;
-            if nu2 >= VOLUME_SINGULAR_SQ {
+            if fail_at_singularity && nu2 >= VOLUME_SINGULAR_SQ {
                 return Err(broken(format!(
                     "volume change {nu:.3} beyond the volume singularity |ν| = 0.1"
                 )));
@@ -385,7 +430,7 @@ impl MembraneForces {
                 let delta = (h - reference.patch_height[i]) / reference.mean_edge;
                 let delta2 = delta * delta;
                 summary.max_bending_deviation = summary.max_bending_deviation.max(delta.abs());
-                if delta2 >= BENDING_SINGULAR_SQ {
+                if fail_at_singularity && delta2 >= BENDING_SINGULAR_SQ {
                     return Err(broken(format!(
                         "vertex {i} bending deviation {delta:.3} beyond the bending singularity |δ| = √0.055"
                     )));
@@ -507,6 +552,7 @@ mod tests {
             volume,
             bending,
             cap: false,
+            past_singularity: PastSingularity::Fail,
         };
         let mut f = vec![[0.0; 3]; x.len()];
         for (name, terms) in [
@@ -557,6 +603,21 @@ mod tests {
             .compute(&mesh, &reference, &x, &mut f, 7)
             .unwrap_err();
         assert!(matches!(err, RbcError::MeshBroken { step: 7, .. }), "{err}");
+        // HemoCell's FORCE_LIMIT build carries on with a finite force that still pulls the
+        // edge back (|ε| = 3.5: ε + ε/|9 − ε²| = 3.5 + 3.5/3.25 > 0 along the edge).
+        let mut carry_on = vec![[0.0; 3]; x.len()];
+        MembraneForces::new(c)
+            .with_terms(ForceTerms {
+                past_singularity: PastSingularity::CarryOn,
+                ..Default::default()
+            })
+            .compute(&mesh, &reference, &x, &mut carry_on, 7)
+            .unwrap();
+        assert!(carry_on.iter().flatten().all(|f| f.is_finite()));
+        assert!(
+            dot(carry_on[b], v) < 0.0,
+            "the stretched vertex is pulled back"
+        );
         x[b][0] = f64::NAN;
         let err = MembraneForces::new(c)
             .compute(&mesh, &reference, &x, &mut f, 8)

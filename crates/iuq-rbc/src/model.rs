@@ -16,7 +16,7 @@ use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
 
 use crate::error::{RbcError, Result};
 use crate::lattice::Precision;
-use crate::membrane_forces::MembraneParameters;
+use crate::membrane_forces::{MembraneParameters, PastSingularity};
 use crate::protocol::{FRAMES, Protocol, START_STRAIN, ShearExperiment, run_shear};
 
 /// Names of the parameters the model understands, in the spec's spelling.
@@ -74,6 +74,8 @@ pub struct RbcShearSettings {
     pub start_strain: f64,
     /// Recorded shapes per run (10).
     pub frames: usize,
+    /// Whether a strain past a force singularity fails the run (the default, as in the spec).
+    pub past_singularity: PastSingularity,
 }
 
 impl Default for RbcShearSettings {
@@ -84,6 +86,7 @@ impl Default for RbcShearSettings {
             precision: Precision::default(),
             start_strain: START_STRAIN,
             frames: FRAMES,
+            past_singularity: PastSingularity::Fail,
         }
     }
 }
@@ -201,6 +204,7 @@ impl RbcShearModel {
             start_strain: self.settings.start_strain,
             frames: self.settings.frames,
             precision: self.settings.precision,
+            past_singularity: self.settings.past_singularity,
             ..ShearExperiment::new(cell.membrane, cell.viscosity_ratio, stress)
         }
     }

@@ -40,7 +40,7 @@ use crate::cell_in_flow::CellInFlow;
 use crate::ellipse::elongation_index;
 use crate::error::{RbcError, Result};
 use crate::lattice::{Lattice, Precision, ZBoundary};
-use crate::membrane_forces::{ForceCoefficients, MembraneParameters};
+use crate::membrane_forces::{ForceCoefficients, ForceTerms, MembraneParameters, PastSingularity};
 use crate::mesh::Mesh;
 use crate::units::{CELL_RADIUS, LatticeUnits, shear_rate};
 
@@ -140,6 +140,9 @@ pub struct ShearExperiment {
     pub precision: Precision,
     /// Spread the fluid update over rayon's threads (identical results either way).
     pub parallel: bool,
+    /// Whether a strain past a force singularity fails the run (the spec) or carries on (HemoCell
+    /// built with `FORCE_LIMIT`).
+    pub past_singularity: PastSingularity,
 }
 
 impl ShearExperiment {
@@ -154,6 +157,7 @@ impl ShearExperiment {
             frames: FRAMES,
             precision: Precision::default(),
             parallel: true,
+            past_singularity: PastSingularity::Fail,
         }
     }
 
@@ -348,12 +352,17 @@ pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<Ce
     for v in &mut mesh.vertices {
         *v = from_hemocell_frame(*v);
     }
-    CellInFlow::new(
+    let mut cell = CellInFlow::new(
         lattice,
         mesh,
         setup.coefficients,
         Some(experiment.viscosity_ratio),
-    )
+    )?;
+    cell.set_force_terms(ForceTerms {
+        past_singularity: experiment.past_singularity,
+        ..ForceTerms::default()
+    });
+    Ok(cell)
 }
 
 /// Run the shear experiment and measure the elongation index.

@@ -5,7 +5,7 @@
 
 use rayon::prelude::*;
 
-use crate::membrane_forces::MembraneParameters;
+use crate::membrane_forces::{MembraneParameters, PastSingularity};
 use crate::protocol::{Protocol, ShearExperiment, run_shear};
 use crate::stretching::{OPTICAL_TWEEZERS_AXIAL, StretchExperiment, run_stretch};
 
@@ -54,9 +54,12 @@ pub struct ShearValidationRow {
     pub seconds: f64,
 }
 
-/// Run the seven validation stresses with `protocol`, the runs spread over rayon's threads
+/// Run the seven validation stresses with `protocol` (and `past_singularity`), the runs spread over rayon's threads
 /// (each run single-threaded).
-pub fn validate_shear(protocol: Protocol) -> Vec<ShearValidationRow> {
+pub fn validate_shear(
+    protocol: Protocol,
+    past_singularity: PastSingularity,
+) -> Vec<ShearValidationRow> {
     HEMOCELL_EL
         .par_iter()
         .map(|&(stress, hemocell)| {
@@ -64,6 +67,7 @@ pub fn validate_shear(protocol: Protocol) -> Vec<ShearValidationRow> {
                 ShearExperiment::new(VALIDATION_MEMBRANE, VALIDATION_VISCOSITY_RATIO, stress)
                     .with_protocol(protocol);
             e.parallel = false;
+            e.past_singularity = past_singularity;
             let steps = e.setup().t_max;
             let t = std::time::Instant::now();
             match run_shear(&e) {

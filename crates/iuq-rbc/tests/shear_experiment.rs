@@ -7,7 +7,7 @@
 
 use iuq_core::Model;
 use iuq_rbc::lattice::Precision;
-use iuq_rbc::membrane_forces::MembraneParameters;
+use iuq_rbc::membrane_forces::{MembraneParameters, PastSingularity};
 use iuq_rbc::model::{RbcShearModel, RbcShearSettings};
 use iuq_rbc::protocol::{Protocol, ShearExperiment, run_shear, shear_cell};
 use iuq_rbc::validation::{HEMOCELL_EL, validate_shear, validate_stretch};
@@ -117,8 +117,26 @@ fn single_precision_storage_gives_the_double_precision_elongation() {
     assert!((ra.el_mean - rb.el_mean).abs() < 0.01 * rb.el_mean.max(0.01));
 }
 
+/// HemoCell's validation cell at 6.19 Pa: by the spec's definition its mesh breaks (one triangle
+/// reaches the area singularity at step ≈ 13,000); with HemoCell's FORCE_LIMIT behaviour the run
+/// carries on and its EL lies within 5 % of HemoCell's 0.492 (measured 0.4765, −3.2 %).
+#[test]
+#[ignore = "long: two scaled-protocol runs at 6.19 Pa (about a minute each on 2 cores)"]
+fn the_validation_cell_at_6_19_pa_carries_on_past_the_area_singularity_as_hemocell_does() {
+    let spec = ShearExperiment::new(cell(36.7), 5.9, 6.19);
+    let err = run_shear(&spec).unwrap_err();
+    assert!(err.to_string().contains("singularity"), "{err}");
+    let hemocell = ShearExperiment {
+        past_singularity: PastSingularity::CarryOn,
+        ..spec
+    };
+    let r = run_shear(&hemocell).unwrap();
+    println!("carry-on at 6.19 Pa: {:?}", r.el_frames());
+    assert!((r.el_mean - 0.492).abs() < 0.05 * 0.492, "{}", r.el_mean);
+}
+
 fn print_shear_table(protocol: Protocol) {
-    for r in validate_shear(protocol) {
+    for r in validate_shear(protocol, PastSingularity::Fail) {
         println!(
             "{:<9} {:>5} Pa  HemoCell {:.3}  here {}  {}",
             r.protocol,

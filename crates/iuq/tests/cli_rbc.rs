@@ -120,6 +120,19 @@ fn bad_values_are_input_errors_naming_the_flag() {
             .code(),
         Some(2)
     );
+    assert_eq!(
+        iuq(&[
+            "rbc",
+            "shear",
+            "--stress",
+            "1",
+            "--past-singularity",
+            "ignore"
+        ])
+        .status
+        .code(),
+        Some(2)
+    );
 }
 
 #[test]

@@ -17,7 +17,7 @@ use iuq_rbc::protocol::{
 use iuq_rbc::shape_output::ShapeFormat;
 use iuq_rbc::stretching::{OPTICAL_TWEEZERS_AXIAL, StretchExperiment, run_stretch};
 use iuq_rbc::validation::{validate_shear, validate_stretch};
-use iuq_rbc::{MembraneParameters, RbcError};
+use iuq_rbc::{MembraneParameters, PastSingularity, RbcError};
 
 use crate::input_error::input_error;
 use crate::report_output::{emit, short};
@@ -77,6 +77,24 @@ impl From<PrecisionArg> for Precision {
     }
 }
 
+/// What a strain past a singularity of the membrane's force laws means.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PastSingularityArg {
+    /// The mesh broke: the run fails (the spec).
+    Fail,
+    /// Carry on with the absolute-value force laws, as HemoCell built with FORCE_LIMIT does.
+    CarryOn,
+}
+
+impl From<PastSingularityArg> for PastSingularity {
+    fn from(p: PastSingularityArg) -> Self {
+        match p {
+            PastSingularityArg::Fail => PastSingularity::Fail,
+            PastSingularityArg::CarryOn => PastSingularity::CarryOn,
+        }
+    }
+}
+
 /// Arguments of `iuq rbc shear`.
 #[derive(Debug, Args)]
 pub struct ShearArgs {
@@ -111,6 +129,10 @@ pub struct ShearArgs {
     /// Storage precision of the fluid.
     #[arg(long, value_enum, default_value_t = PrecisionArg::Single)]
     pub precision: PrecisionArg,
+    /// A strain past a singularity of the membrane's force laws: `fail` (a broken mesh, as the
+    /// spec defines it) or `carry-on` (as HemoCell built with FORCE_LIMIT does).
+    #[arg(long, value_enum, default_value_t = PastSingularityArg::Fail)]
+    pub past_singularity: PastSingularityArg,
     /// Write the membrane at each measuring frame into this directory.
     #[arg(long)]
     pub shape_out: Option<PathBuf>,
@@ -176,6 +198,7 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
         ShearExperiment::new(membrane, args.viscosity_ratio, args.stress).with_protocol(protocol);
     experiment.start_strain = args.start_strain;
     experiment.precision = args.precision.into();
+    experiment.past_singularity = args.past_singularity.into();
     experiment.validate().map_err(cli_error)?;
     if let Some(dir) = &args.shape_out {
         std::fs::create_dir_all(dir).map_err(|e| {
@@ -345,6 +368,10 @@ pub struct ValidateArgs {
     /// Also run the optical-tweezers stretching check (kLink = 15, kBend = 80).
     #[arg(long)]
     pub stretch: bool,
+    /// A strain past a force singularity: `fail` (the spec) or `carry-on` (HemoCell's
+    /// FORCE_LIMIT build).
+    #[arg(long, value_enum, default_value_t = PastSingularityArg::Fail)]
+    pub past_singularity: PastSingularityArg,
 }
 
 fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
@@ -354,7 +381,11 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
         ValidateProtocol::Both => vec![Protocol::default(), Protocol::Reference],
         ValidateProtocol::None => vec![],
     };
-    let shear_rows: Vec<_> = protocols.into_iter().flat_map(validate_shear).collect();
+    let past_singularity = args.past_singularity.into();
+    let shear_rows: Vec<_> = protocols
+        .into_iter()
+        .flat_map(|p| validate_shear(p, past_singularity))
+        .collect();
     let stretch_rows = if args.stretch {
         validate_stretch()
     } else {
@@ -548,6 +579,12 @@ pub fn rbc_shear_model(
                 }
             }
             "lattice_shear_rate" => lattice_shear_rate = number(&full, value)?,
+            "past_singularity" => {
+                settings.past_singularity = value
+                    .as_str()
+                    .and_then(PastSingularity::from_name)
+                    .ok_or_else(|| key_error(&full, "expected \"fail\" or \"carry-on\""))?
+            }
             // Quick checks and tests only: the spec's window starts at 7.5 strain units.
             "start_strain" => settings.start_strain = number(&full, value)?,
             "precision" => {
@@ -594,7 +631,7 @@ pub fn rbc_shear_model(
                 return Err(key_error(
                     &format!("model.{other}"),
                     &format!(
-                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, start_strain, stresses or one of {})",
+                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, past_singularity, start_strain, stresses or one of {})",
                         PARAMETER_NAMES.join(", ")
                     ),
                 ));

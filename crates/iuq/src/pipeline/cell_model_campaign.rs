@@ -34,10 +34,11 @@ const PARAMETER_FLAGS: [(&str, &str); 5] = [
 ];
 
 /// Keys of the `[model]` section of kind `rbc-shear` passed on to `iuq rbc shear`.
-const SETTING_FLAGS: [(&str, &str); 4] = [
+const SETTING_FLAGS: [(&str, &str); 5] = [
     ("protocol", "--protocol"),
     ("lattice_shear_rate", "--lattice-shear-rate"),
     ("precision", "--precision"),
+    ("past_singularity", "--past-singularity"),
     ("start_strain", "--start-strain"),
 ];
 
