@@ -132,7 +132,11 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
         "description".into(),
         Value::String(format!(
             "Cell-model runs of the study {} (written by iuq pipeline; do not edit)",
-            study.path.display()
+            // The file name only: the same study called by another path keeps one text.
+            study.path.file_name().map_or_else(
+                || study.path.display().to_string(),
+                |n| n.to_string_lossy().into_owned()
+            )
         )),
     );
     root.insert("parameters".into(), Value::Table(parameters));
