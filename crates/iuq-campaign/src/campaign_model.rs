@@ -11,6 +11,7 @@ use std::time::Duration;
 use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
 
 use crate::campaign::{Campaign, Progress};
+use crate::{CampaignError, StatusCounts};
 
 /// Observer of a campaign model's progress.
 pub type ProgressObserver = Box<dyn FnMut(&Progress) + Send>;
@@ -52,6 +53,19 @@ impl CampaignModel {
             state.2 = Some(observer);
         }
         self
+    }
+
+    /// The store's runs counted by status, and the reason of every failed run: the run
+    /// statistics of a report, counted over runs (one per point and output group), not points.
+    pub fn run_statistics(&self) -> crate::Result<(StatusCounts, Vec<String>)> {
+        let guard = self
+            .state
+            .lock()
+            .map_err(|_| CampaignError::BadInput("the campaign's lock is poisoned".into()))?;
+        let store = guard.0.store();
+        let counts = store.counts(None)?;
+        let reasons = store.failures()?.into_iter().map(|f| f.reason).collect();
+        Ok((counts, reasons))
     }
 
     /// Give the campaign back.

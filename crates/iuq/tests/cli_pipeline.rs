@@ -241,3 +241,94 @@ fn bad_pipeline_settings_are_input_errors() {
     assert_eq!(output.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&output.stderr).contains("likelihood"));
 }
+
+/// The README's main job: the healthy-cell study on its shipped campaign store completes without
+/// a single new run of the cell model, and its result says what the study is known for — kLink
+/// is identified, kBend is not, every GP passes its test set.
+#[test]
+fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = scratch("pipeline", "shipped");
+    for (from, to) in [
+        ("examples/rbc-healthy.toml", "examples/rbc-healthy.toml"),
+        (
+            "examples/rbc-healthy.campaign/campaign.sqlite",
+            "examples/rbc-healthy.campaign/campaign.sqlite",
+        ),
+        (
+            "data/ektacytometry_gutierrez2018.csv",
+            "data/ektacytometry_gutierrez2018.csv",
+        ),
+    ] {
+        let target = dir.join(to);
+        std::fs::create_dir_all(target.parent().unwrap()).unwrap();
+        std::fs::copy(root.join(from), &target).unwrap();
+    }
+    let out = dir.join("report");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args([
+            "pipeline",
+            dir.join("examples/rbc-healthy.toml").to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // A run of the cell model takes half a minute: a pipeline that has to make runs is stopped
+    // rather than left to recompute the study.
+    let started = std::time::Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if started.elapsed() > std::time::Duration::from_secs(600) {
+            child.kill().unwrap();
+            panic!("the pipeline did not finish from the shipped runs within 10 minutes");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(200));
+    }
+    let output = child.wait_with_output().unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    let runs = dir.join("examples/rbc-healthy.campaign/runs");
+    let made = std::fs::read_dir(&runs).map_or(0, |d| d.count());
+    assert_eq!(
+        made, 0,
+        "the shipped store should hold every run of the study"
+    );
+
+    let summary = json_of(&output);
+    let q2 = summary["q2"].as_array().unwrap();
+    assert_eq!(q2.len(), 8, "one GP per stress");
+    for q in q2 {
+        assert!(q.as_f64().unwrap() > 0.9, "Q2 {q}");
+    }
+    let gp = &summary["posterior"][0];
+    assert_eq!(gp["source"], "GP surrogate");
+    let std_of = |name: &str| {
+        gp["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["parameter"] == name)
+            .unwrap_or_else(|| panic!("{name} in {gp}"))["std"]
+            .as_f64()
+            .unwrap()
+    };
+    // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101.
+    assert!(std_of("kLink") < 0.1 * 83.7, "kLink is identified");
+    assert!(std_of("kBend") > 0.4 * 101.0, "kBend is not");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let sources: HashSet<&str> = report["report"]["sensitivity"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s["source"].as_str().unwrap())
+        .collect();
+    assert_eq!(sources, HashSet::from(["model runs", "surrogate"]));
+    assert!(out.join("report.html").is_file());
+}

@@ -398,6 +398,9 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
         model_sobol: model_sobol.as_ref(),
         gp_posterior: &gp_posterior,
         model_posterior: model_posterior.as_ref(),
+        campaign_runs: campaign
+            .run_statistics()
+            .context("reading the run statistics of the campaign store")?,
     };
     stage_seconds.push(("propagation and report".into(), 0.0));
     let summary = write_pipeline_report(&outcome, &out, &mut stage_seconds, stage)?;

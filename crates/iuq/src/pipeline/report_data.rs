@@ -9,6 +9,7 @@ use std::time::Instant;
 use anyhow::{Context, Result};
 use serde_json::{Value, json};
 
+use iuq_campaign::StatusCounts;
 use iuq_gp::GpBank;
 use iuq_report::{
     DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
@@ -65,6 +66,8 @@ pub struct PipelineOutcome<'a> {
     pub gp_posterior: &'a SampledPosterior,
     /// The posterior on the cell model.
     pub model_posterior: Option<&'a SampledPosterior>,
+    /// The campaign store's runs by status and the reasons of its failed runs.
+    pub campaign_runs: (StatusCounts, Vec<String>),
 }
 
 /// The `p` quantile of `sorted` (linear interpolation between order statistics).
@@ -248,31 +251,13 @@ pub fn write_pipeline_report(
             hyperparameters,
         });
     }
+    let (counts, failed_reasons) = &outcome.campaign_runs;
     let mut failures: BTreeMap<String, usize> = BTreeMap::new();
-    let mut runs = 0;
-    let mut failed = 0;
-    for r in outcome.stress_runs {
-        runs += r.training_y.len() + r.test_y.len() + r.failures.len();
-        failed += r.failures.len();
-        for f in &r.failures {
-            *failures.entry(short_reason(f)).or_default() += 1;
-        }
+    for reason in failed_reasons {
+        *failures.entry(short_reason(reason)).or_default() += 1;
     }
-    if let Some(m) = outcome.model_sobol {
-        runs += m.evaluations;
-        failed += m.failed_evaluations;
-        for (reason, n) in &m.failure_reasons {
-            *failures.entry(short_reason(reason)).or_default() += n;
-        }
-    }
-    if let Some(m) = outcome.model_posterior {
-        let state = &m.run.state;
-        runs += state.evaluations * stresses.len();
-        failed += state.failures();
-        for (reason, n) in state.failure_reasons() {
-            *failures.entry(short_reason(&reason)).or_default() += n;
-        }
-    }
+    let runs = counts.total() as usize;
+    let failed = counts.failed as usize;
     let data = outcome.data;
     let y_err = data
         .observations
@@ -337,7 +322,7 @@ pub fn write_pipeline_report(
         gp_diagnostics,
         run_statistics: RunStatistics {
             runs,
-            succeeded: runs - failed,
+            succeeded: counts.succeeded as usize,
             failed,
             failures_by_reason: failures.into_iter().collect(),
             stage_seconds: stage_seconds.to_vec(),
