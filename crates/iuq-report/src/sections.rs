@@ -8,7 +8,7 @@ use crate::charts::data_fit::DataFitChart;
 use crate::charts::gp_diagnostics::GpDiagnosticsChart;
 use crate::charts::map_error::MapErrorChart;
 use crate::charts::sampler_stages::{self, SamplerStagesChart};
-use crate::charts::sensitivity::SensitivityChart;
+use crate::charts::sensitivity::{DISPLAY_RANGE, SensitivityChart};
 use crate::charts::violins::ViolinChart;
 use crate::derived::DerivedResults;
 use crate::error::Result;
@@ -171,7 +171,10 @@ pub(crate) fn build_sections(
             FigureSpec {
                 name: "sensitivity",
                 title: "Sobol' indices per output",
-                caption: "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group.".to_string(),
+                caption: format!(
+                    "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group. The axis stops at {} and {}: bars or intervals beyond are cut and marked with an arrowhead (the table gives their values).",
+                    DISPLAY_RANGE.0, DISPLAY_RANGE.1
+                ),
                 size: chart.size(),
                 tables: &["sensitivity"],
             },

@@ -1,5 +1,6 @@
 //! Figure 3: Sobol' indices as grouped bars, one panel per output (stress): for every parameter
-//! S1 (solid) and ST (light) of each source side by side, with confidence-interval whiskers.
+//! S1 (solid) and ST (light) of each source side by side, with confidence-interval whiskers,
+//! on a range cut at [`DISPLAY_RANGE`].
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -20,6 +21,22 @@ const PANEL: (u32, u32) = (360, 310);
 const GROUP_WIDTH: f64 = 0.84;
 /// Opacity of the ST bars' fill.
 const TOTAL_OPACITY: f64 = 0.3;
+/// The widest index range a panel shows. Indices lie in [0, 1]; estimates from a handful of
+/// model runs can lie far outside with intervals wider still, and one such bar would flatten
+/// every other. What lies beyond is cut at the edge and marked with an arrowhead; the table
+/// gives the values.
+pub(crate) const DISPLAY_RANGE: (f64, f64) = (-0.25, 1.25);
+/// Size in pixels of the arrowhead that marks a cut bar or interval.
+const CUT_MARK: i32 = 5;
+
+/// The y range of a panel whose values span `lo..hi`: at least [0, 1] with a margin, at most
+/// [`DISPLAY_RANGE`].
+pub(crate) fn panel_range(lo: f64, hi: f64) -> (f64, f64) {
+    (
+        (lo.min(0.0) - 0.02).max(DISPLAY_RANGE.0),
+        (hi.max(1.0) + 0.04).min(DISPLAY_RANGE.1),
+    )
+}
 
 /// One panel: the results of all sources for one output.
 struct Panel<'a> {
@@ -111,7 +128,8 @@ impl<'a> SensitivityChart<'a> {
             })
         });
         let (lo, hi) = extent(values).unwrap_or((0.0, 1.0));
-        let (y_lo, y_hi) = (lo.min(0.0) - 0.02, hi.max(1.0) + 0.04);
+        let (y_lo, y_hi) = panel_range(lo, hi);
+        let clip = |v: f64| v.clamp(y_lo, y_hi);
         let n = self.parameters.len();
         let mut chart = ChartBuilder::on(area)
             .caption(panel.title.as_str(), (FONT, AXIS_LABEL_SIZE))
@@ -133,6 +151,7 @@ impl<'a> SensitivityChart<'a> {
         let bars_per_group = 2 * self.sources.len().max(1);
         let width = GROUP_WIDTH / bars_per_group as f64;
         let mut whiskers = Vec::new();
+        let mut cut: Vec<(f64, f64, bool)> = Vec::new();
         for (p, parameter) in self.parameters.iter().enumerate() {
             for (s, source) in self.sources.iter().enumerate() {
                 let colour = source_colour(source, s);
@@ -158,7 +177,10 @@ impl<'a> SensitivityChart<'a> {
                 {
                     let slot = k * self.sources.len() + s;
                     let left = p as f64 - GROUP_WIDTH / 2.0 + slot as f64 * width;
-                    let corners = [(left + 0.08 * width, 0.0), (left + 0.92 * width, value)];
+                    let corners = [
+                        (left + 0.08 * width, 0.0),
+                        (left + 0.92 * width, clip(value)),
+                    ];
                     if k == 0 {
                         chart.draw_series(std::iter::once(Rectangle::new(
                             corners,
@@ -174,7 +196,20 @@ impl<'a> SensitivityChart<'a> {
                             colour.stroke_width(1),
                         )))?;
                     }
-                    whiskers.push((left + width / 2.0, low, high));
+                    let centre = left + width / 2.0;
+                    whiskers.push((centre, clip(low), clip(high)));
+                    cut.extend(
+                        [low, high, value]
+                            .into_iter()
+                            .filter(|v| *v > y_hi)
+                            .map(|_| (centre, y_hi, true)),
+                    );
+                    cut.extend(
+                        [low, high, value]
+                            .into_iter()
+                            .filter(|v| *v < y_lo)
+                            .map(|_| (centre, y_lo, false)),
+                    );
                 }
             }
         }
@@ -183,6 +218,15 @@ impl<'a> SensitivityChart<'a> {
             BLACK.stroke_width(1),
         )))?;
         draw_error_bars(&mut chart, &whiskers, BLACK.stroke_width(1), 3)?;
+        cut.dedup_by(|a, b| a.0 == b.0 && a.2 == b.2);
+        chart.draw_series(cut.iter().map(|&(x, y, upward)| {
+            let tip = if upward { -CUT_MARK } else { CUT_MARK };
+            EmptyElement::at((x, y))
+                + Polygon::new(
+                    vec![(0, tip), (-CUT_MARK, 0), (CUT_MARK, 0)],
+                    BLACK.filled(),
+                )
+        }))?;
         Ok(())
     }
 }
@@ -219,5 +263,18 @@ impl Chart for SensitivityChart<'_> {
             self.draw_panel(&region, panel)?;
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn panel_range_covers_the_unit_interval_and_cuts_wild_estimates() {
+        assert_eq!(panel_range(0.1, 0.9), (-0.02, 1.04));
+        let (lo, hi) = panel_range(-0.1, 1.1);
+        assert!((lo + 0.12).abs() < 1e-12 && (hi - 1.14).abs() < 1e-12);
+        assert_eq!(panel_range(-141.5, 148.4), DISPLAY_RANGE);
     }
 }
