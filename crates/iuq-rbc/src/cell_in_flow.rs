@@ -146,6 +146,8 @@ impl CellInFlow {
         let parallel = self.lattice.is_parallel();
         self.ibm
             .interpolate(&self.lattice, &mut self.velocities, parallel);
+        // The force was spread onto these stencil nodes only; clear it before they move.
+        self.ibm.clear_spread(&mut self.lattice);
         for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
             *x = add(*x, *v);
         }
@@ -184,7 +186,6 @@ impl CellInFlow {
         };
         self.strain = strain?;
         geometry?;
-        self.lattice.clear_forces();
         Ok(())
     }
 

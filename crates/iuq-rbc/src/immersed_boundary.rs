@@ -92,10 +92,10 @@ pub struct ImmersedBoundary {
     /// The distinct nodes of all stencils and their coordinates.
     unique: Vec<[u32; 3]>,
     unique_velocity: Vec<[f64; 3]>,
-    /// Per lattice node: `stamp` equals `current` when `slot_of` is valid for this locate.
-    stamp: Vec<u32>,
+    /// One bit per lattice node: covered by a stencil of this locate (cleared as it is read).
+    covered: Vec<u64>,
+    /// Per covered node, its index in `unique`.
     slot_of: Vec<u32>,
-    current: u32,
 }
 
 impl ImmersedBoundary {
@@ -106,9 +106,8 @@ impl ImmersedBoundary {
             entry_slot: vec![0; 8 * vertices],
             unique: Vec::new(),
             unique_velocity: Vec::new(),
-            stamp: vec![0; geometry.nodes()],
+            covered: vec![0; geometry.nodes().div_ceil(64)],
             slot_of: vec![0; geometry.nodes()],
-            current: 0,
         }
     }
 
@@ -116,26 +115,41 @@ impl ImmersedBoundary {
     /// the index of the first vertex that has no fluid node around it (it left the channel),
     /// if any.
     pub fn locate(&mut self, geometry: &LatticeGeometry, x: &[[f64; 3]]) -> Option<usize> {
-        self.current = self.current.wrapping_add(1);
-        if self.current == 0 {
-            self.stamp.fill(0);
-            self.current = 1;
-        }
         self.unique.clear();
         let mut outside = None;
+        let (mut lowest, mut highest) = (usize::MAX, 0);
         for (i, (s, p)) in self.stencils.iter_mut().zip(x).enumerate() {
             *s = Stencil::at(geometry, *p);
             if s.len == 0 && outside.is_none() {
                 outside = Some(i);
             }
-            for k in 0..s.len {
-                let node = s.nodes[k];
-                if self.stamp[node] != self.current {
-                    self.stamp[node] = self.current;
+            for &node in &s.nodes[..s.len] {
+                self.covered[node / 64] |= 1 << (node % 64);
+                lowest = lowest.min(node);
+                highest = highest.max(node);
+            }
+        }
+        // The distinct nodes in the order of their index, so that gathering their populations
+        // walks memory row by row (neighbours in x share cache lines) instead of jumping.
+        if lowest <= highest {
+            let (nx, ny) = (geometry.nx, geometry.ny);
+            for word in lowest / 64..=highest / 64 {
+                let mut bits = std::mem::take(&mut self.covered[word]);
+                while bits != 0 {
+                    let node = 64 * word + bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
                     self.slot_of[node] = self.unique.len() as u32;
-                    self.unique.push(s.cells[k]);
+                    self.unique.push([
+                        (node % nx) as u32,
+                        ((node / nx) % ny) as u32,
+                        (node / (nx * ny)) as u32,
+                    ]);
                 }
-                self.entry_slot[8 * i + k] = self.slot_of[node];
+            }
+        }
+        for (i, s) in self.stencils.iter().enumerate() {
+            for k in 0..s.len {
+                self.entry_slot[8 * i + k] = self.slot_of[s.nodes[k]];
             }
         }
         outside
@@ -159,6 +173,17 @@ impl ImmersedBoundary {
                 lattice.add_force(s.nodes[k], [w * f[0], w * f[1], w * f[2]]);
             }
         }
+    }
+
+    /// Zero the force density that [`ImmersedBoundary::spread`] left on the stencil nodes of
+    /// this locate (the lattice must carry no other force).
+    pub fn clear_spread(&self, lattice: &mut Lattice) {
+        let g = *lattice.geometry();
+        lattice.clear_forces_at(
+            self.unique
+                .iter()
+                .map(|c| c[0] as usize + g.nx * (c[1] as usize + g.ny * c[2] as usize)),
+        );
     }
 
     /// Interpolate the fluid velocity (post-streaming populations plus half the force density
@@ -294,6 +319,11 @@ mod tests {
             assert!((total[d] - f[0][d] - f[1][d]).abs() < 1e-15);
         }
         l.clear_forces();
+        assert!((0..l.geometry().nodes()).all(|n| l.force(n) == [0.0; 3]));
+        // The stencil-only clear leaves the same empty field.
+        ibm.spread(&f, &mut l);
+        assert!((0..l.geometry().nodes()).any(|n| l.force(n) != [0.0; 3]));
+        ibm.clear_spread(&mut l);
         assert!((0..l.geometry().nodes()).all(|n| l.force(n) == [0.0; 3]));
     }
 }

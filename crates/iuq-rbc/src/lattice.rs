@@ -373,6 +373,19 @@ impl Lattice {
         }
     }
 
+    /// Zero the force density at `nodes` and mark their rows as carrying none: the clear for a
+    /// caller that knows these are the only nodes with force (the immersed boundary's stencil
+    /// nodes), a few thousand stores instead of every forced row.
+    pub fn clear_forces_at(&mut self, nodes: impl IntoIterator<Item = usize>) {
+        let nx = self.geometry.nx;
+        for node in nodes {
+            for d in 0..3 {
+                self.force[d][node] = 0.0;
+            }
+            self.row_forced[node / nx] = false;
+        }
+    }
+
     /// Set the same force density on every node (a body force).
     pub fn fill_force(&mut self, f: [f64; 3]) {
         for d in 0..3 {
