@@ -15,7 +15,8 @@
 //!
 //! # Validation
 //! The long checks of the spec stay out of the default test suite:
-//! `iuq rbc validate --protocol scaled|reference|both --stretch`, or the ignored tests `cargo test --release -p iuq-rbc --test shear_experiment -- --ignored`.
+//! `iuq rbc validate --protocol scaled|reference|both --stretch`, or the ignored tests
+//! `cargo test --release -p iuq-rbc --test shear_experiment -- --ignored`.
 //! No model constant is fitted to the validation numbers.
 //!
 //! # Performance

@@ -39,7 +39,7 @@ use std::time::Instant;
 use crate::cell_in_flow::CellInFlow;
 use crate::ellipse::elongation_index;
 use crate::error::{RbcError, Result};
-use crate::lattice::{Lattice, Precision, ZBoundary};
+use crate::lattice::{Lattice, Precision, ZBoundary, on_pool_worker};
 use crate::membrane_forces::{ForceCoefficients, ForceTerms, MembraneParameters, PastSingularity};
 use crate::mesh::Mesh;
 use crate::units::{CELL_RADIUS, LatticeUnits, shear_rate};
@@ -370,6 +370,10 @@ pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<Ce
 /// Fails with the reason when the mesh breaks, a value becomes non-finite, the cell leaves the
 /// channel or a recorded contour admits no ellipse.
 pub fn run_shear(experiment: &ShearExperiment) -> Result<ShearResult> {
+    on_pool_worker(|| run_shear_on_worker(experiment))
+}
+
+fn run_shear_on_worker(experiment: &ShearExperiment) -> Result<ShearResult> {
     experiment.validate()?;
     let setup = experiment.setup();
     let started = Instant::now();

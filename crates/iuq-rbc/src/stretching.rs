@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use crate::cell_in_flow::CellInFlow;
 use crate::error::{RbcError, Result};
-use crate::lattice::{Lattice, Precision, ZBoundary};
+use crate::lattice::{Lattice, Precision, ZBoundary, on_pool_worker};
 use crate::membrane_forces::{ForceCoefficients, MembraneParameters};
 use crate::mesh::Mesh;
 use crate::units::LatticeUnits;
@@ -92,6 +92,10 @@ fn extent(x: &[[f64; 3]], d: usize) -> f64 {
 
 /// Run one stretching experiment to equilibrium.
 pub fn run_stretch(e: &StretchExperiment) -> Result<StretchResult> {
+    on_pool_worker(|| run_stretch_on_worker(e))
+}
+
+fn run_stretch_on_worker(e: &StretchExperiment) -> Result<StretchResult> {
     e.membrane.validate()?;
     if !(e.force_pn.is_finite() && e.force_pn >= 0.0) {
         return Err(RbcError::invalid(
