@@ -3,7 +3,10 @@
 //! axial diameter at equilibrium is compared with the measured one.
 //!
 //! As in HemoCell `helper/hemoCellStretch.cpp`, the 7 vertices with the smallest x of the
-//! undeformed cell are pulled with −F/7 each along x and the 7 with the largest x with +F/7.
+//! undeformed cell (a rim vertex and its one-ring) are pulled along −x and the 7 with the largest
+//! x along +x. HemoCell's helper adds the configured force to each of the 7; here F is the
+//! tweezers' total force on each side, the quantity the experiment measured, so each vertex
+//! carries F/7.
 //! The box is HemoCell's, 26×13×13 µm (52×26×26 nodes), here periodic in x and y with resting
 //! walls in z (HemoCell closes all faces with resting velocity walls; the equilibrium shape does
 //! not depend on the fluid). The cell lies in the x–y plane, so x and y are in-plane diameters.
@@ -26,6 +29,14 @@ use crate::units::LatticeUnits;
 /// `examples/stretchCell/validation/reference-axial.dat`, as quoted by the spec.
 pub const OPTICAL_TWEEZERS_AXIAL: [(f64, f64); 4] =
     [(1.8, 8.0), (15.0, 9.4), (35.0, 10.9), (62.0, 12.3)];
+
+/// Transverse (in-plane) diameters (µm) at the same forces (pN): HemoCell
+/// `examples/stretchCell/validation/reference-transverse.dat` (Mills et al. 2004), interpolated
+/// linearly between its tabulated forces. The spec quotes only the axial diameters; the
+/// transverse one tells the membrane's in-plane elasticity apart from the local deformation
+/// under the pulled vertices, which only the axial diameter contains.
+pub const OPTICAL_TWEEZERS_TRANSVERSE: [(f64, f64); 4] =
+    [(1.8, 7.776), (15.0, 7.168), (35.0, 6.427), (62.0, 5.654)];
 
 /// Nodes of the stretching box.
 pub const STRETCH_DOMAIN: [usize; 3] = [52, 26, 26];
@@ -90,6 +101,17 @@ fn extent(x: &[[f64; 3]], d: usize) -> f64 {
     hi - lo
 }
 
+/// The `n` vertices with the smallest x and the `n` with the largest x (HemoCell's choice; on
+/// the icosphere mesh, n = 7 is a rim vertex and its one-ring on each side).
+pub fn pulled_vertices(mesh: &Mesh, n: usize) -> (Vec<usize>, Vec<usize>) {
+    let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
+    order.sort_by(|&a, &b| mesh.vertices[a][0].total_cmp(&mesh.vertices[b][0]));
+    let n = n.min(order.len() / 2);
+    let upper = order.iter().rev().take(n).copied().collect();
+    order.truncate(n);
+    (order, upper)
+}
+
 /// Run one stretching experiment to equilibrium.
 pub fn run_stretch(e: &StretchExperiment) -> Result<StretchResult> {
     on_pool_worker(|| run_stretch_on_worker(e))
@@ -138,12 +160,11 @@ fn run_stretch_on_worker(e: &StretchExperiment) -> Result<StretchResult> {
     let coefficients = ForceCoefficients::hemocell(&e.membrane, &units, mesh.triangles.len())
         .scaled(e.force_scale);
     let pull = units.force_lu(e.force_pn * 1e-12) * e.force_scale / e.forced_vertices as f64;
-    let mut order: Vec<usize> = (0..mesh.vertices.len()).collect();
-    order.sort_by(|&a, &b| mesh.vertices[a][0].total_cmp(&mesh.vertices[b][0]));
+    let (lower, upper) = pulled_vertices(&mesh, e.forced_vertices);
     let mut external = vec![[0.0; 3]; mesh.vertices.len()];
-    for k in 0..e.forced_vertices {
-        external[order[k]] = [-pull, 0.0, 0.0];
-        external[order[order.len() - 1 - k]] = [pull, 0.0, 0.0];
+    for (&l, &u) in lower.iter().zip(&upper) {
+        external[l] = [-pull, 0.0, 0.0];
+        external[u] = [pull, 0.0, 0.0];
     }
     let mut cell = CellInFlow::new(lattice, mesh, coefficients, None)?;
     cell.set_external_forces(Some(external));
@@ -169,4 +190,41 @@ fn run_stretch_on_worker(e: &StretchExperiment) -> Result<StretchResult> {
         converged,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_reference_tables_share_their_forces() {
+        for (a, t) in OPTICAL_TWEEZERS_AXIAL
+            .iter()
+            .zip(&OPTICAL_TWEEZERS_TRANSVERSE)
+        {
+            assert_eq!(a.0, t.0);
+            assert!(a.1 > t.1, "stretched cells are longer than wide");
+        }
+    }
+
+    #[test]
+    fn seven_pulled_vertices_are_a_rim_vertex_and_its_one_ring() {
+        let mesh = Mesh::red_blood_cell_lu(0.5e-6, [26.0, 13.0, 13.0]);
+        let (lower, upper) = pulled_vertices(&mesh, 7);
+        for side in [&lower, &upper] {
+            assert_eq!(side.len(), 7);
+            let tip = side[0];
+            assert_eq!(mesh.ring(tip).len(), 6);
+            let mut ring: Vec<usize> = mesh.ring(tip).to_vec();
+            let mut rest: Vec<usize> = side[1..].to_vec();
+            ring.sort_unstable();
+            rest.sort_unstable();
+            assert_eq!(ring, rest);
+            assert!(
+                (mesh.vertices[tip][2] - 13.0).abs() < 1e-9,
+                "the tip lies on the rim"
+            );
+        }
+        assert!(mesh.vertices[lower[0]][0] < 26.0 && mesh.vertices[upper[0]][0] > 26.0);
+    }
 }

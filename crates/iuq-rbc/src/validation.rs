@@ -7,7 +7,9 @@ use rayon::prelude::*;
 
 use crate::membrane_forces::{MembraneParameters, PastSingularity};
 use crate::protocol::{Protocol, ShearExperiment, run_shear};
-use crate::stretching::{OPTICAL_TWEEZERS_AXIAL, StretchExperiment, run_stretch};
+use crate::stretching::{
+    OPTICAL_TWEEZERS_AXIAL, OPTICAL_TWEEZERS_TRANSVERSE, StretchExperiment, run_stretch,
+};
 
 /// The cell of HemoCell's validation runs: kLink = 36.7, kBend = 367 (kArea 5, kVolume 20).
 pub const VALIDATION_MEMBRANE: MembraneParameters = MembraneParameters {
@@ -111,6 +113,10 @@ pub struct StretchValidationRow {
     pub transverse_um: Option<f64>,
     /// `(axial − reference)/reference`.
     pub relative_difference: Option<f64>,
+    /// Measured transverse diameter, µm.
+    pub reference_transverse_um: f64,
+    /// `(transverse − reference)/reference`.
+    pub transverse_relative_difference: Option<f64>,
     /// Whether the run reached equilibrium.
     pub converged: bool,
     /// Why the run failed, if it did.
@@ -123,7 +129,8 @@ pub struct StretchValidationRow {
 pub fn validate_stretch() -> Vec<StretchValidationRow> {
     OPTICAL_TWEEZERS_AXIAL
         .par_iter()
-        .map(|&(force, reference)| {
+        .zip(OPTICAL_TWEEZERS_TRANSVERSE.par_iter())
+        .map(|(&(force, reference), &(_, reference_transverse))| {
             let mut e = StretchExperiment::new(force);
             e.parallel = false;
             match run_stretch(&e) {
@@ -133,6 +140,10 @@ pub fn validate_stretch() -> Vec<StretchValidationRow> {
                     axial_um: Some(r.axial_um),
                     transverse_um: Some(r.transverse_um),
                     relative_difference: Some((r.axial_um - reference) / reference),
+                    reference_transverse_um: reference_transverse,
+                    transverse_relative_difference: Some(
+                        (r.transverse_um - reference_transverse) / reference_transverse,
+                    ),
                     converged: r.converged,
                     failure: None,
                     seconds: r.seconds,
@@ -143,6 +154,8 @@ pub fn validate_stretch() -> Vec<StretchValidationRow> {
                     axial_um: None,
                     transverse_um: None,
                     relative_difference: None,
+                    reference_transverse_um: reference_transverse,
+                    transverse_relative_difference: None,
                     converged: false,
                     failure: Some(err.to_string()),
                     seconds: 0.0,

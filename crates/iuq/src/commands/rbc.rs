@@ -415,17 +415,20 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
         }
         if !stretch_rows.is_empty() {
             text.push_str(&format!(
-                "{:>10} {:>10} {:>10} {:>8}\n",
-                "force pN", "measured", "axial µm", "diff"
+                "{:>10} {:>10} {:>10} {:>8} {:>10} {:>14} {:>8}\n",
+                "force pN", "measured", "axial µm", "diff", "measured", "transverse µm", "diff"
             ));
+            let percent = |d: Option<f64>| d.map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v));
             for r in &stretch_rows {
                 text.push_str(&format!(
-                    "{:>10} {:>10.1} {:>10} {:>8}  {}\n",
+                    "{:>10} {:>10.1} {:>10} {:>8} {:>10.3} {:>14} {:>8}  {}\n",
                     r.force_pn,
                     r.reference_axial_um,
                     r.axial_um.map_or("-".into(), |v| format!("{v:.3}")),
-                    r.relative_difference
-                        .map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v)),
+                    percent(r.relative_difference),
+                    r.reference_transverse_um,
+                    r.transverse_um.map_or("-".into(), |v| format!("{v:.3}")),
+                    percent(r.transverse_relative_difference),
                     r.failure.clone().unwrap_or_default()
                 ));
             }
