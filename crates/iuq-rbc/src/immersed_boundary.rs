@@ -14,8 +14,6 @@ use crate::lattice::{Lattice, LatticeGeometry, ZBoundary};
 pub struct Stencil {
     /// Node indices (the first `len` are used).
     pub nodes: [usize; 8],
-    /// Their lattice coordinates (x, y, z).
-    pub cells: [[u32; 3]; 8],
     /// Weights, summing to one over the first `len` entries.
     pub weights: [f64; 8],
     /// Number of nodes in use (0 when the vertex is outside the fluid).
@@ -57,7 +55,6 @@ impl Stencil {
             if let (Some(i), Some(j), Some(k)) = (index[0][cx], index[1][cy], index[2][cz]) {
                 if w > 0.0 {
                     s.nodes[s.len] = g.node(i, j, k);
-                    s.cells[s.len] = [i as u32, j as u32, k as u32];
                     s.weights[s.len] = w;
                     s.len += 1;
                     total += w;

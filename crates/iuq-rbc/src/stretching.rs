@@ -25,18 +25,45 @@ use crate::membrane_forces::{ForceCoefficients, MembraneParameters};
 use crate::mesh::Mesh;
 use crate::units::LatticeUnits;
 
-/// Axial diameters (µm) measured at a stretching force (pN): HemoCell
-/// `examples/stretchCell/validation/reference-axial.dat`, as quoted by the spec.
-pub const OPTICAL_TWEEZERS_AXIAL: [(f64, f64); 4] =
-    [(1.8, 8.0), (15.0, 9.4), (35.0, 10.9), (62.0, 12.3)];
+/// One optical-tweezers measurement: the cell's diameters under a pulling force.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TweezersMeasurement {
+    /// Total pulling force on each side, pN.
+    pub force_pn: f64,
+    /// Diameter along the pull, µm.
+    pub axial_um: f64,
+    /// In-plane diameter across the pull, µm.
+    pub transverse_um: f64,
+}
 
-/// Transverse (in-plane) diameters (µm) at the same forces (pN): HemoCell
-/// `examples/stretchCell/validation/reference-transverse.dat` (Mills et al. 2004), interpolated
-/// linearly between its tabulated forces. The spec quotes only the axial diameters; the
-/// transverse one tells the membrane's in-plane elasticity apart from the local deformation
-/// under the pulled vertices, which only the axial diameter contains.
-pub const OPTICAL_TWEEZERS_TRANSVERSE: [(f64, f64); 4] =
-    [(1.8, 7.776), (15.0, 7.168), (35.0, 6.427), (62.0, 5.654)];
+/// The measurements of the check (Mills et al. 2004). Axial diameters: HemoCell
+/// `examples/stretchCell/validation/reference-axial.dat`, as quoted by the spec. Transverse
+/// diameters: its `reference-transverse.dat`, interpolated linearly at the same forces. The spec
+/// quotes only the axial diameters; the transverse one tells the membrane's in-plane elasticity
+/// apart from the local deformation under the pulled vertices, which only the axial diameter
+/// contains.
+pub const OPTICAL_TWEEZERS: [TweezersMeasurement; 4] = [
+    TweezersMeasurement {
+        force_pn: 1.8,
+        axial_um: 8.0,
+        transverse_um: 7.776,
+    },
+    TweezersMeasurement {
+        force_pn: 15.0,
+        axial_um: 9.4,
+        transverse_um: 7.168,
+    },
+    TweezersMeasurement {
+        force_pn: 35.0,
+        axial_um: 10.9,
+        transverse_um: 6.427,
+    },
+    TweezersMeasurement {
+        force_pn: 62.0,
+        axial_um: 12.3,
+        transverse_um: 5.654,
+    },
+];
 
 /// Nodes of the stretching box.
 pub const STRETCH_DOMAIN: [usize; 3] = [52, 26, 26];
@@ -197,13 +224,12 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_reference_tables_share_their_forces() {
-        for (a, t) in OPTICAL_TWEEZERS_AXIAL
-            .iter()
-            .zip(&OPTICAL_TWEEZERS_TRANSVERSE)
-        {
-            assert_eq!(a.0, t.0);
-            assert!(a.1 > t.1, "stretched cells are longer than wide");
+    fn stretched_cells_are_longer_than_wide() {
+        for m in &OPTICAL_TWEEZERS {
+            assert!(
+                m.axial_um > m.transverse_um,
+                "stretched cells are longer than wide"
+            );
         }
     }
 

@@ -7,9 +7,7 @@ use rayon::prelude::*;
 
 use crate::membrane_forces::{MembraneParameters, PastSingularity};
 use crate::protocol::{Protocol, ShearExperiment, run_shear};
-use crate::stretching::{
-    OPTICAL_TWEEZERS_AXIAL, OPTICAL_TWEEZERS_TRANSVERSE, StretchExperiment, run_stretch,
-};
+use crate::stretching::{OPTICAL_TWEEZERS, StretchExperiment, run_stretch};
 
 /// The cell of HemoCell's validation runs: kLink = 36.7, kBend = 367 (kArea 5, kVolume 20).
 pub const VALIDATION_MEMBRANE: MembraneParameters = MembraneParameters {
@@ -127,10 +125,11 @@ pub struct StretchValidationRow {
 
 /// The optical-tweezers check at 1.8, 15, 35 and 62 pN with kLink = 15, kBend = 80.
 pub fn validate_stretch() -> Vec<StretchValidationRow> {
-    OPTICAL_TWEEZERS_AXIAL
+    OPTICAL_TWEEZERS
         .par_iter()
-        .zip(OPTICAL_TWEEZERS_TRANSVERSE.par_iter())
-        .map(|(&(force, reference), &(_, reference_transverse))| {
+        .map(|m| {
+            let (force, reference, reference_transverse) =
+                (m.force_pn, m.axial_um, m.transverse_um);
             let mut e = StretchExperiment::new(force);
             e.parallel = false;
             match run_stretch(&e) {

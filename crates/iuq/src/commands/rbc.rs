@@ -15,7 +15,7 @@ use iuq_rbc::protocol::{
     DEFAULT_LATTICE_SHEAR_RATE, Protocol, SHEAR_DOMAIN, START_STRAIN, ShearExperiment, run_shear,
 };
 use iuq_rbc::shape_output::ShapeFormat;
-use iuq_rbc::stretching::{OPTICAL_TWEEZERS_AXIAL, StretchExperiment, run_stretch};
+use iuq_rbc::stretching::{OPTICAL_TWEEZERS, StretchExperiment, run_stretch};
 use iuq_rbc::validation::{validate_shear, validate_stretch};
 use iuq_rbc::{MembraneParameters, PastSingularity, RbcError};
 
@@ -290,7 +290,7 @@ pub struct StretchArgs {
 
 fn stretch(args: &StretchArgs, json: bool) -> Result<()> {
     let forces = if args.forces.is_empty() {
-        OPTICAL_TWEEZERS_AXIAL.iter().map(|(f, _)| *f).collect()
+        OPTICAL_TWEEZERS.iter().map(|m| m.force_pn).collect()
     } else {
         args.forces.clone()
     };
@@ -394,6 +394,7 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
     let value = json!({ "shear": shear_rows, "stretch": stretch_rows });
     emit(json, &value, || {
         let mut text = String::new();
+        let percent = |d: Option<f64>| d.map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v));
         if !shear_rows.is_empty() {
             text.push_str(&format!(
                 "{:<10} {:>8} {:>9} {:>9} {:>8} {:>8}  {}\n",
@@ -407,8 +408,7 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
                     r.hemocell,
                     r.el_mean.map_or("-".into(), |v| format!("{v:.4}")),
                     r.el_std.map_or("-".into(), |v| format!("{v:.4}")),
-                    r.relative_difference
-                        .map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v)),
+                    percent(r.relative_difference),
                     r.failure.clone().unwrap_or_default()
                 ));
             }
@@ -418,7 +418,6 @@ fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
                 "{:>10} {:>10} {:>10} {:>8} {:>10} {:>14} {:>8}\n",
                 "force pN", "measured", "axial µm", "diff", "measured", "transverse µm", "diff"
             ));
-            let percent = |d: Option<f64>| d.map_or("-".into(), |v| format!("{:+.1}%", 100.0 * v));
             for r in &stretch_rows {
                 text.push_str(&format!(
                     "{:>10} {:>10.1} {:>10} {:>8} {:>10.3} {:>14} {:>8}  {}\n",
