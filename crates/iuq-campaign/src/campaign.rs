@@ -66,6 +66,9 @@ pub struct CampaignOptions {
     pub max_parallel: Option<usize>,
     /// Overrides `executor.poll_interval` (seconds).
     pub poll_interval: Option<f64>,
+    /// Evaluate the runs in this process with this model instead of starting the study's
+    /// command (local executor only; see [`crate::in_process`]).
+    pub in_process: Option<crate::in_process::SharedModel>,
 }
 
 /// A campaign: a study, its store and an executor.
@@ -183,7 +186,11 @@ impl Campaign {
             )))
         };
         let executor: Box<dyn Executor> = match study.executor.kind {
-            ExecutorKind::Local => Box::new(LocalExecutor::new(compiled.clone(), max_parallel)),
+            ExecutorKind::Local => Box::new(LocalExecutor::new(
+                compiled.clone(),
+                max_parallel,
+                options.in_process.clone(),
+            )),
             ExecutorKind::Slurm => Box::new(SlurmExecutor::new(SlurmSettings {
                 campaign_dir: directory.clone(),
                 spec_path,

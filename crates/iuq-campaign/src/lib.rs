@@ -13,6 +13,7 @@
 //! | [`decoder`] | outputs from a JSON file, a CSV column or a regex over a file |
 //! | [`run_directory`] | run directories: `params.json`, filled templates, batch input CSVs |
 //! | [`supervised_process`] | process groups, timeouts (SIGTERM, then SIGKILL) |
+//! | [`in_process`] | models evaluated in this process (formulas, UM-Bridge, the cell model) |
 //! | [`worker`] | executes one task, writes `result.json`/`status.json` atomically (`iuq worker`) |
 //! | [`store`] | the SQLite campaign store |
 //! | [`executor`] | local, Slurm and HyperQueue executors |
@@ -35,6 +36,7 @@ pub mod design;
 pub mod error;
 pub mod executor;
 pub mod export;
+pub mod in_process;
 pub mod outcome;
 pub mod retry_policy;
 pub mod run_directory;
@@ -47,6 +49,7 @@ pub mod worker;
 pub use campaign::{Campaign, CampaignOptions, Progress, ResumeSummary, STORE_FILE, store_path};
 pub use campaign_model::CampaignModel;
 pub use error::{CampaignError, Result};
+pub use in_process::{InProcessModel, InProcessOutputs, SharedModel};
 pub use outcome::{OutcomeKind, RunResult, TaskReport};
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};

@@ -136,15 +136,28 @@ fn all_runs(task: &Task, kind: OutcomeKind, reason: &str) -> Vec<RunResult> {
 }
 
 /// The program to start for a command whose first word is `program`: the word `iuq` names the
-/// iuq executable running this worker (campaigns of `iuq rbc shear` then need no `PATH` set-up
+/// iuq executable ([`iuq_executable`]: campaigns of `iuq rbc shear` then need no `PATH` set-up
 /// and use the same version as the coordinator); anything else is taken as written.
 fn program(program: &str) -> std::ffi::OsString {
-    if program == SELF_PROGRAM {
-        if let Ok(exe) = std::env::current_exe() {
-            return exe.into_os_string();
-        }
+    if program == SELF_PROGRAM
+        && let Some(exe) = iuq_executable()
+    {
+        return exe.into_os_string();
     }
     program.into()
+}
+
+/// The iuq executable that the command word `iuq` and the workers of cluster executors run:
+/// `$IUQ_EXECUTABLE` when set, else the running executable when it is an `iuq` binary, else
+/// `None` (the word is then looked up on `PATH`). A library host that is not `iuq` — a Python
+/// interpreter, a test binary — thus never runs itself by mistake.
+pub fn iuq_executable() -> Option<std::path::PathBuf> {
+    if let Some(path) = std::env::var_os("IUQ_EXECUTABLE").filter(|p| !p.is_empty()) {
+        return Some(path.into());
+    }
+    let exe = std::env::current_exe().ok()?;
+    let stem = exe.file_stem()?.to_string_lossy().into_owned();
+    (stem == SELF_PROGRAM).then_some(exe)
 }
 
 /// The command word that names the running iuq executable (see [`program`]).

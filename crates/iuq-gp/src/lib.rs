@@ -14,6 +14,8 @@
 //! - [`q2()`], [`GaussianProcess::loo_q2`]: test-set and closed-form leave-one-out Q2.
 //! - [`GaussianProcess::to_json_string`] / [`GaussianProcess::from_json_str`]: persistence.
 //! - [`GpBank`]: one GP per output, an [`iuq_core::Model`].
+//! - [`GaussianProcess::posterior_covariance`]: cov[f(a), f(b) | data], for sequential designs.
+//! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
 //! The crate does no I/O.
 
@@ -21,6 +23,7 @@
 
 pub mod bank;
 pub mod bounds;
+pub mod classification;
 mod data;
 pub mod diagnostics;
 pub mod error;
@@ -32,6 +35,7 @@ pub mod log_marginal_likelihood;
 mod multi_start;
 pub mod optimizer;
 pub mod persistence;
+mod posterior_covariance;
 pub mod prediction;
 pub mod scaling;
 pub mod screening;
@@ -42,6 +46,7 @@ mod vector_math;
 
 pub use bank::{GpBank, PredictiveStd};
 pub use bounds::Bounds;
+pub use classification::{ClassifierOptions, FailureClassifier};
 pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
 pub use error::{GpError, Result};
 pub use fit::{FitOptions, fit};

@@ -6,13 +6,7 @@
 
 mod commands;
 mod input_error;
-mod likelihood_section;
-mod pipeline;
 mod report_output;
-mod sampler_section;
-mod study;
-mod table_io;
-mod umbridge_section;
 
 use clap::{Parser, Subcommand};
 

@@ -22,6 +22,7 @@ use crate::error::Result;
 use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
 };
+use crate::in_process::{SharedModel, execute_in_process};
 use crate::outcome::{OutcomeKind, host_name, unix_now};
 use crate::study::ExecutorKind;
 use crate::supervised_process::signal_group;
@@ -54,8 +55,13 @@ pub fn default_parallelism() -> usize {
 }
 
 impl LocalExecutor {
-    /// An executor running `max_parallel` tasks at once (default: the number of cores).
-    pub fn new(spec: CompiledSpec, max_parallel: Option<usize>) -> Self {
+    /// An executor running `max_parallel` tasks at once (default: the number of cores), as
+    /// processes of the spec's command, or with `in_process` in this process.
+    pub fn new(
+        spec: CompiledSpec,
+        max_parallel: Option<usize>,
+        in_process: Option<SharedModel>,
+    ) -> Self {
         let capacity = max_parallel.unwrap_or_else(default_parallelism).max(1);
         let (task_tx, task_rx) = channel::<SubmittedTask>();
         let (event_tx, event_rx) = channel();
@@ -68,6 +74,7 @@ impl LocalExecutor {
                 let event_tx = event_tx.clone();
                 let spec = Arc::clone(&spec);
                 let host = host.clone();
+                let in_process = in_process.clone();
                 std::thread::spawn(move || {
                     loop {
                         let next = match task_rx.lock() {
@@ -75,7 +82,13 @@ impl LocalExecutor {
                             Err(_) => return,
                         };
                         let Ok(task) = next else { return };
-                        let report = execute_task_with_start(&spec, &task, &event_tx, &host);
+                        let report = execute_task_with_start(
+                            &spec,
+                            in_process.as_ref(),
+                            &task,
+                            &event_tx,
+                            &host,
+                        );
                         if event_tx.send((true, report)).is_err() {
                             return;
                         }
@@ -96,6 +109,7 @@ impl LocalExecutor {
 
 fn execute_task_with_start(
     spec: &CompiledSpec,
+    in_process: Option<&SharedModel>,
     task: &SubmittedTask,
     events: &Sender<(bool, Vec<ExecutorEvent>)>,
     host: &str,
@@ -112,7 +126,10 @@ fn execute_task_with_start(
         })
         .collect();
     let _ = events.send((false, started));
-    let report = execute_task(spec, &task.task, false);
+    let report = match in_process {
+        Some(model) => execute_in_process(model.0.as_ref(), &task.task, spec.spec.outputs.len()),
+        None => execute_task(spec, &task.task, false),
+    };
     report_events(task, report)
 }
 

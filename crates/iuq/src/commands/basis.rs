@@ -1,7 +1,8 @@
 //! `iuq basis STUDY`: posterior sampling and evidence with BASIS (Wu et al. 2017).
 //!
-//! Reads the study's parameters and priors, its `[likelihood]` (see [`crate::likelihood_section`])
-//! and `[sampler]` ([`crate::sampler_section`]) sections, and writes to the output directory:
+//! Reads the study's parameters and priors, its `[likelihood]` (see
+//! [`iuq_study::likelihood_section`]) and `[sampler]` ([`iuq_study::sampler_section`]) sections,
+//! and writes to the output directory (by [`iuq_study::posterior::sample_posterior`]):
 //! - `checkpoint.json` — the state after every stage, written atomically (format:
 //!   `iuq_basis::checkpoint`); `--resume DIR` continues from `DIR/checkpoint.json`
 //!   bit-identically;
@@ -18,29 +19,22 @@
 //! posterior.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
-use std::time::Instant;
+use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::Args;
 use indicatif::{ProgressBar, ProgressStyle};
-use serde_json::{Map, Value, json};
+use serde_json::json;
 
-use iuq_basis::checkpoint::{from_json, to_json};
+use iuq_basis::checkpoint::from_json;
 use iuq_basis::summary::DEFAULT_PROBABILITIES;
-use iuq_basis::{
-    Basis, BasisError, BasisState, Control, CurveModel, ErrorModel, LogDensityLikelihood,
-    LogLikelihood, Observer, PosteriorSummary, PredictionErrorLikelihood, StopReason, marginal_1d,
-    marginal_2d, marginal_range,
-};
-use iuq_core::{Model, ParameterSpace};
+use iuq_basis::{BasisState, StopReason};
+use iuq_study::Study;
+use iuq_study::posterior::{build_posterior, by_name, sample_posterior};
+use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 
 use crate::input_error::{BadInput, input_error};
-use crate::likelihood_section::{LikelihoodSection, parse_likelihood};
 use crate::report_output::{emit, short};
-use crate::sampler_section::{SamplerOverrides, parse_sampler};
-use crate::study::Study;
-use crate::table_io::{write_atomically, write_numeric_csv};
 
 /// Arguments of `iuq basis`.
 #[derive(Debug, Args)]
@@ -72,101 +66,34 @@ pub struct BasisArgs {
     pub stop_after: Option<usize>,
 }
 
-/// The likelihood of a study, with its sampled parameter space.
-pub(crate) struct StudyPosterior {
-    /// The sampled parameters (the study's, and σ_m when the modelling error is estimated).
-    pub(crate) space: ParameterSpace,
-    /// ln f(D | θ).
-    pub(crate) likelihood: Box<dyn LogLikelihood>,
-    /// What the likelihood is, for the summary.
-    pub(crate) description: Value,
-}
-
-fn build_posterior(study: &Study) -> Result<StudyPosterior> {
-    build_posterior_with(study, || study.model())
-}
-
-/// The likelihood of `study`, comparing the outputs of the model `model()` builds with the data
-/// (`model` is called only when the `[likelihood]` needs a model: data without `prediction`).
-pub(crate) fn build_posterior_with<M: Model + 'static>(
-    study: &Study,
-    model: impl FnOnce() -> Result<M>,
-) -> Result<StudyPosterior> {
-    let file = study.path.display().to_string();
-    match parse_likelihood(study)? {
-        LikelihoodSection::LogDensity(source) => {
-            let likelihood = LogDensityLikelihood::new(&source, &study.space)
-                .bad_input(|| format!("{file}: key `likelihood.log_density`"))?;
-            Ok(StudyPosterior {
-                space: study.space.clone(),
-                likelihood: Box::new(likelihood),
-                description: json!({"kind": "log_density", "log_density": source}),
-            })
-        }
-        LikelihoodSection::Data(data) => {
-            let errors = ErrorModel {
-                measurement_error: data.measurement_error,
-                computational_error: data.computational_error,
-                modelling_error: data.modelling_error,
-            };
-            let description = json!({
-                "kind": "prediction_error",
-                "data": data.file.display().to_string(),
-                "points": data.x.len(),
-                "measurement_error": data.measurement_error && data.observations.measurement_std.is_some(),
-                "computational_error": data.computational_error.name(),
-                "modelling_error": data.modelling_error,
-                "model": if data.prediction.is_some() { "prediction" } else { "model" },
-            });
-            let n = data.x.len();
-            let (space, likelihood): (ParameterSpace, Box<dyn LogLikelihood>) = if let Some(
-                formula,
-            ) =
-                &data.prediction
-            {
-                let model = CurveModel::new(study.space.names(), formula, data.x.clone())
-                    .bad_input(|| format!("{file}: key `likelihood.prediction`"))?;
-                let likelihood = PredictionErrorLikelihood::new(model, data.observations, errors)
-                    .bad_input(|| format!("{file}: section `[likelihood]`"))?;
-                let space = likelihood
-                    .parameter_space(&study.space)
-                    .bad_input(|| format!("{file}: section `[likelihood]`"))?;
-                (space, Box::new(likelihood))
-            } else {
-                let model = model()?;
-                if model.output_dimension() != n {
-                    return Err(input_error(format!(
-                        "{file}: key `model.outputs`: the model has {} outputs but the data has {n} points (output j is compared with data point j, in file order; or give `likelihood.prediction = \"formula of the parameters and x\"`)",
-                        model.output_dimension()
-                    )));
-                }
-                let likelihood = PredictionErrorLikelihood::new(model, data.observations, errors)
-                    .bad_input(|| format!("{file}: section `[likelihood]`"))?;
-                let space = likelihood
-                    .parameter_space(&study.space)
-                    .bad_input(|| format!("{file}: section `[likelihood]`"))?;
-                (space, Box::new(likelihood))
-            };
-            Ok(StudyPosterior {
-                space,
-                likelihood,
-                description,
-            })
-        }
-    }
-}
-
-/// Writes the checkpoint and the stage table after every stage, reports progress, and stops
-/// after `stop_after`.
-struct StageReporter {
-    out: PathBuf,
+/// The progress of a BASIS run on stderr after every stage: a progress bar on a terminal, log
+/// lines (`basis: stage …`) otherwise.
+pub struct StageProgress {
     bar: Option<ProgressBar>,
-    stop_after: Option<usize>,
-    started: Instant,
 }
 
-impl StageReporter {
-    fn report(&self, state: &BasisState) {
+impl StageProgress {
+    /// Start reporting (the bar, on a terminal, shows the elapsed time from now on).
+    pub fn start() -> Self {
+        let bar = if std::io::stderr().is_terminal() {
+            let bar = ProgressBar::new(1000);
+            bar.set_style(
+                ProgressStyle::with_template(
+                    "basis [{elapsed_precise}] {bar:25} p {pos}/{len}‰ {wide_msg}",
+                )
+                .unwrap_or_else(|_| ProgressStyle::default_bar()),
+            );
+            // keep the elapsed time moving during long stages (an expensive model)
+            bar.enable_steady_tick(std::time::Duration::from_millis(500));
+            Some(bar)
+        } else {
+            None
+        };
+        Self { bar }
+    }
+
+    /// Report the stage that just ended.
+    pub fn report(&self, state: &BasisState) {
         let Some(d) = state.diagnostics.last() else {
             return;
         };
@@ -202,281 +129,12 @@ impl StageReporter {
         }
     }
 
-    fn write(&self, state: &BasisState) -> Result<()> {
-        let text = to_json(state)?;
-        write_atomically(&self.out.join("checkpoint.json"), text.as_bytes())?;
-        write_stages(&self.out, state)
-    }
-}
-
-impl Observer for StageReporter {
-    fn observe(&mut self, state: &BasisState) -> iuq_basis::Result<Control> {
-        self.write(state)
-            .map_err(|e| BasisError::Observer(format!("{e:#}")))?;
-        self.report(state);
-        if self.stop_after.is_some_and(|s| state.stage >= s) {
-            return Ok(Control::Stop);
-        }
-        Ok(Control::Continue)
-    }
-}
-
-fn write_stages(out: &Path, state: &BasisState) -> Result<()> {
-    let text = serde_json::to_string_pretty(&state.diagnostics)?;
-    write_atomically(&out.join("stages.json"), text.as_bytes())?;
-    let columns: Vec<String> = [
-        "stage",
-        "exponent",
-        "step",
-        "cv",
-        "ess_fraction",
-        "step_clamped",
-        "log_evidence_increment",
-        "log_evidence",
-        "max_log_likelihood",
-        "chains",
-        "proposals",
-        "accepted",
-        "acceptance_rate",
-        "out_of_support",
-        "failures",
-        "evaluations",
-        "batches",
-        "unique_fraction",
-        "wall_seconds",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect();
-    let rows: Vec<Vec<f64>> = state
-        .diagnostics
-        .iter()
-        .map(|d| {
-            vec![
-                d.stage as f64,
-                d.exponent,
-                d.step,
-                d.cv,
-                d.ess_fraction,
-                f64::from(u8::from(d.step_clamped)),
-                d.log_evidence_increment,
-                d.log_evidence,
-                d.max_log_likelihood,
-                d.chains as f64,
-                d.proposals as f64,
-                d.accepted as f64,
-                d.acceptance_rate,
-                d.out_of_support as f64,
-                d.failures as f64,
-                d.evaluations as f64,
-                d.batches as f64,
-                d.unique_fraction,
-                d.wall_seconds,
-            ]
-        })
-        .collect();
-    write_numeric_csv(&out.join("stages.csv"), &columns, &rows)
-}
-
-fn by_name(names: &[String], values: &[f64]) -> Value {
-    Value::Object(
-        names
-            .iter()
-            .zip(values)
-            .map(|(k, v)| (k.clone(), json!(v)))
-            .collect::<Map<_, _>>(),
-    )
-}
-
-fn marginals(state: &BasisState, space: &ParameterSpace) -> Value {
-    let names = &state.parameter_names;
-    let d = names.len();
-    let ranges = space.ranges();
-    let mut one = Vec::new();
-    let mut grid_ranges = Vec::new();
-    for (k, name) in names.iter().enumerate() {
-        // the KDE's natural range, clipped to the prior's
-        let range = marginal_range(&state.samples, k)
-            .ok()
-            .map(|(lo, hi)| (lo.max(ranges[k].0), hi.min(ranges[k].1)))
-            .filter(|(lo, hi)| lo < hi);
-        grid_ranges.push(range);
-        match range.map(|r| marginal_1d(&state.samples, k, name, 200, Some(r))) {
-            Some(Ok(m)) => one.push(json!(m)),
-            Some(Err(e)) => one.push(json!({"parameter": name, "error": e.to_string()})),
-            None => one.push(
-                json!({"parameter": name, "error": "no density: the samples of this parameter are constant"}),
-            ),
+    /// The run is over: clear the bar.
+    pub fn finish(self) {
+        if let Some(bar) = &self.bar {
+            bar.finish_and_clear();
         }
     }
-    let mut two = Vec::new();
-    for a in 0..d {
-        for b in a + 1..d {
-            let ranges = grid_ranges[a].zip(grid_ranges[b]);
-            let result = match ranges {
-                Some(r) => marginal_2d(
-                    &state.samples,
-                    (a, b),
-                    (&names[a], &names[b]),
-                    50,
-                    Some(r),
-                )
-                .map(|m| json!(m))
-                .unwrap_or_else(|e| json!({"x_parameter": names[a], "y_parameter": names[b], "error": e.to_string()})),
-                None => {
-                    json!({"x_parameter": names[a], "y_parameter": names[b], "error": "constant samples"})
-                }
-            };
-            two.push(result);
-        }
-    }
-    json!({"one_dimensional": one, "two_dimensional": two})
-}
-
-/// A finished (or stopped) BASIS run with its summary.
-pub(crate) struct SampledPosterior {
-    /// The run (final state and stop reason).
-    pub(crate) run: iuq_basis::BasisRun,
-    /// MAP, mean, std and quantiles.
-    pub(crate) summary: PosteriorSummary,
-    /// Wall-clock seconds of this invocation.
-    pub(crate) seconds: f64,
-}
-
-/// Sample `posterior` with BASIS and write every result file into `out` (checkpoint after each
-/// stage, `stages.json/csv`, `samples.csv`, `marginals.json`, `summary.json`); `checkpoint`
-/// resumes an earlier run. `study_name`/`study_file` label the summary; `label` prefixes the
-/// progress lines.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn sample_posterior(
-    study_name: &str,
-    study_file: &Path,
-    posterior: &StudyPosterior,
-    settings: iuq_basis::CheckedSettings,
-    out: &Path,
-    checkpoint: Option<BasisState>,
-    resume_dir: Option<&Path>,
-    stop_after: Option<usize>,
-) -> Result<SampledPosterior> {
-    let out = out.to_path_buf();
-    std::fs::create_dir_all(&out)
-        .map_err(|e| input_error(format!("cannot create {}: {e}", out.display())))?;
-    let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), settings)
-        .bad_input(|| format!("{}", study_file.display()))?;
-    if let Some(state) = &checkpoint {
-        basis.check_compatible(state).bad_input(|| {
-            format!(
-                "--resume: {} does not belong to this study and these settings",
-                resume_dir
-                    .unwrap_or(Path::new("."))
-                    .join("checkpoint.json")
-                    .display()
-            )
-        })?;
-    }
-    let bar = if std::io::stderr().is_terminal() {
-        let bar = ProgressBar::new(1000);
-        bar.set_style(
-            ProgressStyle::with_template(
-                "basis [{elapsed_precise}] {bar:25} p {pos}/{len}‰ {wide_msg}",
-            )
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-        );
-        // keep the elapsed time moving during long stages (an expensive model)
-        bar.enable_steady_tick(std::time::Duration::from_millis(500));
-        Some(bar)
-    } else {
-        None
-    };
-    let mut reporter = StageReporter {
-        out: out.clone(),
-        bar,
-        stop_after,
-        started: Instant::now(),
-    };
-    let result = match checkpoint {
-        Some(state) => basis.resume(state, &mut reporter),
-        None => basis.run(&mut reporter),
-    };
-    if let Some(bar) = &reporter.bar {
-        bar.finish_and_clear();
-    }
-    let run = result.context("BASIS run failed")?;
-    let state = &run.state;
-    // The final state is also the last checkpoint (a resumed finished run rewrites it).
-    reporter.write(state)?;
-
-    let names = &state.parameter_names;
-    let summary = PosteriorSummary::from_state(state).context("posterior summary")?;
-    let mut columns = names.clone();
-    columns.push("ll".into());
-    columns.push("lp".into());
-    let rows: Vec<Vec<f64>> = state
-        .samples
-        .iter()
-        .zip(&state.log_likelihood)
-        .zip(&state.log_prior)
-        .map(|((x, ll), lp)| {
-            let mut row = x.clone();
-            row.push(*ll);
-            row.push(*lp);
-            row
-        })
-        .collect();
-    write_numeric_csv(&out.join("samples.csv"), &columns, &rows)?;
-    let marginals = marginals(state, &posterior.space);
-    write_atomically(
-        &out.join("marginals.json"),
-        serde_json::to_string(&marginals)?.as_bytes(),
-    )?;
-
-    let converged = run.stop_reason == StopReason::Converged;
-    let quantiles: Map<String, Value> = names
-        .iter()
-        .zip(&summary.quantiles)
-        .map(|(name, q)| {
-            let by_p: Map<String, Value> = summary
-                .probabilities
-                .iter()
-                .zip(q)
-                .map(|(p, v)| (format!("{p}"), json!(v)))
-                .collect();
-            (name.clone(), Value::Object(by_p))
-        })
-        .collect();
-    let summary_file = json!({
-        "study": study_name,
-        "study_file": study_file.display().to_string(),
-        "likelihood": posterior.description,
-        "settings": state.settings,
-        "parameters": names,
-        "log_evidence": state.log_evidence,
-        "log_evidence_increments": state.diagnostics.iter().map(|d| d.log_evidence_increment).collect::<Vec<_>>(),
-        "stages": state.stages(),
-        "evaluations": state.evaluations,
-        "stop_reason": run.stop_reason,
-        "stop_message": run.stop_reason.to_string(),
-        "converged": converged,
-        "exponent": state.exponent,
-        "map": by_name(names, &summary.map),
-        "map_log_likelihood": summary.map_log_likelihood,
-        "map_log_prior": summary.map_log_prior,
-        "mean": by_name(names, &summary.mean),
-        "std": by_name(names, &summary.std),
-        "quantiles": quantiles,
-        "failures": state.failures(),
-        "failure_reasons": state.failure_reasons(),
-        "out_of_support": state.out_of_support(),
-    });
-    write_atomically(
-        &out.join("summary.json"),
-        serde_json::to_string_pretty(&summary_file)?.as_bytes(),
-    )?;
-    Ok(SampledPosterior {
-        seconds: reporter.started.elapsed().as_secs_f64(),
-        run,
-        summary,
-    })
 }
 
 /// Run `iuq basis`.
@@ -509,6 +167,7 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
     std::fs::create_dir_all(&out)
         .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
 
+    let progress = StageProgress::start();
     let sampled = sample_posterior(
         &study.name,
         &study.path,
@@ -518,7 +177,10 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
         checkpoint,
         args.resume.as_deref(),
         args.stop_after,
-    )?;
+        &mut |state| progress.report(state),
+    );
+    progress.finish();
+    let sampled = sampled?;
     let (run, summary) = (&sampled.run, &sampled.summary);
     let state = &run.state;
     let names = &state.parameter_names;

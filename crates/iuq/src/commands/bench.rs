@@ -15,10 +15,10 @@ use iuq_basis::{
 };
 use iuq_core::{GaussianKde, Model, Parameter, ParameterSpace, Prior};
 use iuq_gp::{FitOptions, GpBank};
+use iuq_study::table_io::{read_numeric_csv, write_numeric_csv};
 
 use crate::input_error::{BadInput, input_error};
 use crate::report_output::{emit, short};
-use crate::table_io::{read_numeric_csv, write_numeric_csv};
 
 /// The kernels that can be timed.
 #[derive(Debug, Subcommand)]

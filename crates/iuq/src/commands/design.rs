@@ -10,10 +10,10 @@ use iuq_doe::{
     LhsMethod, SaltelliDesign, Scrambling, latin_hypercube, min_distance, scale_to_bounds,
     sobol_points,
 };
+use iuq_study::table_io::write_numeric_csv;
 
 use crate::input_error::{BadInput, input_error};
 use crate::report_output::{emit, short};
-use crate::table_io::write_numeric_csv;
 
 /// Which design to build.
 #[derive(Debug, Clone, Copy, ValueEnum)]

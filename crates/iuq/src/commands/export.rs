@@ -9,10 +9,10 @@ use serde_json::json;
 
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
+use iuq_study::campaign_runs::{campaign_error, load_study};
+use iuq_study::table_io::write_atomically;
 
-use crate::commands::run::{campaign_error, load_study};
 use crate::report_output::emit;
-use crate::table_io::write_atomically;
 
 /// Export format.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

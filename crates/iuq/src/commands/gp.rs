@@ -13,10 +13,10 @@ use serde::{Deserialize, Serialize};
 use serde_json::json;
 
 use iuq_gp::{FitOptions, GaussianProcess, Kernel};
+use iuq_study::table_io::{read_numeric_csv, write_atomically, write_numeric_csv};
 
 use crate::input_error::{BadInput, input_error};
 use crate::report_output::{emit, short};
-use crate::table_io::{read_numeric_csv, write_atomically, write_numeric_csv};
 
 /// The verbs of `iuq gp`.
 #[derive(Debug, Subcommand)]

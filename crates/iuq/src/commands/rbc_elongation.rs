@@ -21,10 +21,10 @@ use serde_json::json;
 
 use iuq_rbc::ellipse::elongation_index;
 use iuq_rbc::protocol::{CONTOUR_BIN_WIDTH, mean_and_sample_std};
+use iuq_study::table_io::{read_numeric_csv, write_atomically};
 
 use crate::input_error::input_error;
 use crate::report_output::{emit, short};
-use crate::table_io::{read_numeric_csv, write_atomically};
 
 /// The lattice spacing of the shear experiment, in metres (HemoCell's `dx`).
 pub const LATTICE_SPACING_M: f64 = 0.5e-6;

@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 
-use crate::commands::run::{
-    campaign_error, drive, load_study, open_campaign, summary, summary_text,
-};
+use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign};
+
+use crate::commands::run::{drive, summary, summary_text};
 use crate::report_output::emit;
 
 /// Arguments of `iuq retry`.

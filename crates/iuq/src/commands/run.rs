@@ -2,7 +2,7 @@
 //! earlier coordinator left), with a progress bar on a terminal and log lines otherwise.
 
 use std::io::IsTerminal;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Duration;
 
 use anyhow::Result;
@@ -10,11 +10,9 @@ use clap::Args;
 use serde_json::{Value, json};
 
 use iuq_campaign::design::design_points;
-use iuq_campaign::{
-    Campaign, CampaignError, CampaignOptions, CampaignStudy, Progress, ResumeSummary, StatusCounts,
-};
+use iuq_campaign::{Campaign, Progress, ResumeSummary, StatusCounts};
+use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign, progress_line};
 
-use crate::input_error::input_error;
 use crate::report_output::emit;
 
 /// Arguments of `iuq run`.
@@ -28,65 +26,6 @@ pub struct RunArgs {
     /// Seconds between log lines when stderr is not a terminal.
     #[arg(long, default_value_t = 5.0)]
     pub log_interval: f64,
-}
-
-/// A campaign error as a CLI error: bad input (exit 2) or a failure of the work (exit 1).
-pub fn campaign_error(error: CampaignError) -> anyhow::Error {
-    if error.is_bad_input() {
-        input_error(error.to_string())
-    } else {
-        anyhow::Error::new(error)
-    }
-}
-
-/// Read and validate a campaign study file.
-pub fn load_study(path: &Path) -> Result<CampaignStudy> {
-    CampaignStudy::load(path).map_err(campaign_error)
-}
-
-/// Open the campaign of `study` (resuming it), with this binary as the remote worker.
-pub fn open_campaign(
-    study: CampaignStudy,
-    max_parallel: Option<usize>,
-) -> Result<(Campaign, ResumeSummary)> {
-    let worker_command = std::env::current_exe()
-        .ok()
-        .map(|exe| vec![exe.display().to_string(), "worker".to_string()]);
-    let options = CampaignOptions {
-        worker_command: study.executor.worker.clone().or(worker_command),
-        max_parallel,
-        poll_interval: None,
-    };
-    if max_parallel == Some(0) {
-        return Err(input_error("--max-parallel: must be at least 1"));
-    }
-    Campaign::open(study, &options).map_err(campaign_error)
-}
-
-fn seconds(s: f64) -> String {
-    let s = s.max(0.0).round() as u64;
-    match s {
-        0..=59 => format!("{s}s"),
-        60..=3599 => format!("{}m{:02}s", s / 60, s % 60),
-        _ => format!("{}h{:02}m", s / 3600, (s % 3600) / 60),
-    }
-}
-
-/// One log line about the progress of campaign `name`.
-pub fn progress_line(name: &str, p: &Progress) -> String {
-    let c = &p.counts;
-    format!(
-        "campaign {name}: {}/{} finished ({} succeeded, {} failed), {} running, {} queued, {} pending, elapsed {}, ETA {}",
-        c.finished(),
-        c.total(),
-        c.succeeded,
-        c.failed + c.cancelled,
-        c.running,
-        c.queued,
-        c.pending,
-        seconds(p.elapsed_seconds),
-        p.eta_seconds.map_or_else(|| "unknown".into(), seconds)
-    )
 }
 
 /// Run every pending run of the campaign, showing progress on stderr: a progress bar with ETA
@@ -119,11 +58,12 @@ pub fn drive(campaign: &mut Campaign, json: bool, log_interval: f64) -> Result<S
         Ok(counts)
     } else {
         let interval = Duration::from_secs_f64(log_interval.max(0.1));
-        campaign
+        let counts = campaign
             .run(interval, &mut |p: &Progress| {
                 eprintln!("{}", progress_line(&name, p))
             })
-            .map_err(campaign_error)
+            .map_err(campaign_error)?;
+        Ok(counts)
     }
 }
 

@@ -32,11 +32,11 @@ use serde_json::{Value, json};
 use iuq_basis::LogLikelihood;
 use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome, ParameterSpace};
 use iuq_gp::{GaussianProcess, GpBank};
+use iuq_study::posterior::build_posterior_with;
+use iuq_study::study::{ModelSection, Study};
 use iuq_umbridge::{Jacobian, ServedModel, Server, ServerOptions};
 
-use crate::commands::basis::build_posterior_with;
 use crate::input_error::{BadInput, input_error};
-use crate::study::{ModelSection, Study};
 
 /// The verbs of `iuq serve`.
 #[derive(Debug, Subcommand)]
@@ -142,7 +142,7 @@ fn serve_umbridge(args: &UmbridgeArgs, json_output: bool) -> Result<()> {
             let shared = forward.clone();
             let posterior = build_posterior_with(&study, || match shared {
                 Some(model) => Ok(SharedModel(model)),
-                None => Err(input_error(format!(
+                None => Err(iuq_study::input_error(format!(
                     "{file}: section `[model]`: missing; the `[likelihood]` compares model outputs with data"
                 ))),
             })?;

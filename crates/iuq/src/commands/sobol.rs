@@ -7,10 +7,10 @@ use clap::Args;
 use serde_json::{Map, Value, json};
 
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
+use iuq_study::study::Study;
 
 use crate::input_error::{BadInput, input_error};
 use crate::report_output::{emit, short};
-use crate::study::Study;
 
 /// Arguments of `iuq sobol`.
 #[derive(Debug, Args)]

@@ -7,8 +7,8 @@ use clap::Args;
 use serde_json::{Map, Value, json};
 
 use iuq_campaign::{CampaignStore, store_path};
+use iuq_study::campaign_runs::{campaign_error, load_study};
 
-use crate::commands::run::{campaign_error, load_study};
 use crate::report_output::{emit, short};
 
 /// Arguments of `iuq status`.

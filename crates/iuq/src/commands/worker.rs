@@ -9,8 +9,8 @@ use clap::Args;
 use serde_json::json;
 
 use iuq_campaign::worker::run_manifest_task;
+use iuq_study::campaign_runs::campaign_error;
 
-use crate::commands::run::campaign_error;
 use crate::input_error::input_error;
 use crate::report_output::emit;
 

@@ -6,7 +6,6 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::{Context, Result};
 use serde_json::{Value, json};
 
 use iuq_campaign::StatusCounts;
@@ -17,9 +16,10 @@ use iuq_report::{
 };
 use iuq_sensitivity::SensitivityReport;
 
-use crate::commands::basis::SampledPosterior;
+use crate::error::{Context, Result};
 use crate::likelihood_section::DataLikelihood;
 use crate::pipeline::settings::PipelineSettings;
+use crate::posterior::SampledPosterior;
 use crate::study::Study;
 use crate::table_io::write_atomically;
 
@@ -45,7 +45,7 @@ pub struct StressRuns {
 }
 
 /// Everything the pipeline computed, borrowed for the report.
-pub struct PipelineOutcome<'a> {
+pub struct PipelineResults<'a> {
     /// The study.
     pub study: &'a Study,
     /// Its data.
@@ -189,48 +189,48 @@ fn posterior_json(p: &PosteriorResult) -> Value {
     json!({"source": p.source, "log_evidence": p.log_evidence, "stages": p.stages.len(), "parameters": rows})
 }
 
-/// Build the report of `outcome`, write it into `out`, and return the posterior tables as JSON.
+/// Build the report of `results`, write it into `out`, and return the posterior tables as JSON.
 /// `stage_seconds` gets the wall time of this last stage (started at `started`).
 pub fn write_pipeline_report(
-    outcome: &PipelineOutcome<'_>,
+    results: &PipelineResults<'_>,
     out: &Path,
     stage_seconds: &mut [(String, f64)],
     started: Instant,
 ) -> Result<Value> {
-    let study = outcome.study;
+    let study = results.study;
     let d = study.space.dimension();
-    let stresses: Vec<f64> = outcome.stress_runs.iter().map(|r| r.stress).collect();
+    let stresses: Vec<f64> = results.stress_runs.iter().map(|r| r.stress).collect();
     let mut posteriors = vec![posterior_result(
         "GP surrogate",
-        outcome.gp_posterior,
-        outcome.bank,
+        results.gp_posterior,
+        results.bank,
         &stresses,
         d,
     )?];
-    if let Some(m) = outcome.model_posterior {
+    if let Some(m) = results.model_posterior {
         posteriors.push(posterior_result(
             "cell model",
             m,
-            outcome.bank,
+            results.bank,
             &stresses,
             d,
         )?);
     }
     let mut sensitivity = Vec::new();
-    if let Some(m) = outcome.model_sobol {
+    if let Some(m) = results.model_sobol {
         sensitivity.extend(sensitivity_results(m, "model runs", &stresses));
     }
     sensitivity.extend(sensitivity_results(
-        outcome.surrogate_sobol,
+        results.surrogate_sobol,
         "surrogate",
         &stresses,
     ));
     let mut gp_diagnostics = Vec::new();
-    for ((r, gp), (q2, loo)) in outcome
+    for ((r, gp), (q2, loo)) in results
         .stress_runs
         .iter()
-        .zip(outcome.bank.gps())
-        .zip(outcome.gp_checks)
+        .zip(results.bank.gps())
+        .zip(results.gp_checks)
     {
         let prediction = gp.predict(&r.test_x)?;
         let h = gp.hyperparameters();
@@ -251,14 +251,14 @@ pub fn write_pipeline_report(
             hyperparameters,
         });
     }
-    let (counts, failed_reasons) = &outcome.campaign_runs;
+    let (counts, failed_reasons) = &results.campaign_runs;
     let mut failures: BTreeMap<String, usize> = BTreeMap::new();
     for reason in failed_reasons {
         *failures.entry(short_reason(reason)).or_default() += 1;
     }
     let runs = counts.total() as usize;
     let failed = counts.failed as usize;
-    let data = outcome.data;
+    let data = results.data;
     let y_err = data
         .observations
         .measurement_std
@@ -279,22 +279,22 @@ pub fn write_pipeline_report(
             "training design".to_string(),
             format!(
                 "maximin LHS, {} runs per stress, seed {} + stress index",
-                outcome.settings.training_runs, outcome.settings.training_seed
+                results.settings.training_runs, results.settings.training_seed
             ),
         ),
         (
             "test design".to_string(),
             format!(
                 "scrambled Sobol', {} runs per stress, seed {}",
-                outcome.settings.test_runs, outcome.settings.test_seed
+                results.settings.test_runs, results.settings.test_seed
             ),
         ),
         (
             "sampler".to_string(),
             format!(
                 "BASIS, N = {}, seed {}",
-                outcome.gp_posterior.run.state.samples.len(),
-                outcome.gp_posterior.run.state.settings.seed
+                results.gp_posterior.run.state.samples.len(),
+                results.gp_posterior.run.state.settings.seed
             ),
         ),
         (
@@ -309,7 +309,7 @@ pub fn write_pipeline_report(
         title: format!("Calibration study `{}`", study.name),
         study_name: study.name.clone(),
         provenance,
-        parameters: outcome.gp_posterior.run.state.parameter_names.clone(),
+        parameters: results.gp_posterior.run.state.parameter_names.clone(),
         data: DataSeries {
             x_label: "shear stress (Pa)".into(),
             y_label: "elongation index EL (–)".into(),
@@ -332,8 +332,8 @@ pub fn write_pipeline_report(
     let summary = json!({
         "posteriors": report.posteriors.iter().map(posterior_json).collect::<Vec<_>>(),
         "q2": report.gp_diagnostics.iter().map(|g| json!({"stress": g.x, "q2": g.q2, "loo_q2": g.loo_q2})).collect::<Vec<_>>(),
-        "sensitivity": crate::commands::pipeline::sobol_json(outcome.surrogate_sobol),
-        "model_sensitivity": outcome.model_sobol.map(crate::commands::pipeline::sobol_json),
+        "sensitivity": sobol_json(results.surrogate_sobol),
+        "model_sensitivity": results.model_sobol.map(sobol_json),
     });
     write_atomically(
         &out.join("pipeline.json"),
@@ -362,6 +362,29 @@ fn short_reason(reason: &str) -> String {
         words.push(if element && index { "N" } else { word });
     }
     words.join(" ").chars().take(120).collect()
+}
+
+/// JSON of a Sobol' report, by output and parameter.
+pub fn sobol_json(report: &SensitivityReport) -> Value {
+    let outputs: Vec<Value> = report
+        .outputs
+        .iter()
+        .map(|o| {
+            json!({
+                "output": o.output,
+                "S1": o.first_order, "S1_conf": o.first_order_conf,
+                "ST": o.total, "ST_conf": o.total_conf,
+                "variance": o.variance,
+            })
+        })
+        .collect();
+    json!({
+        "inputs": report.inputs,
+        "outputs": outputs,
+        "evaluations": report.evaluations,
+        "failed_evaluations": report.failed_evaluations,
+        "failure_handling": report.failure_handling(),
+    })
 }
 
 #[cfg(test)]

@@ -1,12 +1,10 @@
 //! Numeric CSV tables: reading with errors that name file, line and column, and atomic writing
 //! (a temporary file renamed into place, so a crash never leaves a half-written result).
+//! Every reading error is an input error naming the file.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
-
-use crate::input_error::input_error;
+use crate::error::{Context, Result, StudyError, input_error};
 
 /// A table of named numeric columns, stored by rows.
 #[derive(Debug, Clone, PartialEq)]
@@ -101,8 +99,9 @@ pub fn read_numeric_csv(path: &Path, allow_nan: bool) -> Result<NumericTable> {
     Ok(NumericTable { columns, rows })
 }
 
-/// Write `contents` to `path` atomically: a temporary file in the same directory, flushed and
-/// renamed over the target.
+/// Write `contents` to `path` atomically: a temporary file in the same directory, renamed over
+/// the target (by [`iuq_campaign::atomic_file::write_atomically`]). A missing directory is an
+/// input error.
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
     let directory = match path.parent() {
         Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -115,27 +114,15 @@ pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
             directory.display()
         )));
     }
-    let file_name = path
-        .file_name()
-        .ok_or_else(|| input_error(format!("{}: not a file path", path.display())))?;
-    let temporary = directory.join(format!(
-        ".{}.tmp-{}",
-        file_name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = (|| -> Result<()> {
-        let mut file = std::fs::File::create(&temporary)
-            .with_context(|| format!("cannot create {}", temporary.display()))?;
-        file.write_all(contents)?;
-        file.sync_all()?;
-        std::fs::rename(&temporary, path)
-            .with_context(|| format!("cannot move the result into {}", path.display()))?;
-        Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_file(&temporary);
+    if path.file_name().is_none() {
+        return Err(input_error(format!("{}: not a file path", path.display())));
     }
-    result
+    iuq_campaign::atomic_file::write_atomically(path, contents, false).map_err(|e| match e {
+        iuq_campaign::CampaignError::Io { source, .. } => {
+            StudyError::Failure(format!("cannot write {}: {source}", path.display()))
+        }
+        other => StudyError::from(other),
+    })
 }
 
 /// Format a numeric table as CSV text (shortest round-trip representation of each value).

@@ -22,11 +22,9 @@
 
 use std::time::Duration;
 
-use anyhow::Result;
-
 use iuq_umbridge::{ClientOptions, UmBridgeModel};
 
-use crate::input_error::input_error;
+use crate::error::{Result, StudyError, input_error};
 
 /// The keys the section accepts.
 pub const UMBRIDGE_KEYS: [&str; 10] = [
@@ -171,8 +169,7 @@ pub fn connect(
                 "{file}: section `[model]` (kind = \"umbridge\"): {e}"
             ))
         } else {
-            anyhow::Error::new(e)
-                .context(format!("{file}: section `[model]` (kind = \"umbridge\")"))
+            StudyError::from(e).context(format!("{file}: section `[model]` (kind = \"umbridge\")"))
         }
     })
 }
@@ -238,8 +235,8 @@ timeout = 60"#,
             ),
         ] {
             let e = parse(text).unwrap_err();
-            assert!(crate::input_error::is_input_error(&e));
-            let m = format!("{e:#}");
+            assert!(e.is_bad_input());
+            let m = e.to_string();
             assert!(m.contains("s.toml") && m.contains(key), "{m}");
         }
     }

@@ -28,12 +28,10 @@
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
-
 use iuq_basis::{ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, Observations};
 use iuq_core::Prior;
 
-use crate::input_error::{BadInput, input_error};
+use crate::error::{BadInput, Result, input_error};
 use crate::study::Study;
 use crate::table_io::read_numeric_csv;
 
@@ -187,11 +185,11 @@ fn parse_data(
     let base = study.path.parent().unwrap_or(Path::new("."));
     let path = base.join(&data_file);
     let table_data = read_numeric_csv(&path, false)
-        .map_err(|e| input_error(format!("{file}: key `likelihood.data.file`: {e:#}")))?;
+        .map_err(|e| input_error(format!("{file}: key `likelihood.data.file`: {e}")))?;
     let column = |name: &str, key: &str| -> Result<usize> {
         table_data
             .column_index(name, &path)
-            .map_err(|e| input_error(format!("{file}: key `likelihood.data.{key}`: {e:#}")))
+            .map_err(|e| input_error(format!("{file}: key `likelihood.data.{key}`: {e}")))
     };
     let ix = column(&x_column, "x")?;
     let iy = column(&y_column, "y")?;

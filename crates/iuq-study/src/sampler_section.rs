@@ -14,11 +14,9 @@
 //! max_stages = 100           # annealing stages before p = 1 (default 100)
 //! ```
 
-use anyhow::Result;
-
 use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Resampling};
 
-use crate::input_error::input_error;
+use crate::error::{Result, input_error};
 use crate::study::Study;
 
 /// The keys the `[sampler]` section accepts.

@@ -11,15 +11,15 @@
 
 use std::path::Path;
 
-use anyhow::Result;
 use toml::{Table, Value};
 
 use iuq_campaign::{CampaignModel, CampaignStudy};
 use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
 
-use crate::commands::run::{campaign_error, open_campaign};
-use crate::input_error::input_error;
-use crate::study::Study;
+use super::Events;
+use crate::campaign_runs::{campaign_error, open_campaign};
+use crate::error::{Result, StudyError, input_error};
+use crate::study::{ModelSection, Study};
 
 /// Name of the stress parameter of the campaign.
 pub const STRESS: &str = "stress";
@@ -54,7 +54,7 @@ fn value_text(v: &Value) -> Option<String> {
 /// The text of the campaign study that runs `study`'s cell model at the given stresses.
 pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     let file = study.path.display().to_string();
-    let crate::study::ModelSection::RbcShear { table } = &study.model else {
+    let ModelSection::RbcShear { table } = &study.model else {
         return Err(input_error(format!(
             "{file}: key `model.kind`: `iuq pipeline` builds the calibration study of the cell model; expected kind = \"rbc-shear\""
         )));
@@ -69,8 +69,9 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     }
     let mut parameters = Table::new();
     for p in study.space.parameters() {
-        let prior = Value::try_from(p.prior)
-            .map_err(|e| anyhow::anyhow!("cannot write the prior of `{}`: {e}", p.name))?;
+        let prior = Value::try_from(p.prior).map_err(|e| {
+            StudyError::Failure(format!("cannot write the prior of `{}`: {e}", p.name))
+        })?;
         parameters.insert(p.name.clone(), prior);
     }
     let mut stress = Table::new();
@@ -147,23 +148,25 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     Ok(toml::to_string(&root)?)
 }
 
-/// Open the campaign of `study`'s cell model at `stresses` (creating or resuming its store).
-pub fn open_cell_campaign(
+/// Open the campaign of `study`'s cell model at `stresses` (creating or resuming its store); a
+/// resumed campaign is news for the pipeline's observer.
+pub(super) fn open_cell_campaign(
     study: &Study,
     stresses: &[f64],
     max_parallel: Option<usize>,
+    events: &Events,
 ) -> Result<CampaignModel> {
     let text = campaign_study_text(study, stresses)?;
     let campaign_study = CampaignStudy::parse(&text, &study.path).map_err(campaign_error)?;
     let (campaign, resumed) = open_campaign(campaign_study, max_parallel)?;
     if resumed.requeued + resumed.ingested + resumed.reattached > 0 {
-        eprintln!(
-            "pipeline: resumed the campaign in {} ({} runs requeued, {} results ingested, {} reattached)",
+        events.message(format!(
+            "resumed the campaign in {} ({} runs requeued, {} results ingested, {} reattached)",
             campaign.directory().display(),
             resumed.requeued,
             resumed.ingested,
             resumed.reattached
-        );
+        ));
     }
     Ok(CampaignModel::new(campaign))
 }
@@ -230,8 +233,18 @@ impl Model for CellModelAtStresses {
                 for (o, s) in group.iter().zip(&self.stresses) {
                     match o {
                         Ok(e) => {
-                            values.push(e.outputs[0]);
-                            stds.push(e.computational_std.as_ref().map_or(0.0, |v| v[0]));
+                            let Some(&value) = e.outputs.first() else {
+                                return Err(EvaluationFailure::new(format!(
+                                    "at {s} Pa: the run has no output `el`"
+                                )));
+                            };
+                            values.push(value);
+                            stds.push(
+                                e.computational_std
+                                    .as_ref()
+                                    .and_then(|v| v.first().copied())
+                                    .unwrap_or(0.0),
+                            );
                         }
                         Err(f) => {
                             return Err(EvaluationFailure::new(format!("at {s} Pa: {}", f.reason)));
@@ -244,7 +257,8 @@ impl Model for CellModelAtStresses {
     }
 }
 
-/// Whether the campaign directory of `study` exists (results may be reused).
+/// The campaign directory of `study`: `executor.directory` (relative to the study file), else
+/// `<study stem>.campaign` beside the study file.
 pub fn campaign_directory(study: &Study) -> std::path::PathBuf {
     let stem = study
         .path

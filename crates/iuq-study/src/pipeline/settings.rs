@@ -11,9 +11,7 @@
 //! seed = 3
 //! ```
 
-use anyhow::Result;
-
-use crate::input_error::input_error;
+use crate::error::{Result, input_error};
 use crate::study::Study;
 
 /// Settings of the surrogate and sensitivity stages.

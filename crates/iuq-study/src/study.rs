@@ -1,17 +1,18 @@
-//! Study files (TOML): the parameters with their priors, the model and the settings of each
-//! stage. See ARCHITECTURE.md for the format; this module reads the keys the built verbs use and
-//! accepts the sections of later stages unchanged (they are validated by the verbs that use them).
+//! Study files (TOML): the study's `name`, its `[parameters]` with their priors, the `[model]`
+//! (expression, rbc-shear, umbridge) and `[sensitivity]`. The sections of the other stages
+//! (`[likelihood]`, `[sampler]`, `[surrogate]`, `[model_sampler]`, `[executor]`, `[design]`) are
+//! kept as written and validated by the code that uses them ([`crate::likelihood_section`],
+//! [`crate::sampler_section`], [`crate::pipeline`], campaigns).
 //!
 //! Every error names the file, the key and the reason, and is an input error (exit code 2).
 
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
 use serde::Deserialize;
 
 use iuq_core::{ExpressionModel, Parameter, ParameterSpace, Prior};
 
-use crate::input_error::{BadInput, input_error};
+use crate::error::{BadInput, Result, input_error};
 
 /// The `[model]` section.
 #[derive(Debug, Clone)]
@@ -22,7 +23,7 @@ pub enum ModelSection {
         outputs: toml::Table,
     },
     /// `kind = "rbc-shear"`: the native single-cell shear simulator
-    /// ([`Study::rbc_shear_model`] builds it; keys in `commands::rbc::rbc_shear_model`).
+    /// ([`Study::rbc_shear_model`] builds it; keys in [`crate::rbc_section`]).
     RbcShear {
         /// The section as written.
         table: toml::Table,
@@ -234,7 +235,7 @@ impl Study {
     pub fn rbc_shear_model(&self) -> Result<iuq_rbc::RbcShearModel> {
         let file = self.path.display().to_string();
         match &self.model {
-            ModelSection::RbcShear { table } => crate::commands::rbc::rbc_shear_model(
+            ModelSection::RbcShear { table } => crate::rbc_section::rbc_shear_model(
                 table,
                 &file,
                 &self.path,
@@ -420,8 +421,8 @@ n = 1024
         ];
         for (text, key) in cases {
             let err = parse(&text).unwrap_err();
-            assert!(crate::input_error::is_input_error(&err));
-            let message = format!("{err:#}");
+            assert!(err.is_bad_input());
+            let message = err.to_string();
             assert!(
                 message.contains("study.toml") && message.contains(key),
                 "{message}"

@@ -1,0 +1,42 @@
+//! Sequential design for calibration: where to run an expensive model next so that a
+//! surrogate-based posterior converges with few runs, and when to stop.
+//!
+//! One round of the adaptive engine (the orchestration lives in `iuq-study`): fit the surrogates
+//! (one GP per data point, and where runs fail a [`iuq_gp::FailureClassifier`]), sample the
+//! posterior on them, then
+//!
+//! 1. score candidate parameter vectors — the distinct posterior samples, so that runs go where
+//!    the posterior lies — by how uncertain the surrogate leaves the log-likelihood there
+//!    ([`acquisition`]: the variance of the Gaussian log-likelihood under the GP, times the
+//!    probability that the model answers there);
+//! 2. pick a batch greedily, conditioning the GPs on every pick before the next one
+//!    ("kriging believer"), so that a batch spreads out instead of piling up ([`batch`]);
+//! 3. stop when the posterior has stopped moving and the surrogate's uncertainty of the
+//!    log-likelihood over the posterior is small ([`convergence`]), and report how much
+//!    posterior mass lies far from every run ([`extrapolation`]).
+//!
+//! | module | what |
+//! |---|---|
+//! | [`acquisition`] | the log-likelihood variance Var_f[ln N(y | f, s²)] of a GP prediction |
+//! | [`batch`] | greedy batch selection with kriging-believer variance updates |
+//! | [`convergence`] | the stopping rule: posterior shift and surrogate log-likelihood spread |
+//! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
+//! | [`error`] | the crate's error type [`AdaptiveError`] |
+//!
+//! The crate does no I/O.
+
+#![warn(missing_docs)]
+
+pub mod acquisition;
+pub mod batch;
+pub mod convergence;
+pub mod error;
+pub mod extrapolation;
+
+pub use acquisition::log_likelihood_variance;
+pub use batch::{LikelihoodTerm, Selection, select_batch};
+pub use convergence::{
+    ConvergenceCriterion, PosteriorMoments, RoundAssessment, surrogate_log_likelihood_std,
+};
+pub use error::{AdaptiveError, Result};
+pub use extrapolation::{extrapolation_share, nearest_run_distance};

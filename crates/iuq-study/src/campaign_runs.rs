@@ -1,0 +1,70 @@
+//! Campaigns of model runs as the study layer uses them: campaign errors as study errors,
+//! opening (and resuming) a campaign with this executable as the remote worker, and the log line
+//! of a campaign's progress.
+
+use std::path::Path;
+
+use iuq_campaign::{
+    Campaign, CampaignError, CampaignOptions, CampaignStudy, Progress, ResumeSummary,
+};
+
+use crate::error::{Result, StudyError, input_error};
+
+/// A campaign error as a study error: bad input (a study file, a flag) or a failure of the
+/// work, with the campaign error's message.
+pub fn campaign_error(error: CampaignError) -> StudyError {
+    StudyError::from(error)
+}
+
+/// Read and validate a campaign study file.
+pub fn load_study(path: &Path) -> Result<CampaignStudy> {
+    CampaignStudy::load(path).map_err(campaign_error)
+}
+
+/// Open the campaign of `study` (resuming it), with the running executable as the remote worker
+/// (`<exe> worker`) unless the study's executor names one; `max_parallel` overrides
+/// `executor.max_parallel` (0 is an input error).
+pub fn open_campaign(
+    study: CampaignStudy,
+    max_parallel: Option<usize>,
+) -> Result<(Campaign, ResumeSummary)> {
+    let worker_command = iuq_campaign::worker::iuq_executable()
+        .map(|exe| vec![exe.display().to_string(), "worker".to_string()]);
+    let options = CampaignOptions {
+        worker_command: study.executor.worker.clone().or(worker_command),
+        max_parallel,
+        poll_interval: None,
+        in_process: None,
+    };
+    if max_parallel == Some(0) {
+        return Err(input_error("--max-parallel: must be at least 1"));
+    }
+    Campaign::open(study, &options).map_err(campaign_error)
+}
+
+/// A duration for people: `42s`, `3m05s`, `2h10m`.
+fn seconds(s: f64) -> String {
+    let s = s.max(0.0).round() as u64;
+    match s {
+        0..=59 => format!("{s}s"),
+        60..=3599 => format!("{}m{:02}s", s / 60, s % 60),
+        _ => format!("{}h{:02}m", s / 3600, (s % 3600) / 60),
+    }
+}
+
+/// One log line about the progress of campaign `name`.
+pub fn progress_line(name: &str, p: &Progress) -> String {
+    let c = &p.counts;
+    format!(
+        "campaign {name}: {}/{} finished ({} succeeded, {} failed), {} running, {} queued, {} pending, elapsed {}, ETA {}",
+        c.finished(),
+        c.total(),
+        c.succeeded,
+        c.failed + c.cancelled,
+        c.running,
+        c.queued,
+        c.pending,
+        seconds(p.elapsed_seconds),
+        p.eta_seconds.map_or_else(|| "unknown".into(), seconds)
+    )
+}

@@ -1,0 +1,612 @@
+//! The calibration study end to end (`iuq pipeline STUDY`), as a library: [`run`].
+//!
+//! 1. the training design (a maximin Latin hypercube per stress) and an independent test design
+//!    (scrambled Sobol' points) run through the campaign executor — every result the campaign
+//!    store already holds is reused;
+//! 2. one GP per stress, validated by Q2 on the test runs (and leave-one-out Q2);
+//! 3. Sobol' indices per stress from the surrogate and, with `[sensitivity] model_n`, from model
+//!    runs;
+//! 4. BASIS on the GP bank and, with [`PipelineOptions::model_posterior`], directly on the cell
+//!    model through the campaign (`[model_sampler]`, chains of one step, no burn-in, resumable);
+//! 5. posterior summaries and the propagation of the posterior to the outputs;
+//! 6. the report: `DIR/report.html` with every figure as SVG and PNG and every table as CSV/JSON.
+//!
+//! While it works, the pipeline reports to a [`PipelineObserver`]: news, the progress of the
+//! campaign's model runs and every BASIS stage ([`PipelineEvent`]). The stages run on a thread
+//! of their own and the events reach the observer on the caller's thread, so an observer need
+//! not be `Send`.
+//!
+//! | module | what |
+//! |---|---|
+//! | [`cell_model_campaign`] | the cell model as a campaign of `iuq rbc shear` runs |
+//! | [`settings`] | the pipeline's settings from `[surrogate]` and `[sensitivity]` |
+//! | [`report_data`] | from the results to the report and `pipeline.json` |
+
+pub mod cell_model_campaign;
+pub mod report_data;
+pub mod settings;
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use serde_json::Value;
+
+use iuq_basis::BasisState;
+use iuq_campaign::Progress;
+use iuq_campaign::campaign_model::ProgressObserver;
+use iuq_core::{Model, Outcome, ParameterSpace};
+use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
+use iuq_gp::{FitOptions, GaussianProcess, GpBank};
+use iuq_sensitivity::{IntervalMethod, SensitivityOptions, SensitivityReport, analyse};
+
+use crate::error::{BadInput, Context, Result, StudyError, input_error};
+use crate::likelihood_section::{DataLikelihood, LikelihoodSection, parse_likelihood};
+use crate::posterior::{SampledPosterior, build_posterior_with, sample_posterior};
+use crate::sampler_section::{SamplerOverrides, parse_sampler};
+use crate::study::Study;
+use crate::table_io::{write_atomically, write_numeric_csv};
+use cell_model_campaign::{
+    CellModelAtStresses, campaign_directory, open_cell_campaign, output_name,
+};
+use report_data::{PipelineResults, StressRuns, write_pipeline_report};
+use settings::{PipelineSettings, parse_pipeline_settings};
+
+/// How to run the pipeline (the flags of `iuq pipeline`).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PipelineOptions {
+    /// Output directory of the report and every stage's results (created when missing).
+    pub out: PathBuf,
+    /// Model runs at once (overrides `executor.max_parallel`; `None`: the number of cores; 0 is
+    /// an input error).
+    pub max_parallel: Option<usize>,
+    /// Also sample the posterior directly on the cell model through the campaign, with
+    /// `[model_sampler]` (expensive: samples × stages × stresses runs).
+    pub model_posterior: bool,
+    /// Recompute every model run: move the campaign directory aside (to `<dir>.previous-N`)
+    /// instead of reusing the results it holds.
+    pub fresh: bool,
+    /// Stop after the training and test runs (e.g. to make the campaign in a batch job).
+    pub runs_only: bool,
+}
+
+/// What the pipeline reports while it works.
+#[derive(Debug, Clone, Copy)]
+pub enum PipelineEvent<'a> {
+    /// A line of news: the runs to make, a resumed campaign or posterior, a campaign moved aside
+    /// (`iuq pipeline` prints it as `pipeline: <line>`).
+    Message(&'a str),
+    /// Where the campaign of model runs stands (every 10 s while runs are under way); `label`
+    /// names the runs (`model runs`).
+    CampaignProgress {
+        /// What the runs are.
+        label: &'a str,
+        /// The campaign's counts, elapsed time and ETA.
+        progress: &'a Progress,
+    },
+    /// A BASIS run starts; `label` says on what (`GP bank`, `cell model`).
+    BasisStarted {
+        /// What the posterior is sampled on.
+        label: &'a str,
+    },
+    /// A stage of the BASIS run is done and its checkpoint written.
+    BasisStage(&'a BasisState),
+    /// The BASIS run is over (converged, stopped or failed).
+    BasisFinished,
+}
+
+/// Receives the [`PipelineEvent`]s of a pipeline, on the thread that called [`run`]. Any
+/// `FnMut(&PipelineEvent<'_>)` is one.
+pub trait PipelineObserver {
+    /// Look at one event.
+    fn event(&mut self, event: &PipelineEvent<'_>);
+}
+
+impl<F: FnMut(&PipelineEvent<'_>)> PipelineObserver for F {
+    fn event(&mut self, event: &PipelineEvent<'_>) {
+        self(event)
+    }
+}
+
+/// What the pipeline did: the numbers `iuq pipeline` prints.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PipelineOutcome {
+    /// The study's name.
+    pub study: String,
+    /// The output directory.
+    pub out: PathBuf,
+    /// The report page (`None` with [`PipelineOptions::runs_only`]).
+    pub report: Option<PathBuf>,
+    /// Model runs of the training and test designs (all stresses).
+    pub runs: usize,
+    /// How many of them failed.
+    pub failed: usize,
+    /// Q2 of each stress's GP on its test runs (empty with `runs_only`).
+    pub q2: Vec<f64>,
+    /// The posterior tables as JSON (as in `pipeline.json`; `null` with `runs_only`).
+    pub posterior: Value,
+    /// Wall-clock seconds of each stage, in order.
+    pub stage_seconds: Vec<(String, f64)>,
+    /// Wall-clock seconds of the whole pipeline.
+    pub seconds: f64,
+}
+
+/// Run the calibration study `study` end to end with `options`, reporting to `observer`.
+///
+/// Errors are [`StudyError::BadInput`] for a study, data file or option that cannot be used
+/// (naming the file, key and reason) and [`StudyError::Failure`] for failed work.
+pub fn run(
+    study: &Study,
+    options: &PipelineOptions,
+    observer: &mut dyn PipelineObserver,
+) -> Result<PipelineOutcome> {
+    let (sender, receiver) = mpsc::channel();
+    std::thread::scope(|scope| {
+        let stages = std::thread::Builder::new()
+            .name("iuq-pipeline".into())
+            // as much stack as a main thread gets
+            .stack_size(8 << 20)
+            .spawn_scoped(scope, move || run_stages(study, options, &Events(sender)))
+            .map_err(|e| StudyError::Failure(format!("cannot start the pipeline's thread: {e}")))?;
+        // Ends when the stages are done and every sender (the campaign's progress observer's
+        // too) is dropped.
+        for event in receiver {
+            observer.event(&event.borrowed());
+        }
+        match stages.join() {
+            Ok(result) => result,
+            Err(panic) => std::panic::resume_unwind(panic),
+        }
+    })
+}
+
+/// An event on its way from the pipeline's thread to the observer.
+enum OwnedEvent {
+    Message(String),
+    CampaignProgress {
+        label: &'static str,
+        progress: Progress,
+    },
+    BasisStarted {
+        label: &'static str,
+    },
+    BasisStage(Box<BasisState>),
+    BasisFinished,
+}
+
+impl OwnedEvent {
+    fn borrowed(&self) -> PipelineEvent<'_> {
+        match self {
+            Self::Message(m) => PipelineEvent::Message(m),
+            Self::CampaignProgress { label, progress } => {
+                PipelineEvent::CampaignProgress { label, progress }
+            }
+            Self::BasisStarted { label } => PipelineEvent::BasisStarted { label },
+            Self::BasisStage(state) => PipelineEvent::BasisStage(state),
+            Self::BasisFinished => PipelineEvent::BasisFinished,
+        }
+    }
+}
+
+/// The sending end of the events (an observer that has gone away is not an error).
+struct Events(mpsc::Sender<OwnedEvent>);
+
+impl Events {
+    fn send(&self, event: OwnedEvent) {
+        let _ = self.0.send(event);
+    }
+
+    fn message(&self, line: String) {
+        self.send(OwnedEvent::Message(line));
+    }
+
+    /// The campaign's progress observer, forwarding to the pipeline's observer.
+    fn campaign_progress(&self, label: &'static str) -> ProgressObserver {
+        let sender = self.0.clone();
+        Box::new(move |progress: &Progress| {
+            let _ = sender.send(OwnedEvent::CampaignProgress {
+                label,
+                progress: progress.clone(),
+            });
+        })
+    }
+}
+
+/// The stresses of the study's data and the data themselves.
+fn study_data(study: &Study) -> Result<DataLikelihood> {
+    let file = study.path.display();
+    match parse_likelihood(study)? {
+        LikelihoodSection::Data(data) if data.prediction.is_none() => Ok(data),
+        _ => Err(input_error(format!(
+            "{file}: section `[likelihood]`: the pipeline calibrates the model on data: give `data = {{ file, x, y, ... }}` without `prediction`"
+        ))),
+    }
+}
+
+/// The training points at stress index j: a maximin Latin hypercube mapped through the priors.
+fn training_points(
+    space: &ParameterSpace,
+    settings: &PipelineSettings,
+    j: usize,
+) -> Result<Vec<Vec<f64>>> {
+    let unit = latin_hypercube(
+        settings.training_runs,
+        space.dimension(),
+        LhsMethod::Maximin {
+            candidates: settings.maximin_candidates,
+        },
+        settings.training_seed.wrapping_add(j as u64),
+    )?;
+    unit.iter()
+        .map(|u| space.from_unit_cube(u).map_err(StudyError::from))
+        .collect()
+}
+
+/// The test points (the same at every stress): scrambled Sobol' points through the priors.
+fn test_points(space: &ParameterSpace, settings: &PipelineSettings) -> Result<Vec<Vec<f64>>> {
+    let unit = sobol_points(
+        space.dimension(),
+        settings.test_runs,
+        Scrambling::LinearMatrixWithShift {
+            seed: settings.test_seed,
+            replicate: 0,
+        },
+    )?;
+    unit.iter()
+        .map(|u| space.from_unit_cube(u).map_err(StudyError::from))
+        .collect()
+}
+
+/// Move `dir` aside to the first free `<dir>.previous-N`.
+fn move_aside(dir: &Path) -> Result<Option<PathBuf>> {
+    if !dir.exists() {
+        return Ok(None);
+    }
+    for k in 1.. {
+        let target = PathBuf::from(format!("{}.previous-{k}", dir.display()));
+        if !target.exists() {
+            std::fs::rename(dir, &target)
+                .with_context(|| format!("cannot move {} aside", dir.display()))?;
+            return Ok(Some(target));
+        }
+    }
+    Ok(None)
+}
+
+fn split_runs(
+    outcomes: &[Outcome],
+    points: &[Vec<f64>],
+) -> (Vec<Vec<f64>>, Vec<f64>, Vec<f64>, Vec<String>) {
+    let mut x = Vec::new();
+    let mut y = Vec::new();
+    let mut std = Vec::new();
+    let mut failures = Vec::new();
+    for (o, p) in outcomes.iter().zip(points) {
+        match o {
+            Ok(e) => match e.outputs.first() {
+                Some(&value) => {
+                    x.push(p.clone());
+                    y.push(value);
+                    std.push(
+                        e.computational_std
+                            .as_ref()
+                            .and_then(|s| s.first().copied())
+                            .unwrap_or(0.0),
+                    );
+                }
+                None => failures.push("the run has no output `el`".to_string()),
+            },
+            Err(f) => failures.push(f.reason.clone()),
+        }
+    }
+    (x, y, std, failures)
+}
+
+/// Sobol' options of the pipeline with `n` base points.
+fn sobol_options(settings: &PipelineSettings, n: usize) -> SensitivityOptions {
+    SensitivityOptions {
+        base_points: n,
+        seed: settings.sobol_seed,
+        interval: IntervalMethod::Bootstrap {
+            resamples: settings.resamples,
+        },
+        confidence_level: settings.confidence,
+        ..Default::default()
+    }
+}
+
+/// The stages of [`run`], on the pipeline's thread.
+fn run_stages(
+    study: &Study,
+    options: &PipelineOptions,
+    events: &Events,
+) -> Result<PipelineOutcome> {
+    let started = Instant::now();
+    let data = study_data(study)?;
+    let settings = parse_pipeline_settings(study)?;
+    let sampler_settings = parse_sampler(study, &SamplerOverrides::default())?;
+    let model_sampler_settings = if options.model_posterior {
+        let mut model_study = study.clone();
+        model_study.sampler = study.model_sampler.clone();
+        Some(parse_sampler(
+            &model_study,
+            &SamplerOverrides {
+                burn: Some(0),
+                max_chain: Some(1),
+                ..Default::default()
+            },
+        )?)
+    } else {
+        None
+    };
+    let out = options.out.clone();
+    std::fs::create_dir_all(&out)
+        .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
+    if options.max_parallel == Some(0) {
+        return Err(input_error("--max-parallel: must be at least 1"));
+    }
+    let stresses = data.x.clone();
+    let names = study.space.names();
+    let mut stage_seconds: Vec<(String, f64)> = Vec::new();
+
+    // 1. Training and test runs through the campaign.
+    let stage = Instant::now();
+    if options.fresh {
+        let dir = campaign_directory(study);
+        if let Some(moved) = move_aside(&dir)? {
+            events.message(format!(
+                "--fresh: moved the earlier campaign to {}",
+                moved.display()
+            ));
+        }
+    }
+    let campaign = std::sync::Arc::new(
+        open_cell_campaign(study, &stresses, options.max_parallel, events)?.with_progress(
+            Duration::from_secs(10),
+            events.campaign_progress("model runs"),
+        ),
+    );
+    let test = test_points(&study.space, &settings)?;
+    let mut runs: Vec<Vec<f64>> = Vec::new();
+    let mut training: Vec<Vec<Vec<f64>>> = Vec::new();
+    for j in 0..stresses.len() {
+        training.push(training_points(&study.space, &settings, j)?);
+    }
+    for (j, s) in stresses.iter().enumerate() {
+        for p in training[j].iter().chain(&test) {
+            let mut x = p.clone();
+            x.push(*s);
+            runs.push(x);
+        }
+    }
+    events.message(format!(
+        "{} model runs ({} training + {} test at each of {} stresses; results already stored are reused)",
+        runs.len(),
+        settings.training_runs,
+        settings.test_runs,
+        stresses.len()
+    ));
+    let outcomes = campaign.evaluate_batch(&runs)?;
+    let per_stress = settings.training_runs + settings.test_runs;
+    let mut stress_runs = Vec::new();
+    for (j, s) in stresses.iter().enumerate() {
+        let chunk = &outcomes[j * per_stress..(j + 1) * per_stress];
+        let (train_out, test_out) = chunk.split_at(settings.training_runs);
+        let (x, y, y_std, train_fail) = split_runs(train_out, &training[j]);
+        let (xt, yt, yt_std, test_fail) = split_runs(test_out, &test);
+        stress_runs.push(StressRuns {
+            stress: *s,
+            training_x: x,
+            training_y: y,
+            training_std: y_std,
+            test_x: xt,
+            test_y: yt,
+            test_std: yt_std,
+            failures: train_fail.into_iter().chain(test_fail).collect(),
+        });
+    }
+    write_runs_csv(&out.join("model-runs.csv"), &names, &stress_runs)?;
+    stage_seconds.push((
+        "training and test runs".into(),
+        stage.elapsed().as_secs_f64(),
+    ));
+    let failed: usize = stress_runs.iter().map(|r| r.failures.len()).sum();
+    if options.runs_only {
+        return Ok(PipelineOutcome {
+            study: study.name.clone(),
+            out,
+            report: None,
+            runs: runs.len(),
+            failed,
+            q2: Vec::new(),
+            posterior: Value::Null,
+            stage_seconds,
+            seconds: started.elapsed().as_secs_f64(),
+        });
+    }
+
+    // 2. One GP per stress.
+    let stage = Instant::now();
+    let mut gps: Vec<GaussianProcess> = Vec::new();
+    let mut gp_checks: Vec<(f64, f64)> = Vec::new();
+    for (j, r) in stress_runs.iter().enumerate() {
+        if r.training_y.len() < 3 {
+            return Err(StudyError::Failure(format!(
+                "at {} Pa only {} training runs succeeded; a GP needs at least 3 (failures: {})",
+                r.stress,
+                r.training_y.len(),
+                r.failures.first().map_or("none", String::as_str)
+            )));
+        }
+        let options = FitOptions {
+            seed: settings.training_seed.wrapping_add(j as u64),
+            ..Default::default()
+        };
+        let gp = GaussianProcess::fit(&r.training_x, &r.training_y, &options)
+            .with_context(|| format!("GP fit at {} Pa", r.stress))?;
+        let q2 = if r.test_y.len() >= 2 {
+            gp.q2(&r.test_x, &r.test_y).unwrap_or(f64::NAN)
+        } else {
+            f64::NAN
+        };
+        let loo = gp.loo_q2().unwrap_or(f64::NAN);
+        gp_checks.push((q2, loo));
+        gps.push(gp);
+    }
+    let outputs: Vec<String> = stresses.iter().map(|s| output_name(*s)).collect();
+    let bank = GpBank::new(names.clone(), outputs.clone(), gps)?;
+    write_atomically(&out.join("gp-bank.json"), bank.to_json_string()?.as_bytes())?;
+    stage_seconds.push(("GP fits".into(), stage.elapsed().as_secs_f64()));
+
+    // 3. Sobol' indices.
+    let stage = Instant::now();
+    let surrogate_sobol = analyse(
+        &bank,
+        &study.space,
+        &sobol_options(&settings, settings.surrogate_sobol_n),
+    )
+    .bad_input(|| format!("{}: section `[sensitivity]`", study.path.display()))?;
+    stage_seconds.push((
+        "Sobol' on the surrogate".into(),
+        stage.elapsed().as_secs_f64(),
+    ));
+    let model_sobol: Option<SensitivityReport> = if settings.model_sobol_n >= 2 {
+        let stage = Instant::now();
+        let cell = CellModelAtStresses::new(campaign.clone(), names.clone(), stresses.clone());
+        events.message(format!(
+            "Sobol' indices from model runs: N = {} base points, {} runs",
+            settings.model_sobol_n,
+            settings.model_sobol_n * (names.len() + 2) * stresses.len()
+        ));
+        let report = analyse(
+            &cell,
+            &study.space,
+            &sobol_options(&settings, settings.model_sobol_n),
+        )
+        .context("Sobol' indices from model runs")?;
+        stage_seconds.push(("Sobol' on model runs".into(), stage.elapsed().as_secs_f64()));
+        Some(report)
+    } else {
+        None
+    };
+
+    // 4. BASIS on the GP bank (and on the model).
+    let stage = Instant::now();
+    let posterior = build_posterior_with(study, || Ok(bank.clone()))?;
+    events.send(OwnedEvent::BasisStarted { label: "GP bank" });
+    let gp_posterior = sample_posterior(
+        &study.name,
+        &study.path,
+        &posterior,
+        sampler_settings,
+        &out.join("basis-gp"),
+        None,
+        None,
+        None,
+        &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
+    );
+    events.send(OwnedEvent::BasisFinished);
+    let gp_posterior = gp_posterior?;
+    stage_seconds.push(("BASIS on the GP bank".into(), stage.elapsed().as_secs_f64()));
+    let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
+        Some(settings) => {
+            let stage = Instant::now();
+            let dir = out.join("basis-model");
+            let checkpoint = resume_checkpoint(&dir, events)?;
+            let cell = CellModelAtStresses::new(campaign.clone(), names.clone(), stresses.clone());
+            let posterior = build_posterior_with(study, || Ok(cell))?;
+            events.send(OwnedEvent::BasisStarted {
+                label: "cell model",
+            });
+            let sampled = sample_posterior(
+                &study.name,
+                &study.path,
+                &posterior,
+                settings,
+                &dir,
+                checkpoint,
+                Some(&dir),
+                None,
+                &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
+            );
+            events.send(OwnedEvent::BasisFinished);
+            let sampled = sampled?;
+            stage_seconds.push((
+                "BASIS on the cell model".into(),
+                stage.elapsed().as_secs_f64(),
+            ));
+            Some(sampled)
+        }
+        None => None,
+    };
+
+    // 5. Propagation and the report.
+    let stage = Instant::now();
+    let results = PipelineResults {
+        study,
+        data: &data,
+        settings: &settings,
+        stress_runs: &stress_runs,
+        gp_checks: &gp_checks,
+        bank: &bank,
+        surrogate_sobol: &surrogate_sobol,
+        model_sobol: model_sobol.as_ref(),
+        gp_posterior: &gp_posterior,
+        model_posterior: model_posterior.as_ref(),
+        campaign_runs: campaign
+            .run_statistics()
+            .context("reading the run statistics of the campaign store")?,
+    };
+    stage_seconds.push(("propagation and report".into(), 0.0));
+    let summary = write_pipeline_report(&results, &out, &mut stage_seconds, stage)?;
+    Ok(PipelineOutcome {
+        study: study.name.clone(),
+        report: Some(out.join("report.html")),
+        out,
+        runs: runs.len(),
+        failed,
+        q2: gp_checks.iter().map(|c| c.0).collect(),
+        posterior: summary,
+        stage_seconds,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+fn resume_checkpoint(dir: &Path, events: &Events) -> Result<Option<BasisState>> {
+    let path = dir.join("checkpoint.json");
+    if !path.exists() {
+        return Ok(None);
+    }
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let state = iuq_basis::checkpoint::from_json(&text)
+        .bad_input(|| format!("{}: not a BASIS checkpoint", path.display()))?;
+    events.message(format!(
+        "resuming the model posterior from {}",
+        path.display()
+    ));
+    Ok(Some(state))
+}
+
+fn write_runs_csv(path: &Path, names: &[String], runs: &[StressRuns]) -> Result<()> {
+    let mut columns = vec!["stress".to_string(), "set".to_string()];
+    columns.extend(names.iter().cloned());
+    columns.push("el".into());
+    columns.push("el_std".into());
+    let mut rows = Vec::new();
+    for r in runs {
+        for (set, xs, ys, ss) in [
+            (0.0, &r.training_x, &r.training_y, &r.training_std),
+            (1.0, &r.test_x, &r.test_y, &r.test_std),
+        ] {
+            for ((x, y), s) in xs.iter().zip(ys).zip(ss) {
+                let mut row = vec![r.stress, set];
+                row.extend(x.iter().copied());
+                row.push(*y);
+                row.push(*s);
+                rows.push(row);
+            }
+        }
+    }
+    write_numeric_csv(path, &columns, &rows)
+}

@@ -1,0 +1,296 @@
+//! The `[model]` section of kind `rbc-shear`: the native single red-blood-cell shear simulator
+//! (`iuq-rbc`) as the study's model, one elongation index per shear stress.
+//!
+//! ```toml
+//! [model]
+//! kind = "rbc-shear"
+//! protocol = "scaled"          # or "reference" (HemoCell's time step)
+//! lattice_shear_rate = 3e-4    # scaled protocol only
+//! precision = "single"         # or "double"
+//! past_singularity = "fail"    # or "carry-on"
+//! stresses = [0.64, 1.36]      # Pa; default: the `x` column of `[likelihood] data`
+//! kArea = 5                    # fixed values of the cell parameters not in [parameters]
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use iuq_rbc::lattice::Precision;
+use iuq_rbc::model::{CellParameters, PARAMETER_NAMES, RbcShearModel, RbcShearSettings};
+use iuq_rbc::protocol::{DEFAULT_LATTICE_SHEAR_RATE, Protocol};
+use iuq_rbc::{PastSingularity, RbcError};
+
+use crate::error::{Result, input_error};
+use crate::table_io::read_numeric_csv;
+
+/// Build the model of a study's `[model] kind = "rbc-shear"` section.
+///
+/// Keys: `protocol` (`"scaled"`, default, or `"reference"`), `lattice_shear_rate` (scaled
+/// protocol, default 3e-4), `precision` (`"single"` or `"double"`), `stresses` (Pa; default: the
+/// `x` column of `[likelihood] data`, within its `x_range`), and fixed values for the
+/// parameters of the cell that are not in `[parameters]` (`kLink`, `kBend`, `viscosityRatio`,
+/// `kArea`, `kVolume`; defaults 15, 80, 5, 5, 20). Paths are relative to the study file.
+pub fn rbc_shear_model(
+    table: &toml::Table,
+    file: &str,
+    study_path: &Path,
+    inputs: Vec<String>,
+    likelihood: Option<&toml::Table>,
+) -> Result<RbcShearModel> {
+    let key_error = |key: &str, reason: &str| input_error(format!("{file}: key `{key}`: {reason}"));
+    let number = |key: &str, v: &toml::Value| -> Result<f64> {
+        v.as_float()
+            .or_else(|| v.as_integer().map(|i| i as f64))
+            .ok_or_else(|| key_error(key, "expected a number"))
+    };
+    let mut settings = RbcShearSettings::default();
+    let mut fixed = CellParameters::default();
+    let mut lattice_shear_rate = DEFAULT_LATTICE_SHEAR_RATE;
+    let mut stresses = None;
+    for (key, value) in table {
+        let full = format!("model.{key}");
+        match key.as_str() {
+            "kind" => {}
+            "protocol" => {
+                settings.protocol = match value.as_str() {
+                    Some("scaled") => Protocol::default(),
+                    Some("reference") => Protocol::Reference,
+                    _ => {
+                        return Err(key_error(&full, "expected \"scaled\" or \"reference\""));
+                    }
+                }
+            }
+            "lattice_shear_rate" => lattice_shear_rate = number(&full, value)?,
+            "past_singularity" => {
+                settings.past_singularity = value
+                    .as_str()
+                    .and_then(PastSingularity::from_name)
+                    .ok_or_else(|| key_error(&full, "expected \"fail\" or \"carry-on\""))?
+            }
+            // Quick checks and tests only: the spec's window starts at 7.5 strain units.
+            "start_strain" => settings.start_strain = number(&full, value)?,
+            "precision" => {
+                settings.precision = match value.as_str() {
+                    Some("single") => Precision::Single,
+                    Some("double") => Precision::Double,
+                    _ => return Err(key_error(&full, "expected \"single\" or \"double\"")),
+                }
+            }
+            "stresses" => {
+                let list = value
+                    .as_array()
+                    .ok_or_else(|| key_error(&full, "expected a list of stresses in Pa"))?;
+                stresses = Some(
+                    list.iter()
+                        .map(|v| number(&full, v))
+                        .collect::<Result<Vec<f64>>>()?,
+                );
+            }
+            name if PARAMETER_NAMES.contains(&name) => {
+                if inputs.iter().any(|i| i == name) {
+                    return Err(key_error(
+                        &full,
+                        "this parameter is in [parameters]; fix it here or calibrate it, not both",
+                    ));
+                }
+                let v = number(&full, value)?;
+                fixed
+                    .set(name, v)
+                    .map_err(|e| key_error(&full, &e.to_string()))?;
+                let positive = matches!(name, "kLink" | "viscosityRatio");
+                if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
+                    return Err(key_error(
+                        &full,
+                        if positive {
+                            "must be a positive number"
+                        } else {
+                            "must be a non-negative number"
+                        },
+                    ));
+                }
+            }
+            other => {
+                return Err(key_error(
+                    &format!("model.{other}"),
+                    &format!(
+                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, past_singularity, start_strain, stresses or one of {})",
+                        PARAMETER_NAMES.join(", ")
+                    ),
+                ));
+            }
+        }
+    }
+    if let Protocol::Scaled { .. } = settings.protocol {
+        settings.protocol = Protocol::Scaled { lattice_shear_rate };
+    } else if table.contains_key("lattice_shear_rate") {
+        return Err(key_error(
+            "model.lattice_shear_rate",
+            "only the scaled protocol has a lattice shear rate",
+        ));
+    }
+    settings.fixed = fixed;
+    let stresses = match stresses {
+        Some(s) => s,
+        None => stresses_from_likelihood(file, study_path, likelihood)?,
+    };
+    RbcShearModel::new(inputs, stresses, settings).map_err(|e| match e {
+        RbcError::InvalidParameter {
+            name,
+            value,
+            reason,
+        } => input_error(format!(
+            "{file}: section `[model]`: invalid value {value} for `{name}`: {reason}"
+        )),
+        other => input_error(format!("{file}: section `[model]`: {other}")),
+    })
+}
+
+/// The stresses of `[likelihood] data = { file, x, x_range }`.
+fn stresses_from_likelihood(
+    file: &str,
+    study_path: &Path,
+    likelihood: Option<&toml::Table>,
+) -> Result<Vec<f64>> {
+    let missing = || {
+        input_error(format!(
+            "{file}: key `model.stresses`: missing; give `stresses = [...]` (Pa) or a `[likelihood] data = {{ file, x }}` table"
+        ))
+    };
+    let data = likelihood
+        .and_then(|l| l.get("data"))
+        .and_then(|d| d.as_table())
+        .ok_or_else(missing)?;
+    let data_file = data.get("file").and_then(|f| f.as_str()).ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `likelihood.data.file`: expected a path"
+        ))
+    })?;
+    let x = data.get("x").and_then(|f| f.as_str()).ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `likelihood.data.x`: expected a column name"
+        ))
+    })?;
+    let range = match data.get("x_range") {
+        None => (f64::NEG_INFINITY, f64::INFINITY),
+        Some(v) => {
+            let r: Vec<f64> = v
+                .as_array()
+                .map(|a| {
+                    a.iter()
+                        .filter_map(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
+                        .collect()
+                })
+                .unwrap_or_default();
+            if r.len() != 2 {
+                return Err(input_error(format!(
+                    "{file}: key `likelihood.data.x_range`: expected [lower, upper]"
+                )));
+            }
+            (r[0], r[1])
+        }
+    };
+    let relative = study_path
+        .parent()
+        .unwrap_or(Path::new("."))
+        .join(data_file);
+    let path = if relative.exists() {
+        relative
+    } else {
+        PathBuf::from(data_file)
+    };
+    let table = read_numeric_csv(&path, false)?;
+    let column = table.column_index(x, &path)?;
+    let stresses: Vec<f64> = table
+        .rows
+        .iter()
+        .map(|r| r[column])
+        .filter(|s| *s >= range.0 && *s <= range.1)
+        .collect();
+    if stresses.is_empty() {
+        return Err(input_error(format!(
+            "{}: no value of column `{x}` lies within x_range",
+            path.display()
+        )));
+    }
+    Ok(stresses)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::path::Path;
+
+    use iuq_core::Model;
+
+    use crate::study::Study;
+
+    fn parse(text: &str) -> crate::error::Result<Study> {
+        // The study "lives" in this crate's directory, so `../../data/...` finds the repo's data.
+        Study::parse(
+            text,
+            &Path::new(env!("CARGO_MANIFEST_DIR")).join("study.toml"),
+        )
+    }
+
+    const HEALTHY: &str = r#"
+name = "rbc-healthy"
+[parameters]
+kLink = { uniform = [10, 300] }
+kBend = { uniform = [50, 400] }
+viscosityRatio = { uniform = [1, 15] }
+[likelihood]
+data = { file = "../../data/ektacytometry_gutierrez2018.csv", x = "stress_pa", y = "el_healthy", y_err = "el_healthy_err", x_range = [0.64, 9.04] }
+[model]
+kind = "rbc-shear"
+"#;
+
+    #[test]
+    fn the_stresses_come_from_the_likelihood_data() {
+        let study = parse(HEALTHY).unwrap();
+        let model = study.rbc_shear_model().unwrap();
+        assert_eq!(
+            model.stresses(),
+            [0.64, 0.93, 1.36, 1.99, 2.91, 4.24, 6.19, 9.04]
+        );
+        assert_eq!(model.input_names(), ["kLink", "kBend", "viscosityRatio"]);
+        assert_eq!(model.output_dimension(), 8);
+        assert!(study.expression_model().is_err());
+    }
+
+    #[test]
+    fn explicit_keys_are_read_and_bad_ones_named() {
+        let text = HEALTHY.replace(
+            "kind = \"rbc-shear\"",
+            "kind = \"rbc-shear\"\nprotocol = \"reference\"\nstresses = [1.0, 2.5]\nkArea = 6\nprecision = \"double\"",
+        );
+        let model = parse(&text).unwrap().rbc_shear_model().unwrap();
+        assert_eq!(model.stresses(), [1.0, 2.5]);
+        assert_eq!(model.settings().fixed.membrane.k_area, 6.0);
+        for (change, key) in [
+            ("protocol = \"fast\"", "model.protocol"),
+            ("stresses = [-1.0]", "[model]"),
+            ("kLink = 20", "model.kLink"),
+            ("kVolume = -2", "model.kVolume"),
+            ("frames = 3", "model.frames"),
+            (
+                "protocol = \"reference\"\nlattice_shear_rate = 1e-4",
+                "model.lattice_shear_rate",
+            ),
+        ] {
+            let text = HEALTHY.replace(
+                "kind = \"rbc-shear\"",
+                &format!("kind = \"rbc-shear\"\n{change}"),
+            );
+            let err = parse(&text).unwrap_err();
+            let message = err.to_string();
+            assert!(err.is_bad_input(), "{message}");
+            assert!(
+                message.contains(key) && message.contains("study.toml"),
+                "{change}: {message}"
+            );
+        }
+        let start = HEALTHY.find("[likelihood]").unwrap();
+        let end = HEALTHY.find("[model]").unwrap();
+        let no_data = format!("{}{}", &HEALTHY[..start], &HEALTHY[end..]);
+        let message = parse(&no_data).unwrap_err().to_string();
+        assert!(message.contains("model.stresses"), "{message}");
+    }
+}
