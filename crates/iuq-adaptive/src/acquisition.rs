@@ -7,13 +7,19 @@
 //!
 //! Var[ℓ] = (r²·v + v²/2)/s⁴.
 //!
-//! It is large where the surrogate is unsure (v) *and* that matters for the posterior: near the
-//! data (r² small) only the v² term remains, far from them (r² large) the posterior is small, and
-//! the candidates scored are posterior samples anyway. This is the quantity whose expected value
-//! over the posterior the sequential designs of Sürer, Plumlee & Wild (2023) and of GPry's
-//! acquisition (Gammal, Schöneberg, Torrado & Fidler 2023: the GP std of the log-posterior,
-//! weighted by the posterior) drive down; summed over independent GPs it is the variance of the
-//! whole log-likelihood.
+//! Summed over independent GPs it is the variance of the whole log-likelihood. What moves the
+//! posterior, though, is the error of the likelihood L = e^ℓ itself: for a small spread,
+//! Var[L] ≈ L²·Var[ℓ]. The acquisition of a candidate θ is therefore
+//!
+//! a(θ) = p_answer(θ) · (L̄(θ)π(θ) / max_θ' L̄(θ')π(θ'))² · Σ_t Var[ℓ_t(θ)],
+//!
+//! the variance of the (unnormalised) posterior density there relative to its largest value over
+//! the candidates, times the probability that the model answers. Without the squared density
+//! the variance of ℓ grows with the residual r² into the posterior's tails, and runs would go
+//! there; with it they go where the posterior mass is uncertain. This is the form of GPry's
+//! acquisition (Gammal, Schöneberg, Torrado & Fidler 2023: exp(2ζ·μ_log p)·σ_log p, here with
+//! ζ = 1 and the variance) and of the integrated likelihood variance that the sequential design
+//! for calibration of Sürer, Plumlee & Wild (2023) drives down.
 
 /// Var[ln N(y | f, s²)] for f ~ N(`mean`, `variance`) and total data variance `total_variance`:
 /// (r²v + v²/2)/s⁴ with r = y − mean. Zero for a non-positive or non-finite variance, and
@@ -27,6 +33,28 @@ pub fn log_likelihood_variance(datum: f64, mean: f64, variance: f64, total_varia
     }
     let r = datum - mean;
     (r * r * variance + 0.5 * variance * variance) / (total_variance * total_variance)
+}
+
+/// The weights (L̄π/max L̄π)² · p_answer of candidates with log posterior densities
+/// `log_density` (ℓ̄ + ln π, up to a constant) and answer probabilities `answer_probability`. A
+/// candidate with a non-finite log density gets weight 0.
+pub fn likelihood_weights(log_density: &[f64], answer_probability: &[f64]) -> Vec<f64> {
+    let max = log_density
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
+    log_density
+        .iter()
+        .zip(answer_probability)
+        .map(|(l, p)| {
+            if l.is_finite() && max.is_finite() {
+                (2.0 * (l - max)).exp() * p
+            } else {
+                0.0
+            }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -61,6 +89,18 @@ mod tests {
             let exact = log_likelihood_variance(y, mu, v, s2);
             assert!((var - exact).abs() < 4.0 * se, "{var} vs {exact} (se {se})");
         }
+    }
+
+    #[test]
+    fn weights_are_the_squared_relative_density_times_the_answer_probability() {
+        let w = likelihood_weights(
+            &[-1.0, -2.0, f64::NEG_INFINITY, -1.0],
+            &[1.0, 1.0, 1.0, 0.5],
+        );
+        assert_eq!(w[0], 1.0);
+        assert!((w[1] - (-2.0f64).exp()).abs() < 1e-15);
+        assert_eq!(w[2], 0.0);
+        assert_eq!(w[3], 0.5);
     }
 
     #[test]

@@ -1,7 +1,8 @@
 //! A batch of new runs: greedy maximisation of the acquisition with "kriging believer" updates.
 //!
-//! The score of candidate x is a(x) = p_answer(x) · Σ_t Var[ℓ_t(x)] over the likelihood terms t
-//! (one per datum whose GP the run would inform; see [`crate::acquisition`]). After each pick s,
+//! The score of candidate x is a(x) = w(x) · Σ_t Var[ℓ_t(x)] over the likelihood terms t (one per
+//! datum whose GP the run would inform), with w the candidate's weight: the probability that the
+//! model answers there times (L(x)/L_max)², see [`crate::acquisition`]. After each pick s,
 //! every GP is conditioned on a run at s as if it had returned the predicted mean (Ginsbourger,
 //! Le Riche & Carraro 2010): the means stay, and the variances drop by
 //! cov(x, s | picks so far)²/(var(s | picks so far) + σ²_noise), computed exactly from the
@@ -43,7 +44,7 @@ fn score(
     terms: &[LikelihoodTerm<'_>],
     means: &[Vec<f64>],
     variances: &[Vec<f64>],
-    answer_probability: &[f64],
+    weights: &[f64],
     i: usize,
 ) -> f64 {
     let total: f64 = terms
@@ -58,13 +59,14 @@ fn score(
             )
         })
         .sum();
-    answer_probability[i] * total
+    weights[i] * total
 }
 
 /// Pick up to `batch` of `candidates` (original parameter units), greedily by score, stopping
 /// early when the best remaining score is below `min_score` (the surrogate is already sure
-/// enough everywhere else). `answer_probability[i]` is the probability that the model gives an
-/// answer at candidate i (1 where no run has failed). Ties go to the lower index, so the
+/// enough everywhere else). `weights[i]` ≥ 0 multiplies candidate i's score: the probability
+/// that the model gives an answer there times its likelihood relative to the best candidate's
+/// ([`crate::acquisition::likelihood_weights`]). Ties go to the lower index, so the
 /// selection is deterministic.
 ///
 /// # Errors
@@ -73,16 +75,16 @@ fn score(
 pub fn select_batch(
     terms: &[LikelihoodTerm<'_>],
     candidates: &[Vec<f64>],
-    answer_probability: &[f64],
+    weights: &[f64],
     batch: usize,
     min_score: f64,
 ) -> Result<Selection> {
     let m = candidates.len();
-    if answer_probability.len() != m {
+    if weights.len() != m {
         return Err(AdaptiveError::LengthMismatch {
-            what: "answer probabilities vs. candidates",
+            what: "weights vs. candidates",
             expected: m,
-            actual: answer_probability.len(),
+            actual: weights.len(),
         });
     }
     if let Some(term) = terms.iter().find(|t| t.total_variance.len() != m) {
@@ -112,12 +114,15 @@ pub fn select_batch(
         let prediction = term.gp.predict(candidates)?;
         means.push(prediction.mean);
         variances.push(prediction.variance);
-        // The diagonal of the GP's kernel matrix: noise plus jitter, in output units.
+        // A run fixes the model's output at its point: the models iuq runs are deterministic
+        // (rerunning gives the same value), so the GP's fitted noise — which absorbs what the
+        // kernel cannot represent — does not stand between a run and what it reveals. Only the
+        // jitter remains, in output units.
         let s = term.gp.output_scaling().std;
-        noise.push(prediction.noise_variance + term.gp.jitter() * s * s);
+        noise.push(term.gp.jitter() * s * s);
     }
     let initial_scores: Vec<f64> = (0..m)
-        .map(|i| score(terms, &means, &variances, answer_probability, i))
+        .map(|i| score(terms, &means, &variances, weights, i))
         .collect();
     let mut scores = initial_scores.clone();
     // Per term: the conditioned covariance columns of the picks so far, and their denominators.
@@ -179,7 +184,7 @@ pub fn select_batch(
             scores[i] = if chosen[i] {
                 0.0
             } else {
-                score(terms, &means, &variances, answer_probability, i)
+                score(terms, &means, &variances, weights, i)
             };
         }
     }
@@ -281,5 +286,51 @@ mod tests {
         assert!(none.indices.is_empty());
         assert!(select_batch(std::slice::from_ref(&term), &candidates, &p[..3], 5, 0.0).is_err());
         assert!(select_batch(&[term], &candidates, &p, 5, -1.0).is_err());
+    }
+}
+
+#[cfg(test)]
+mod clustered {
+    use super::*;
+    use iuq_gp::FitOptions;
+
+    /// Candidates clustered far inside the GP's length scales (a sharp posterior): after a pick,
+    /// its neighbours are explained and the next pick is not one of them.
+    #[test]
+    fn picks_in_a_tight_cluster_are_spread() {
+        let x: Vec<Vec<f64>> = (0..10)
+            .map(|i| {
+                let t = i as f64 / 9.0;
+                vec![0.05 + 0.3 * t, 60.0 + 40.0 * ((7.0 * t) % 1.0)]
+            })
+            .collect();
+        let y: Vec<f64> = x
+            .iter()
+            .map(|p| 20.0 + (p[1] - 20.0) * (-p[0] * 3.0f64).exp())
+            .collect();
+        let gp = GaussianProcess::fit(&x, &y, &FitOptions::default()).unwrap();
+        let candidates: Vec<Vec<f64>> = (0..400)
+            .map(|i| {
+                let a = (i % 20) as f64 / 19.0 - 0.5;
+                let b = (i / 20) as f64 / 19.0 - 0.5;
+                vec![0.30 + 0.03 * a, 88.0 + 3.0 * b]
+            })
+            .collect();
+        let datum = 20.0 + 68.0 * (-0.9f64).exp();
+        let term = LikelihoodTerm {
+            gp: &gp,
+            datum,
+            total_variance: vec![0.64; candidates.len()],
+        };
+        let w = vec![1.0; candidates.len()];
+        let s = select_batch(&[term], &candidates, &w, 3, 0.0).unwrap();
+        let picks: Vec<&Vec<f64>> = s.indices.iter().map(|&i| &candidates[i]).collect();
+        for a in 0..picks.len() {
+            for b in a + 1..picks.len() {
+                let dk = (picks[a][0] - picks[b][0]) / 0.03;
+                let dt = (picks[a][1] - picks[b][1]) / 3.0;
+                assert!(dk.hypot(dt) > 0.2, "{picks:?}");
+            }
+        }
     }
 }

@@ -6,9 +6,9 @@
 //! posterior on them, then
 //!
 //! 1. score candidate parameter vectors — the distinct posterior samples, so that runs go where
-//!    the posterior lies — by how uncertain the surrogate leaves the log-likelihood there
+//!    the posterior lies — by how uncertain the surrogate leaves the posterior density there
 //!    ([`acquisition`]: the variance of the Gaussian log-likelihood under the GP, times the
-//!    probability that the model answers there);
+//!    squared relative density and the probability that the model answers there);
 //! 2. pick a batch greedily, conditioning the GPs on every pick before the next one
 //!    ("kriging believer"), so that a batch spreads out instead of piling up ([`batch`]);
 //! 3. stop when the posterior has stopped moving and the surrogate's uncertainty of the
@@ -33,7 +33,7 @@ pub mod convergence;
 pub mod error;
 pub mod extrapolation;
 
-pub use acquisition::log_likelihood_variance;
+pub use acquisition::{likelihood_weights, log_likelihood_variance};
 pub use batch::{LikelihoodTerm, Selection, select_batch};
 pub use convergence::{
     ConvergenceCriterion, PosteriorMoments, RoundAssessment, surrogate_log_likelihood_std,

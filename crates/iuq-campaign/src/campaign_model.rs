@@ -84,6 +84,20 @@ impl Model for CampaignModel {
     }
 
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        self.evaluate_labelled(None, points)
+    }
+}
+
+impl CampaignModel {
+    /// [`Model::evaluate_batch`] with the design recorded in the store under `label` (default:
+    /// `batch-<number of this session's batch>`): a design that names its purpose
+    /// (`initial-design`, `adaptive-round-3`) is found again by a rerun, which then adds
+    /// nothing.
+    pub fn evaluate_labelled(
+        &self,
+        label: Option<&str>,
+        points: &[Vec<f64>],
+    ) -> iuq_core::Result<Vec<Outcome>> {
         let unavailable = |e: crate::CampaignError| CoreError::ModelUnavailable(e.to_string());
         let mut guard = self
             .state
@@ -91,7 +105,7 @@ impl Model for CampaignModel {
             .map_err(|_| CoreError::ModelUnavailable("the campaign's lock is poisoned".into()))?;
         let (campaign, batches, observer) = &mut *guard;
         *batches += 1;
-        let label = format!("batch-{batches}");
+        let label = label.map_or_else(|| format!("batch-{batches}"), str::to_string);
         let run_ids = campaign.add_points(&label, points).map_err(unavailable)?;
         let mut noop = |_: &Progress| {};
         let observer: &mut dyn FnMut(&Progress) = match observer {

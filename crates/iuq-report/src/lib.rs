@@ -5,7 +5,8 @@
 //! `iuq pipeline` fills a [`StudyReport`] and calls [`write_report`]. The page shows, in order:
 //! the measurements against the calibrated model, the posterior summary, Sobol' indices, the
 //! corner plot, the propagated output as violins, the MAP error, the surrogate's quality, the
-//! sampler's stages and the run statistics. Every number in an HTML table is formatted by
+//! sampler's stages, the convergence of the adaptive design, where the model fails, and the run
+//! statistics. Every number in an HTML table is formatted by
 //! [`format_number`] and carries its exact value and its JSON pointer into `report.json`.
 //!
 //! - [`model`]: the input structures;
@@ -35,8 +36,9 @@ pub use error::{ReportError, Result};
 pub use figure::FigureInfo;
 pub use format::format_number;
 pub use model::{
-    DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+    Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic, ParameterSummary,
+    PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
+    SensitivityResult, StudyReport,
 };
 pub use report::{REPORT_FORMAT, ReportDocument, ReportFiles, write_report};
 pub use tables::TableInfo;

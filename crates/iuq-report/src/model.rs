@@ -29,6 +29,92 @@ pub struct StudyReport {
     pub gp_diagnostics: Vec<GpDiagnostic>,
     /// Counts of model runs and wall time per pipeline stage.
     pub run_statistics: RunStatistics,
+    /// The adaptive engine's rounds; `None` (a one-shot design) omits the convergence section.
+    #[serde(default)]
+    pub convergence: Option<Convergence>,
+    /// The runs in the plane of two parameters, successes and failures, one panel per run group
+    /// that had a failure; empty omits the failure map.
+    #[serde(default)]
+    pub failure_map: Vec<FailureMapPanel>,
+    /// Model runs per data point (per run group); empty omits the table.
+    #[serde(default)]
+    pub runs_per_point: Vec<RunsAtPoint>,
+}
+
+/// How the adaptive engine converged: one entry per round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Convergence {
+    /// The stopping rule in words, e.g. "posterior means and stds move < 0.1 std between rounds
+    /// and the surrogate's log-likelihood std over the posterior < 0.2".
+    pub criterion: String,
+    /// Whether the rule was met.
+    pub converged: bool,
+    /// Why the loop stopped.
+    pub stop_reason: String,
+    /// The sampled parameters (columns of `mean` and `std`).
+    pub parameters: Vec<String>,
+    /// The rounds, in order.
+    pub rounds: Vec<ConvergenceRound>,
+}
+
+/// One round of the adaptive engine.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ConvergenceRound {
+    /// Round number, from 1.
+    pub round: usize,
+    /// Model runs made before the round's new runs.
+    pub runs: usize,
+    /// New runs chosen in the round.
+    pub new_runs: usize,
+    /// Posterior mean per parameter.
+    pub mean: Vec<f64>,
+    /// Posterior std per parameter.
+    pub std: Vec<f64>,
+    /// Largest shift of a mean or std since the previous round, in posterior stds (`None` in
+    /// the first round).
+    pub shift: Option<f64>,
+    /// The surrogate's std of the log-likelihood averaged over the posterior (nats).
+    pub log_likelihood_std: f64,
+    /// Share of the posterior farther than one length scale from every training run.
+    pub extrapolation_share: f64,
+}
+
+/// The runs of one run group in the plane of two parameters.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct FailureMapPanel {
+    /// The panel's title, e.g. "runs at 9.04 Pa".
+    pub label: String,
+    /// The parameter on the horizontal axis.
+    pub x_parameter: String,
+    /// The parameter on the vertical axis.
+    pub y_parameter: String,
+    /// Axis ranges (the priors' plotting ranges): (x_low, x_high, y_low, y_high).
+    pub bounds: (f64, f64, f64, f64),
+    /// One entry per run: its two coordinates.
+    pub points: Vec<(f64, f64)>,
+    /// Whether each run failed.
+    pub failed: Vec<bool>,
+    /// Whether each run was placed by the adaptive engine (else the initial or test design).
+    pub adaptive: Vec<bool>,
+    /// The failure classifier's probability of failure on a regular grid over `bounds` (the
+    /// other parameters at their posterior means), row-major with `grid_size.0` columns in x
+    /// and `grid_size.1` rows in y; empty when no run of the group failed.
+    pub failure_probability: Vec<f64>,
+    /// (columns, rows) of the grid.
+    pub grid_size: (usize, usize),
+}
+
+/// Model runs at one data point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunsAtPoint {
+    /// The data point's control value.
+    pub x: f64,
+    /// Runs informing it (initial, test and adaptive).
+    pub runs: usize,
+    /// Of which the adaptive engine placed.
+    pub adaptive: usize,
+    /// Of which failed.
+    pub failed: usize,
 }
 
 /// The measurements: one output `y` with its measurement std `y_err` at each control value `x`.
@@ -38,7 +124,9 @@ pub struct DataSeries {
     pub x_label: String,
     /// Label of the measured output with its unit, e.g. "elongation index EL (–)".
     pub y_label: String,
-    /// Control values (strictly positive: figures use a logarithmic x axis).
+    /// Control values, any finite numbers (times from 0, negative values, …). Figures draw them
+    /// on a logarithmic axis when all are positive and span a ratio of at least 4, on a linear
+    /// axis otherwise.
     pub x: Vec<f64>,
     /// Measured values.
     pub y: Vec<f64>,

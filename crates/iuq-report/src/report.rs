@@ -52,7 +52,8 @@ pub struct ReportFiles {
 ///
 /// The input is validated before anything is written, and every file is written atomically
 /// with `report.html` last, so an error never leaves a half-written page. Empty `posteriors`,
-/// `sensitivity` or `gp_diagnostics` omit their sections.
+/// `sensitivity`, `gp_diagnostics` or `failure_map`, and a `convergence` of `None`, omit their
+/// sections.
 pub fn write_report(report: &StudyReport, dir: &Path) -> Result<ReportFiles> {
     validate(report)?;
     let derived = DerivedResults::compute(report);

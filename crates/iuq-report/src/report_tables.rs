@@ -3,7 +3,7 @@
 //! computed values).
 
 use crate::derived::DerivedResults;
-use crate::model::{DataSeries, StudyReport};
+use crate::model::{Convergence, DataSeries, StudyReport};
 use crate::tables::{Cell, Column, Table};
 
 /// The leading columns of the tables per data point: the abscissa, the measurement, its std.
@@ -400,6 +400,88 @@ pub(crate) fn stage_times(report: &StudyReport, derived: &DerivedResults) -> Tab
         name: "stage_times".into(),
         title: "Wall time per pipeline stage".into(),
         columns: vec![Column::plain("stage"), Column::plain("seconds")],
+        rows,
+    }
+}
+
+/// The adaptive engine's rounds: runs, shift, the surrogate's log-likelihood std, the
+/// extrapolated share, then the posterior mean and std of each parameter (one column group per
+/// parameter).
+pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
+    let parameters = &convergence.parameters;
+    let mut columns = [
+        "round",
+        "runs",
+        "new runs",
+        "shift (posterior stds)",
+        "log-likelihood std (nats)",
+        "extrapolated share",
+    ]
+    .map(Column::plain)
+    .to_vec();
+    for name in parameters {
+        columns.push(Column::grouped(name.clone(), "mean"));
+        columns.push(Column::grouped(name.clone(), "std"));
+    }
+    let rows = convergence
+        .rounds
+        .iter()
+        .enumerate()
+        .map(|(i, round)| {
+            let at = |field: &str| format!("/report/convergence/rounds/{i}/{field}");
+            let mut row = vec![
+                Cell::count(round.round, at("round")),
+                Cell::count(round.runs, at("runs")),
+                Cell::count(round.new_runs, at("new_runs")),
+                match round.shift {
+                    Some(shift) => Cell::number(shift, at("shift")),
+                    None => Cell::Empty,
+                },
+                Cell::number(round.log_likelihood_std, at("log_likelihood_std")),
+                Cell::number(round.extrapolation_share, at("extrapolation_share")),
+            ];
+            for p in 0..parameters.len() {
+                row.push(Cell::number(round.mean[p], at(&format!("mean/{p}"))));
+                row.push(Cell::number(round.std[p], at(&format!("std/{p}"))));
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "adaptive_rounds".into(),
+        title: "Rounds of the adaptive design".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Model runs informing each data point: all of them, those the adaptive engine placed and
+/// those that failed.
+pub(crate) fn runs_per_point(report: &StudyReport) -> Table {
+    let columns = vec![
+        Column::plain(report.data.x_label.clone()),
+        Column::plain("runs"),
+        Column::plain("adaptive"),
+        Column::plain("failed"),
+    ];
+    let rows = report
+        .runs_per_point
+        .iter()
+        .enumerate()
+        .map(|(i, point)| {
+            let at = |field: &str| format!("/report/runs_per_point/{i}/{field}");
+            vec![
+                Cell::number(point.x, at("x")),
+                Cell::count(point.runs, at("runs")),
+                Cell::count(point.adaptive, at("adaptive")),
+                Cell::count(point.failed, at("failed")),
+            ]
+        })
+        .collect();
+    Table {
+        name: "runs_per_point".into(),
+        title: "Model runs per data point".into(),
+        columns,
         rows,
     }
 }

@@ -3,8 +3,10 @@
 
 use std::path::Path;
 
+use crate::charts::convergence::ConvergenceChart;
 use crate::charts::corner::CornerChart;
 use crate::charts::data_fit::DataFitChart;
+use crate::charts::failure_map::{self, FailureMapChart};
 use crate::charts::gp_diagnostics::GpDiagnosticsChart;
 use crate::charts::map_error::MapErrorChart;
 use crate::charts::sampler_stages::{self, SamplerStagesChart};
@@ -14,7 +16,7 @@ use crate::derived::DerivedResults;
 use crate::error::Result;
 use crate::figure::{Chart, FigureInfo, RenderedFigure, render_png, render_svg};
 use crate::files::write_atomic;
-use crate::model::StudyReport;
+use crate::model::{Convergence, StudyReport};
 use crate::report_tables as build;
 use crate::tables::Table;
 
@@ -299,6 +301,48 @@ pub(crate) fn build_sections(
         sections.push(section);
     }
 
+    if let Some(convergence) = &report.convergence {
+        sections.push(convergence_section(convergence, figures_dir)?);
+    }
+
+    // Shown with the failure map, or else with the run statistics.
+    let mut runs_per_point =
+        (!report.runs_per_point.is_empty()).then(|| build::runs_per_point(report));
+    if !report.failure_map.is_empty() {
+        let chart = FailureMapChart {
+            panels: &report.failure_map,
+        };
+        let mut section = Section::new(
+            "failure-map",
+            "Where the model fails",
+            "The model runs in the plane of two parameters, one panel per run group with failed runs: which runs failed, where the adaptive design placed its runs, and the failure classifier's probability of failure.",
+        );
+        let shown = report.failure_map.len().min(failure_map::MAX_PANELS);
+        let left_out = if shown < report.failure_map.len() {
+            format!(
+                " Only the first {shown} of {} panels are shown (report.json holds all).",
+                report.failure_map.len()
+            )
+        } else {
+            String::new()
+        };
+        section.figures.push(figure(
+            FigureSpec {
+                name: "failure_map",
+                title: "Where the model fails",
+                caption: format!(
+                    "Runs of each group: initial and test designs as hollow circles, adaptive runs filled, failed runs as crosses; shaded red, the failure classifier's probability of failure (the darker, the likelier), with the other parameters at their posterior means.{left_out}"
+                ),
+                size: chart.size(),
+                tables: &[],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        section.tables.extend(runs_per_point.take());
+        sections.push(section);
+    }
+
     let mut runs = Section::new(
         "runs",
         "Run statistics",
@@ -308,9 +352,52 @@ pub(crate) fn build_sections(
     if !report.run_statistics.failures_by_reason.is_empty() {
         runs.tables.push(build::failures_by_reason(report));
     }
+    runs.tables.extend(runs_per_point.take());
     runs.tables.push(build::stage_times(report, derived));
     sections.push(runs);
     Ok(sections)
+}
+
+/// The convergence section: the stopping rule and its outcome, and, when there were rounds, the
+/// figure of the posterior and the surrogate's uncertainty per round with the rounds' table.
+fn convergence_section(convergence: &Convergence, figures_dir: &Path) -> Result<Section> {
+    let rounds = convergence.rounds.len();
+    let outcome = if convergence.converged {
+        format!(
+            "The rule was met after {rounds} round{}.",
+            if rounds == 1 { "" } else { "s" }
+        )
+    } else {
+        format!(
+            "The rule was not met in {rounds} round{}.",
+            if rounds == 1 { "" } else { "s" }
+        )
+    };
+    let mut section = Section::new(
+        "convergence",
+        "Convergence of the adaptive design",
+        format!(
+            "Round by round, the adaptive design adds model runs where the surrogate is least certain of the likelihood and recomputes the posterior. Stopping rule: {}. {outcome} Stopped because: {}.",
+            convergence.criterion.trim_end_matches('.'),
+            convergence.stop_reason.trim_end_matches('.')
+        ),
+    );
+    if rounds > 0 {
+        let chart = ConvergenceChart { convergence };
+        section.figures.push(figure(
+            FigureSpec {
+                name: "convergence",
+                title: "Convergence of the adaptive design",
+                caption: "Posterior mean (line) and ± 1 std band of each parameter, and the surrogate's std of the log-likelihood averaged over the posterior (logarithmic axis), against the model runs the round's posterior was computed from, one marker per round (their spacing: the runs each round added).".to_string(),
+                size: chart.size(),
+                tables: &["adaptive_rounds"],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        section.tables.push(build::adaptive_rounds(convergence));
+    }
+    Ok(section)
 }
 
 #[cfg(test)]

@@ -2,7 +2,10 @@
 //! samples, finite values. Every failure names the offending field.
 
 use crate::error::{ReportError, Result};
-use crate::model::{DataSeries, GpDiagnostic, PosteriorResult, StudyReport};
+use crate::model::{
+    Convergence, DataSeries, FailureMapPanel, GpDiagnostic, PosteriorResult, RunsAtPoint,
+    StudyReport,
+};
 
 /// Checks that `report` can be rendered: returns the first problem found.
 pub(crate) fn validate(report: &StudyReport) -> Result<()> {
@@ -67,11 +70,112 @@ pub(crate) fn validate(report: &StudyReport) -> Result<()> {
             ));
         }
     }
+    if let Some(convergence) = &report.convergence {
+        validate_convergence(convergence)?;
+    }
+    for (k, panel) in report.failure_map.iter().enumerate() {
+        validate_failure_panel(panel, &format!("failure_map[{k}]"))?;
+    }
+    validate_runs_per_point(&report.runs_per_point)?;
     Ok(())
 }
 
-/// Checks the measurements: equal lengths, finite values, positive x (logarithmic axes),
-/// non-negative errors.
+/// Checks the adaptive engine's rounds: one mean and std per parameter, finite values,
+/// non-negative stds and shifts, shares in [0, 1].
+fn validate_convergence(convergence: &Convergence) -> Result<()> {
+    let d = convergence.parameters.len();
+    for (i, round) in convergence.rounds.iter().enumerate() {
+        let f = format!("convergence.rounds[{i}]");
+        let parameters = "convergence.parameters";
+        same_length(&format!("{f}.mean"), round.mean.len(), parameters, d)?;
+        same_length(&format!("{f}.std"), round.std.len(), parameters, d)?;
+        for (p, &mean) in round.mean.iter().enumerate() {
+            finite(&format!("{f}.mean[{p}]"), mean)?;
+        }
+        for (p, &std) in round.std.iter().enumerate() {
+            non_negative(&format!("{f}.std[{p}]"), std)?;
+        }
+        if let Some(shift) = round.shift {
+            non_negative(&format!("{f}.shift"), shift)?;
+        }
+        non_negative(&format!("{f}.log_likelihood_std"), round.log_likelihood_std)?;
+        probability(
+            &format!("{f}.extrapolation_share"),
+            round.extrapolation_share,
+        )?;
+    }
+    Ok(())
+}
+
+/// Checks one failure-map panel: one flag of each kind per run, finite coordinates, a
+/// non-empty plotting range, and a probability grid that is empty or complete with values in
+/// [0, 1].
+fn validate_failure_panel(panel: &FailureMapPanel, field: &str) -> Result<()> {
+    let points = format!("{field}.points");
+    let n = panel.points.len();
+    same_length(&format!("{field}.failed"), panel.failed.len(), &points, n)?;
+    same_length(
+        &format!("{field}.adaptive"),
+        panel.adaptive.len(),
+        &points,
+        n,
+    )?;
+    for (i, &(x, y)) in panel.points.iter().enumerate() {
+        finite(&format!("{points}[{i}].0"), x)?;
+        finite(&format!("{points}[{i}].1"), y)?;
+    }
+    let (x_low, x_high, y_low, y_high) = panel.bounds;
+    for (name, low, high) in [("x", x_low, x_high), ("y", y_low, y_high)] {
+        let f = format!("{field}.bounds");
+        finite(&f, low)?;
+        finite(&f, high)?;
+        if low >= high {
+            return Err(ReportError::invalid(
+                f,
+                format!("the {name} range [{low}, {high}] is empty"),
+            ));
+        }
+    }
+    if !panel.failure_probability.is_empty() {
+        let (columns, rows) = panel.grid_size;
+        let cells = columns.saturating_mul(rows);
+        let probabilities = format!("{field}.failure_probability");
+        if panel.failure_probability.len() != cells {
+            return Err(ReportError::invalid(
+                probabilities,
+                format!(
+                    "has {} entries but grid_size {columns} × {rows} needs {cells}",
+                    panel.failure_probability.len()
+                ),
+            ));
+        }
+        for (i, &p) in panel.failure_probability.iter().enumerate() {
+            probability(&format!("{probabilities}[{i}]"), p)?;
+        }
+    }
+    Ok(())
+}
+
+/// Checks the runs per data point: finite control values, adaptive and failed runs among the
+/// runs.
+fn validate_runs_per_point(rows: &[RunsAtPoint]) -> Result<()> {
+    for (i, row) in rows.iter().enumerate() {
+        let f = format!("runs_per_point[{i}]");
+        finite(&format!("{f}.x"), row.x)?;
+        for (name, count) in [("adaptive", row.adaptive), ("failed", row.failed)] {
+            if count > row.runs {
+                return Err(ReportError::invalid(
+                    format!("{f}.{name}"),
+                    format!("{count} exceed the point's {} runs", row.runs),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks the measurements: equal lengths, finite values (any sign of x: the figures choose a
+/// logarithmic or linear x axis from the data), non-negative errors.
 fn validate_data(data: &DataSeries) -> Result<()> {
     let n = data.x.len();
     if n == 0 {
@@ -83,12 +187,6 @@ fn validate_data(data: &DataSeries) -> Result<()> {
         finite(&format!("data.x[{i}]"), data.x[i])?;
         finite(&format!("data.y[{i}]"), data.y[i])?;
         finite(&format!("data.y_err[{i}]"), data.y_err[i])?;
-        if data.x[i] <= 0.0 {
-            return Err(ReportError::invalid(
-                format!("data.x[{i}]"),
-                format!("{} is not positive (the x axis is logarithmic)", data.x[i]),
-            ));
-        }
         if data.y_err[i] < 0.0 {
             return Err(ReportError::invalid(
                 format!("data.y_err[{i}]"),
@@ -240,6 +338,30 @@ fn finite(field: &str, value: f64) -> Result<()> {
         Err(ReportError::invalid(
             field,
             format!("{value} is not finite"),
+        ))
+    }
+}
+
+/// An error unless `value` is finite and not negative.
+fn non_negative(field: &str, value: f64) -> Result<()> {
+    if value.is_finite() && value >= 0.0 {
+        Ok(())
+    } else {
+        Err(ReportError::invalid(
+            field,
+            format!("{value} is not a finite non-negative number"),
+        ))
+    }
+}
+
+/// An error unless `value` lies in [0, 1].
+fn probability(field: &str, value: f64) -> Result<()> {
+    if (0.0..=1.0).contains(&value) {
+        Ok(())
+    } else {
+        Err(ReportError::invalid(
+            field,
+            format!("{value} is not in [0, 1]"),
         ))
     }
 }

@@ -120,11 +120,9 @@ fn writes_every_figure_table_and_page() {
     assert_no_temporaries(&dir);
 }
 
-#[test]
-fn figures_are_svg_and_png_of_the_declared_size() {
-    let dir = fresh_dir("formats");
-    write_report(&small_report(), &dir).unwrap();
-    let (document, _) = read_document(&dir);
+/// Every figure of the report in `dir` is an SVG and a PNG of the declared size, not empty.
+fn assert_figures_well_formed(dir: &Path) {
+    let (document, _) = read_document(dir);
     for figure in &document.figures {
         let svg = std::fs::read_to_string(dir.join(&figure.svg)).unwrap();
         assert!(
@@ -157,6 +155,13 @@ fn figures_are_svg_and_png_of_the_declared_size() {
     }
 }
 
+#[test]
+fn figures_are_svg_and_png_of_the_declared_size() {
+    let dir = fresh_dir("formats");
+    write_report(&small_report(), &dir).unwrap();
+    assert_figures_well_formed(&dir);
+}
+
 /// Every `<td … data-value="V" data-pointer="P">TEXT</td>` of the page.
 fn numeric_cells(html: &str) -> Vec<(f64, String, String)> {
     let mut cells = Vec::new();
@@ -178,12 +183,11 @@ fn numeric_cells(html: &str) -> Vec<(f64, String, String)> {
     cells
 }
 
-#[test]
-fn html_numbers_equal_report_json_numbers() {
-    let dir = fresh_dir("numbers");
-    write_report(&small_report(), &dir).unwrap();
+/// Every number in the tables of the page in `dir` equals the number its pointer names in
+/// `report.json` and is displayed by `format_number`.
+fn assert_numbers_match_report_json(dir: &Path) {
     let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
-    let (_, json) = read_document(&dir);
+    let (_, json) = read_document(dir);
     let cells = numeric_cells(&html);
     assert!(cells.len() > 100, "only {} numeric cells", cells.len());
     for (value, pointer, text) in &cells {
@@ -198,6 +202,13 @@ fn html_numbers_equal_report_json_numbers() {
     let plain_numeric_cells = html.matches("<td class=\"num\">").count();
     let empty_cells = html.matches("<td class=\"num\">–</td>").count();
     assert_eq!(plain_numeric_cells, empty_cells);
+}
+
+#[test]
+fn html_numbers_equal_report_json_numbers() {
+    let dir = fresh_dir("numbers");
+    write_report(&small_report(), &dir).unwrap();
+    assert_numbers_match_report_json(&dir);
 }
 
 #[test]
@@ -276,6 +287,47 @@ fn a_single_source_renders() {
     assert!(dir.join("figures/violins.png").is_file());
 }
 
+/// A report at the control values `xs` (a general model's abscissae, e.g. times) renders: every
+/// figure well formed, the data-fit and violin figures written as SVG and PNG, their x tick
+/// labels on the linear axis the values call for.
+fn assert_renders_at(name: &str, xs: &[f64], expected_labels: &[&str]) {
+    let dir = fresh_dir(name);
+    let mut report = synthetic::synthetic_report(xs, 2, 200, 11);
+    report.data.x_label = "time t (s)".to_string();
+    let files = write_report(&report, &dir).unwrap();
+    assert_figures_well_formed(&dir);
+    for figure in ["data_fit", "violins"] {
+        for extension in ["svg", "png"] {
+            let path = dir.join("figures").join(format!("{figure}.{extension}"));
+            assert!(path.is_file(), "missing {}", path.display());
+            assert!(files.figures.contains(&path));
+        }
+        let svg = std::fs::read_to_string(dir.join(format!("figures/{figure}.svg"))).unwrap();
+        for label in expected_labels {
+            assert!(
+                svg.contains(&format!(">\n{label}\n</text>")),
+                "{figure}.svg has no tick label {label}"
+            );
+        }
+    }
+}
+
+#[test]
+fn control_values_from_zero_render_on_a_linear_axis() {
+    let times: Vec<f64> = [0.0, 0.5]
+        .into_iter()
+        .chain((1..=10).map(f64::from))
+        .collect();
+    assert_renders_at("times", &times, &["0", "2", "4", "6", "8", "10"]);
+}
+
+#[test]
+fn negative_control_values_render_on_a_linear_axis() {
+    // Within the toy model's domain (it has poles at −1 and near −2).
+    let xs = [-0.8, -0.6, -0.4, -0.2, 0.0, 0.3, 0.4];
+    assert_renders_at("negative", &xs, &["-0.8", "-0.4", "0", "0.2", "0.4"]);
+}
+
 /// Writing `bad` into a directory holding a good report fails with an invalid-input error
 /// naming `field`, and leaves the good page untouched.
 fn assert_rejected(name: &str, bad: iuq_report::StudyReport, field: &str) {
@@ -331,8 +383,8 @@ fn non_finite_values_and_empty_samples_are_rejected() {
     assert_rejected("no-samples", bad, "posteriors[1].samples");
 
     let mut bad = small_report();
-    bad.data.x[0] = 0.0;
-    assert_rejected("zero-stress", bad, "data.x[0]");
+    bad.data.x[0] = f64::NAN;
+    assert_rejected("nan-control", bad, "data.x[0]");
 
     let mut bad = small_report();
     bad.posteriors[0].propagated[1].samples[3] = f64::INFINITY;
@@ -341,4 +393,172 @@ fn non_finite_values_and_empty_samples_are_rejected() {
         bad,
         "posteriors[0].propagated[1].samples[3]",
     );
+}
+
+/// The small report with an adaptive design's results: 3 rounds, 2 failure-map panels (the
+/// second without a probability grid) and the runs per data point.
+fn adaptive_report() -> iuq_report::StudyReport {
+    let mut report = small_report();
+    synthetic::add_adaptive_results(&mut report, 3, 2, 5);
+    report
+}
+
+/// Position of `<section id="ID">` in `html`.
+fn section_position(html: &str, id: &str) -> usize {
+    html.find(&format!("<section id=\"{id}\">"))
+        .unwrap_or_else(|| panic!("no section {id}"))
+}
+
+#[test]
+fn adaptive_results_get_their_sections_figures_and_tables() {
+    let dir = fresh_dir("adaptive");
+    let report = adaptive_report();
+    let files = write_report(&report, &dir).unwrap();
+    let html = std::fs::read_to_string(&files.html).unwrap();
+    assert!(html.contains("Convergence of the adaptive design"));
+    assert!(html.contains("Where the model fails"));
+    for name in ["convergence", "failure_map"] {
+        for extension in ["svg", "png"] {
+            let path = dir.join("figures").join(format!("{name}.{extension}"));
+            assert!(path.is_file(), "missing {}", path.display());
+            assert!(files.figures.contains(&path));
+        }
+    }
+    for name in ["adaptive_rounds", "runs_per_point"] {
+        for extension in ["csv", "json"] {
+            let path = dir.join("tables").join(format!("{name}.{extension}"));
+            assert!(path.is_file(), "missing {}", path.display());
+            assert!(files.tables.contains(&path));
+        }
+    }
+    // After the sampler, before the run statistics; the runs per point with the failure map.
+    let order =
+        ["sampler", "convergence", "failure-map", "runs"].map(|id| section_position(&html, id));
+    assert!(order.windows(2).all(|w| w[0] < w[1]));
+    let table = html.find("id=\"table-runs_per_point\"").unwrap();
+    assert!(order[2] < table && table < order[3]);
+
+    let rounds = std::fs::read_to_string(dir.join("tables/adaptive_rounds.csv")).unwrap();
+    let mut lines = rounds.lines();
+    assert_eq!(
+        lines.next().unwrap(),
+        "round,runs,new runs,shift (posterior stds),log-likelihood std (nats),extrapolated share,\
+         kLink mean,kLink std,kBend mean,kBend std,sigma_m mean,sigma_m std"
+    );
+    assert_eq!(lines.count(), 3);
+    let first = report.convergence.as_ref().unwrap().rounds[0].clone();
+    assert!(rounds.contains(&format!("\n1,40,12,,{},", first.log_likelihood_std)));
+
+    let (document, _) = read_document(&dir);
+    assert!(document.report == report, "report.json does not round-trip");
+    assert_eq!(document.figures.len(), FIGURES.len() + 2);
+    assert_figures_well_formed(&dir);
+    assert_numbers_match_report_json(&dir);
+    assert_no_temporaries(&dir);
+}
+
+#[test]
+fn a_report_without_adaptive_results_has_neither_section() {
+    let dir = fresh_dir("no-adaptive");
+    write_report(&small_report(), &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    for id in ["convergence", "failure-map"] {
+        assert!(!html.contains(&format!("<section id=\"{id}\">")));
+    }
+    assert!(!html.contains("Convergence of the adaptive design"));
+    assert!(!html.contains("Where the model fails"));
+    for name in ["convergence", "failure_map"] {
+        assert!(!dir.join(format!("figures/{name}.svg")).exists());
+    }
+    for name in ["adaptive_rounds", "runs_per_point"] {
+        assert!(!dir.join(format!("tables/{name}.csv")).exists());
+    }
+}
+
+#[test]
+fn runs_per_point_without_a_failure_map_join_the_run_statistics() {
+    let dir = fresh_dir("runs-per-point");
+    let mut report = adaptive_report();
+    report.failure_map.clear();
+    write_report(&report, &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(!html.contains("<section id=\"failure-map\">"));
+    let table = html.find("id=\"table-runs_per_point\"").unwrap();
+    assert!(section_position(&html, "runs") < table);
+    assert!(dir.join("tables/runs_per_point.csv").is_file());
+    assert!(!dir.join("figures/failure_map.svg").exists());
+}
+
+#[test]
+fn a_convergence_without_rounds_has_text_but_no_figure() {
+    let dir = fresh_dir("no-rounds");
+    let mut report = adaptive_report();
+    report.convergence.as_mut().unwrap().rounds.clear();
+    report.convergence.as_mut().unwrap().converged = false;
+    write_report(&report, &dir).unwrap();
+    let html = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(html.contains("<section id=\"convergence\">"));
+    assert!(html.contains("The rule was not met in 0 rounds."));
+    assert!(!dir.join("figures/convergence.svg").exists());
+    assert!(!dir.join("tables/adaptive_rounds.csv").exists());
+}
+
+#[test]
+fn only_the_first_eight_failure_panels_are_drawn() {
+    let dir = fresh_dir("nine-panels");
+    let mut report = small_report();
+    synthetic::add_adaptive_results(&mut report, 2, 9, 11);
+    write_report(&report, &dir).unwrap();
+    let (document, _) = read_document(&dir);
+    let figure = document
+        .figures
+        .iter()
+        .find(|f| f.name == "failure_map")
+        .unwrap();
+    assert!(figure.caption.contains("Only the first 8 of 9 panels"));
+    let svg = std::fs::read_to_string(dir.join(&figure.svg)).unwrap();
+    assert_eq!(svg.matches("runs at ").count(), 8);
+}
+
+#[test]
+fn invalid_adaptive_results_are_rejected() {
+    let mut bad = adaptive_report();
+    bad.convergence.as_mut().unwrap().rounds[1].mean.pop();
+    assert_rejected("short-mean", bad, "convergence.rounds[1].mean");
+
+    let mut bad = adaptive_report();
+    bad.convergence.as_mut().unwrap().rounds[2].std[0] = -1.0;
+    assert_rejected("negative-std", bad, "convergence.rounds[2].std[0]");
+
+    let mut bad = adaptive_report();
+    bad.convergence.as_mut().unwrap().rounds[0].extrapolation_share = 1.5;
+    assert_rejected(
+        "share-above-one",
+        bad,
+        "convergence.rounds[0].extrapolation_share",
+    );
+
+    let mut bad = adaptive_report();
+    bad.failure_map[0].failure_probability[7] = 1.2;
+    assert_rejected(
+        "probability-above-one",
+        bad,
+        "failure_map[0].failure_probability[7]",
+    );
+
+    let mut bad = adaptive_report();
+    bad.failure_map[0].failure_probability.pop();
+    assert_rejected("short-grid", bad, "failure_map[0].failure_probability");
+
+    let mut bad = adaptive_report();
+    bad.failure_map[1].failed.pop();
+    assert_rejected("short-failed", bad, "failure_map[1].failed");
+
+    let mut bad = adaptive_report();
+    bad.failure_map[1].bounds.2 = bad.failure_map[1].bounds.3;
+    assert_rejected("empty-bounds", bad, "failure_map[1].bounds");
+
+    let mut bad = adaptive_report();
+    bad.runs_per_point[2].x = f64::NAN;
+    assert_rejected("nan-point", bad, "runs_per_point[2].x");
 }

@@ -21,23 +21,36 @@ pub fn load_study(path: &Path) -> Result<CampaignStudy> {
     CampaignStudy::load(path).map_err(campaign_error)
 }
 
-/// Open the campaign of `study` (resuming it), with the running executable as the remote worker
-/// (`<exe> worker`) unless the study's executor names one; `max_parallel` overrides
-/// `executor.max_parallel` (0 is an input error).
+/// Open the campaign of `study` (resuming it), with the iuq executable as the remote worker
+/// (`<exe> worker`, see `iuq_campaign::worker::iuq_executable`) unless the study's executor
+/// names one; `max_parallel` overrides `executor.max_parallel` (0 is an input error).
 pub fn open_campaign(
     study: CampaignStudy,
     max_parallel: Option<usize>,
 ) -> Result<(Campaign, ResumeSummary)> {
-    let worker_command = iuq_campaign::worker::iuq_executable()
-        .map(|exe| vec![exe.display().to_string(), "worker".to_string()]);
-    let options = CampaignOptions {
-        worker_command: study.executor.worker.clone().or(worker_command),
-        max_parallel,
-        poll_interval: None,
-        in_process: None,
-    };
-    if max_parallel == Some(0) {
+    open_campaign_with(
+        study,
+        CampaignOptions {
+            max_parallel,
+            ..Default::default()
+        },
+    )
+}
+
+/// [`open_campaign`] with every option of the campaign (an in-process model, a poll interval);
+/// an `options.worker_command` of `None` gets the default worker.
+pub fn open_campaign_with(
+    study: CampaignStudy,
+    mut options: CampaignOptions,
+) -> Result<(Campaign, ResumeSummary)> {
+    if options.max_parallel == Some(0) {
         return Err(input_error("--max-parallel: must be at least 1"));
+    }
+    if options.worker_command.is_none() {
+        options.worker_command = study.executor.worker.clone().or_else(|| {
+            iuq_campaign::worker::iuq_executable()
+                .map(|exe| vec![exe.display().to_string(), "worker".to_string()])
+        });
     }
     Campaign::open(study, &options).map_err(campaign_error)
 }

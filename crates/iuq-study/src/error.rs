@@ -102,6 +102,7 @@ failures_from!(
     iuq_core::CoreError,
     iuq_doe::DoeError,
     iuq_gp::GpError,
+    iuq_adaptive::AdaptiveError,
     iuq_basis::BasisError,
     iuq_sensitivity::SensitivityError,
     iuq_report::ReportError,

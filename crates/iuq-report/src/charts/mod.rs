@@ -2,8 +2,10 @@
 //! in a strip of their own, error bars, panel grids).
 
 pub(crate) mod contour;
+pub(crate) mod convergence;
 pub(crate) mod corner;
 pub(crate) mod data_fit;
+pub(crate) mod failure_map;
 pub(crate) mod gp_diagnostics;
 pub(crate) mod map_error;
 pub(crate) mod sampler_stages;
@@ -34,6 +36,22 @@ pub(crate) enum LegendMark {
     LineOnBand(RGBColor, f64),
     /// A cross, as point estimates are marked.
     Cross(RGBColor),
+    /// A filled circle, as single points are marked.
+    Dot(RGBColor),
+    /// A hollow circle.
+    Ring(RGBColor),
+    /// A ramp of the colour from transparent to the opacity, as a shaded scale is drawn.
+    Ramp(RGBColor, f64),
+}
+
+impl LegendMark {
+    /// Width of the mark's swatch in pixels: a ramp takes two swatches.
+    fn width(self) -> i32 {
+        match self {
+            LegendMark::Ramp(..) => 2 * SWATCH,
+            _ => SWATCH,
+        }
+    }
 }
 
 /// Height of one legend line in pixels.
@@ -57,9 +75,9 @@ pub(crate) fn header<DB: DrawingBackend>(
         TextStyle::from((FONT, LEGEND_SIZE).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
     let (width, _) = area.dim_in_pixel();
     let mut widths = Vec::with_capacity(entries.len());
-    for (_, text) in entries {
+    for (mark, text) in entries {
         let (w, _) = area.estimate_text_size(text, &style)?;
-        widths.push(SWATCH + GAP + w as i32 + SPACING);
+        widths.push(mark.width() + GAP + w as i32 + SPACING);
     }
     // Lay the entries out in lines no wider than the area.
     let mut lines: Vec<Vec<usize>> = Vec::new();
@@ -83,10 +101,10 @@ pub(crate) fn header<DB: DrawingBackend>(
         let y = LEGEND_TOP + l as i32 * LEGEND_LINE;
         for &i in line {
             let (mark, text) = &entries[i];
-            draw_mark(&top, *mark, (x, y), SWATCH)?;
+            draw_mark(&top, *mark, (x, y), mark.width())?;
             top.draw(&Text::new(
                 text.as_str(),
-                (x + SWATCH + GAP, y),
+                (x + mark.width() + GAP, y),
                 style.clone(),
             ))?;
             x += widths[i];
@@ -145,6 +163,27 @@ fn draw_mark<DB: DrawingBackend>(
         }
         LegendMark::Cross(colour) => {
             area.draw(&Cross::new((x + swatch / 2, y), 5, colour.stroke_width(2)))?;
+        }
+        LegendMark::Dot(colour) => {
+            area.draw(&Circle::new((x + swatch / 2, y), 4, colour.filled()))?;
+        }
+        LegendMark::Ring(colour) => {
+            area.draw(&Circle::new((x + swatch / 2, y), 4, colour.stroke_width(1)))?;
+        }
+        LegendMark::Ramp(colour, opacity) => {
+            const STEPS: i32 = 11;
+            let step = swatch / STEPS;
+            for k in 0..STEPS {
+                let left = x + k * step;
+                area.draw(&Rectangle::new(
+                    [(left, y - 6), (left + step, y + 6)],
+                    colour.mix(opacity * k as f64 / (STEPS - 1) as f64).filled(),
+                ))?;
+            }
+            area.draw(&Rectangle::new(
+                [(x, y - 6), (x + STEPS * step, y + 6)],
+                colour.mix(0.5).stroke_width(1),
+            ))?;
         }
         LegendMark::Whisker(colour) => {
             let centre = x + swatch / 2;

@@ -1,16 +1,15 @@
 //! Figure 5: the propagated output at each stress as violins (Gaussian KDE of the propagated
 //! samples, mirrored; split left/right when there are two sources), with the measurements and
-//! the MAP curves, on a logarithmic stress axis.
+//! the MAP curves, on the control value's [`DataAxis`] (logarithmic or linear).
 
 use iuq_core::GaussianKde;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axis::{half_min_log_spacing, log_axis};
+use crate::axis::{DataAxis, Padding, linear_tick_label};
 use crate::charts::{LegendMark, draw_error_bars, header};
 use crate::error::{ReportError, Result};
 use crate::figure::{Chart, DrawResult};
-use crate::format::format_tick;
 use crate::model::StudyReport;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
@@ -20,9 +19,21 @@ const OUTLINE_POINTS: usize = 80;
 /// Opacity of a violin's fill.
 const FILL_OPACITY: f64 = 0.35;
 
+/// Room on each side of the data along x: at least the widest violin's half-width.
+const X_PADDING: Padding = Padding {
+    decades: 0.12,
+    fraction: 0.05,
+    half_spacings: 1.0,
+};
+/// Widest violin's half-width, as a share of half the smallest spacing of the control values
+/// in axis space, so that neighbouring violins never touch.
+const VIOLIN_SHARE: f64 = 0.8;
+/// Half-width of the tick marking a constant output, as a share of the same.
+const CONSTANT_SHARE: f64 = 0.3;
+
 /// The density outline of one source's propagated samples at one stress.
 enum Violin {
-    /// Output values `ys` and half-widths (in decades of stress) at them.
+    /// Output values `ys` and half-widths (in axis space) at them.
     Density { ys: Vec<f64>, half_widths: Vec<f64> },
     /// All samples equal: drawn as a horizontal tick.
     Constant(f64),
@@ -39,6 +50,8 @@ enum Side {
 /// The violin chart with its precomputed densities.
 pub(crate) struct ViolinChart<'a> {
     report: &'a StudyReport,
+    /// The x axis.
+    axis: DataAxis,
     /// `violins[s][i]`: source `s` at data point `i`.
     violins: Vec<Vec<Violin>>,
     /// Extent of everything drawn along y.
@@ -48,7 +61,8 @@ pub(crate) struct ViolinChart<'a> {
 impl<'a> ViolinChart<'a> {
     /// Estimates the densities of every source's propagated output at every data point.
     pub(crate) fn new(report: &'a StudyReport) -> Result<Self> {
-        let max_half_width = 0.8 * half_min_log_spacing(&report.data.x);
+        let axis = DataAxis::new(&report.data.x, X_PADDING);
+        let max_half_width = VIOLIN_SHARE * axis.half_min_spacing(&report.data.x);
         let mut violins = Vec::with_capacity(report.posteriors.len());
         for (s, posterior) in report.posteriors.iter().enumerate() {
             let mut row = Vec::with_capacity(posterior.propagated.len());
@@ -75,13 +89,14 @@ impl<'a> ViolinChart<'a> {
         let (lo, hi) = extent(values).unwrap_or((0.0, 1.0));
         Ok(Self {
             report,
+            axis,
             violins,
             y_range: padded(lo, hi, 0.04),
         })
     }
 }
 
-/// The violin of `samples`: KDE outline scaled to `max_half_width` decades at its widest.
+/// The violin of `samples`: KDE outline scaled to `max_half_width` (axis space) at its widest.
 fn violin(samples: &[f64], max_half_width: f64) -> std::result::Result<Violin, String> {
     let (lo, hi) = extent(samples.iter().copied()).unwrap_or((0.0, 0.0));
     if samples.len() < 2 || hi - lo <= f64::EPSILON * hi.abs().max(1.0) {
@@ -136,7 +151,7 @@ impl Chart for ViolinChart<'_> {
         }
         let plot_area = header(area, "Propagated output per stress", &entries, 0)?;
 
-        let (x_lo, x_hi, ticks) = log_axis(&data.x, 0.12);
+        let axis = &self.axis;
         let (y_lo, y_hi) = self.y_range;
         let mut chart = ChartBuilder::on(&plot_area)
             .margin_left(10)
@@ -144,13 +159,13 @@ impl Chart for ViolinChart<'_> {
             .margin_bottom(8)
             .x_label_area_size(58)
             .y_label_area_size(82)
-            .build_cartesian_2d((x_lo..x_hi).log_scale().with_key_points(ticks), y_lo..y_hi)?;
+            .build_cartesian_2d(axis.clone(), y_lo..y_hi)?;
         chart
             .configure_mesh()
             .x_desc(data.x_label.as_str())
             .y_desc(data.y_label.as_str())
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| axis.label(*v))
+            .y_label_formatter(&|v| linear_tick_label(*v, y_lo, y_hi))
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE))
             .bold_line_style(GRID_COLOUR)
@@ -167,7 +182,7 @@ impl Chart for ViolinChart<'_> {
                 _ => Side::Both,
             };
             for (i, violin) in violins.iter().enumerate() {
-                let centre = data.x[i].log10();
+                let centre = axis.map(data.x[i]);
                 match violin {
                     Violin::Density { ys, half_widths } => {
                         let outline = outline(centre, ys, half_widths, side);
@@ -185,14 +200,14 @@ impl Chart for ViolinChart<'_> {
                         )))?;
                     }
                     Violin::Constant(y) => {
-                        let w = 0.3 * half_min_log_spacing(&data.x);
+                        let w = CONSTANT_SHARE * axis.half_min_spacing(&data.x);
                         let (a, b) = match side {
                             Side::Left => (centre - w, centre),
                             Side::Right => (centre, centre + w),
                             Side::Both => (centre - w, centre + w),
                         };
                         chart.draw_series(std::iter::once(PathElement::new(
-                            vec![(10f64.powf(a), *y), (10f64.powf(b), *y)],
+                            vec![(a, *y), (b, *y)],
                             colour.stroke_width(2),
                         )))?;
                     }
@@ -202,7 +217,7 @@ impl Chart for ViolinChart<'_> {
                 .propagated
                 .iter()
                 .zip(&data.x)
-                .map(|(o, &x)| (x, o.map_prediction))
+                .map(|(o, &x)| (axis.map(x), o.map_prediction))
                 .collect();
             map.sort_by(|a, b| a.0.total_cmp(&b.0));
             chart.draw_series(LineSeries::new(map, colour.stroke_width(2)))?;
@@ -210,7 +225,7 @@ impl Chart for ViolinChart<'_> {
         let bars: Vec<(f64, f64, f64)> = (0..data.x.len())
             .map(|i| {
                 (
-                    data.x[i],
+                    axis.map(data.x[i]),
                     data.y[i] - data.y_err[i],
                     data.y[i] + data.y_err[i],
                 )
@@ -218,15 +233,16 @@ impl Chart for ViolinChart<'_> {
             .collect();
         draw_error_bars(&mut chart, &bars, DATA_COLOUR.stroke_width(1), 4)?;
         chart.draw_series(
-            (0..data.x.len()).map(|i| Circle::new((data.x[i], data.y[i]), 4, DATA_COLOUR.filled())),
+            (0..data.x.len())
+                .map(|i| Circle::new((axis.map(data.x[i]), data.y[i]), 4, DATA_COLOUR.filled())),
         )?;
         Ok(())
     }
 }
 
-/// The closed outline (stress, output) of a violin centred at `centre` decades.
+/// The closed outline (x in axis space, output) of a violin centred at `centre` (axis space).
 fn outline(centre: f64, ys: &[f64], half_widths: &[f64], side: Side) -> Vec<(f64, f64)> {
-    let at = |offset: f64, y: f64| (10f64.powf(centre + offset), y);
+    let at = |offset: f64, y: f64| (centre + offset, y);
     let right = ys.iter().zip(half_widths).map(|(&y, &w)| at(w, y));
     let left = ys.iter().zip(half_widths).rev().map(|(&y, &w)| at(-w, y));
     let centre_up = ys.iter().map(|&y| at(0.0, y));

@@ -3,8 +3,9 @@
 //! samples from a seeded random generator, one or two sources.
 
 use iuq_report::{
-    DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+    Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic, ParameterSummary,
+    PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
+    SensitivityResult, StudyReport,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -268,5 +269,128 @@ pub fn synthetic_report(
                 ("BASIS sampling".to_string(), 35.2),
             ],
         },
+        convergence: None,
+        failure_map: Vec::new(),
+        runs_per_point: Vec::new(),
     }
+}
+
+/// The toy model's probability of failure: likely where kLink is small and kBend large.
+fn failure_probability(k_link: f64, k_bend: f64) -> f64 {
+    1.0 / (1.0 + (-(k_bend / 40.0 - k_link / 20.0 - 2.0)).exp())
+}
+
+/// One failure-map panel over (kLink, kBend): `initial` runs spread over the prior ranges and
+/// `adaptive` runs near the posterior, failing at random with the toy failure probability,
+/// over that probability on a `grid` × `grid` grid (no grid when `grid` is 0).
+fn failure_panel(
+    label: &str,
+    initial: usize,
+    adaptive: usize,
+    grid: usize,
+    rng: &mut Xoshiro256PlusPlus,
+) -> FailureMapPanel {
+    let bounds = (40.0, 290.0, 50.0, 400.0);
+    let mut points = Vec::new();
+    let mut is_adaptive = Vec::new();
+    for k in 0..initial + adaptive {
+        let point = if k < initial {
+            (
+                bounds.0 + (bounds.1 - bounds.0) * rng.random::<f64>(),
+                bounds.2 + (bounds.3 - bounds.2) * rng.random::<f64>(),
+            )
+        } else {
+            (
+                118.0 + 40.0 * (rng.random::<f64>() - 0.5),
+                205.0 + 120.0 * (rng.random::<f64>() - 0.5),
+            )
+        };
+        points.push(point);
+        is_adaptive.push(k >= initial);
+    }
+    let failed = points
+        .iter()
+        .map(|&(x, y)| rng.random::<f64>() < failure_probability(x, y))
+        .collect();
+    let mut probability = Vec::with_capacity(grid * grid);
+    for row in 0..grid {
+        for column in 0..grid {
+            let x = bounds.0 + (column as f64 + 0.5) / grid as f64 * (bounds.1 - bounds.0);
+            let y = bounds.2 + (row as f64 + 0.5) / grid as f64 * (bounds.3 - bounds.2);
+            probability.push(failure_probability(x, y));
+        }
+    }
+    FailureMapPanel {
+        label: label.to_string(),
+        x_parameter: "kLink".to_string(),
+        y_parameter: "kBend".to_string(),
+        bounds,
+        points,
+        failed,
+        adaptive: is_adaptive,
+        failure_probability: probability,
+        grid_size: (grid, grid),
+    }
+}
+
+/// Adds an adaptive design's results to `report`: `rounds` rounds of 12 new runs after 40
+/// initial ones, converging; `panels` failure-map panels (the second without a probability
+/// grid); the runs per data point.
+pub fn add_adaptive_results(report: &mut StudyReport, rounds: usize, panels: usize, seed: u64) {
+    let mut rng = Xoshiro256PlusPlus::seed_from_u64(seed);
+    let parameters = vec![
+        "kLink".to_string(),
+        "kBend".to_string(),
+        "sigma_m".to_string(),
+    ];
+    let target = [118.0, 205.0, 0.012];
+    let spread = [9.0, 35.0, 0.003];
+    let rounds: Vec<ConvergenceRound> = (0..rounds)
+        .map(|r| {
+            let decay = 0.25f64.powi(r as i32);
+            let noise = |rng: &mut Xoshiro256PlusPlus| 2.0 * rng.random::<f64>() - 1.0;
+            ConvergenceRound {
+                round: r + 1,
+                runs: 40 + 12 * r,
+                new_runs: if r + 1 == rounds { 0 } else { 12 },
+                mean: (0..3)
+                    .map(|p| target[p] + 1.5 * spread[p] * decay * noise(&mut rng))
+                    .collect(),
+                std: (0..3).map(|p| spread[p] * (1.0 + 1.2 * decay)).collect(),
+                shift: (r > 0).then_some(1.2 * decay),
+                log_likelihood_std: 2.4 * decay,
+                extrapolation_share: 0.3 * decay,
+            }
+        })
+        .collect();
+    report.convergence = Some(Convergence {
+        criterion: "every posterior mean and std moves by less than 0.1 posterior stds between rounds, and the surrogate's std of the log-likelihood averaged over the posterior is below 0.2 nats".to_string(),
+        converged: true,
+        stop_reason: "the convergence rule was met".to_string(),
+        parameters,
+        rounds,
+    });
+    report.failure_map = (0..panels)
+        .map(|k| {
+            let grid = if k == 1 { 0 } else { 40 };
+            failure_panel(
+                &format!("runs at {} Pa", report.data.x[k % report.data.x.len()]),
+                40,
+                24,
+                grid,
+                &mut rng,
+            )
+        })
+        .collect();
+    report.runs_per_point = report
+        .data
+        .x
+        .iter()
+        .map(|&x| RunsAtPoint {
+            x,
+            runs: 64,
+            adaptive: 24,
+            failed: 5,
+        })
+        .collect();
 }

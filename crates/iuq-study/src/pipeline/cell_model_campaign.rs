@@ -6,18 +6,18 @@
 //!
 //! The campaign's parameters are the study's calibrated parameters plus `stress` (Pa); its one
 //! output `el` is the run's mean elongation index with the frames' standard deviation as the
-//! computational std. The command is machine-independent (`iuq` names the running executable,
-//! see `iuq_campaign::worker`), so the store's model hash is the same on every machine.
+//! computational std. The command is machine-independent (`iuq` names the iuq executable, see
+//! `iuq_campaign::worker::iuq_executable`), so the store's model hash is the same on every
+//! machine. With the local executor the runs are computed in this process
+//! ([`CellModelRuns`]), with the same result as the command's.
 
 use std::path::Path;
 
 use toml::{Table, Value};
 
-use iuq_campaign::{CampaignModel, CampaignStudy};
-use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
+use iuq_campaign::{InProcessModel, InProcessOutputs};
+use iuq_rbc::{RbcShearModel, run_shear};
 
-use super::Events;
-use crate::campaign_runs::{campaign_error, open_campaign};
 use crate::error::{Result, StudyError, input_error};
 use crate::study::{ModelSection, Study};
 
@@ -148,112 +148,54 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     Ok(toml::to_string(&root)?)
 }
 
-/// Open the campaign of `study`'s cell model at `stresses` (creating or resuming its store); a
-/// resumed campaign is news for the pipeline's observer.
-pub(super) fn open_cell_campaign(
-    study: &Study,
-    stresses: &[f64],
-    max_parallel: Option<usize>,
-    events: &Events,
-) -> Result<CampaignModel> {
-    let text = campaign_study_text(study, stresses)?;
-    let campaign_study = CampaignStudy::parse(&text, &study.path).map_err(campaign_error)?;
-    let (campaign, resumed) = open_campaign(campaign_study, max_parallel)?;
-    if resumed.requeued + resumed.ingested + resumed.reattached > 0 {
-        events.message(format!(
-            "resumed the campaign in {} ({} runs requeued, {} results ingested, {} reattached)",
-            campaign.directory().display(),
-            resumed.requeued,
-            resumed.ingested,
-            resumed.reattached
-        ));
-    }
-    Ok(CampaignModel::new(campaign))
-}
-
-/// The cell model at a list of stresses as a [`Model`] of the calibrated parameters: output j
-/// is the elongation index at stress j. A point's runs (one per stress) go into the same
-/// campaign batch; the point fails when one of its runs fails, with that run's reason.
-pub struct CellModelAtStresses {
-    campaign: std::sync::Arc<CampaignModel>,
-    stresses: Vec<f64>,
-    inputs: Vec<String>,
-    outputs: Vec<String>,
-}
-
-impl CellModelAtStresses {
-    /// The model of `campaign` (parameters: `inputs` then `stress`) at `stresses`.
-    pub fn new(
-        campaign: std::sync::Arc<CampaignModel>,
-        inputs: Vec<String>,
-        stresses: Vec<f64>,
-    ) -> Self {
-        let outputs = stresses.iter().map(|s| output_name(*s)).collect();
-        Self {
-            campaign,
-            stresses,
-            inputs,
-            outputs,
-        }
-    }
-}
-
 /// The name of the output at stress `s` (Pa).
 pub fn output_name(s: f64) -> String {
     format!("el_{s}Pa")
 }
 
-impl Model for CellModelAtStresses {
-    fn input_names(&self) -> &[String] {
-        &self.inputs
-    }
+/// The native cell model evaluated in this process: a run's inputs are the study's calibrated
+/// parameters, then the stress; its output is the mean elongation index over the measuring
+/// window, with the frames' standard deviation as the computational std — what `iuq rbc shear
+/// --json` prints for the same settings.
+pub struct CellModelRuns {
+    model: RbcShearModel,
+    parameters: usize,
+}
 
-    fn output_names(&self) -> &[String] {
-        &self.outputs
+/// The in-process runs of `study`'s cell model (the keys of its `[model]`).
+pub(super) fn cell_model_runs(study: &Study, stresses: &[f64]) -> Result<CellModelRuns> {
+    if stresses.is_empty() {
+        return Err(input_error(format!(
+            "{}: section `[likelihood]`: no shear stress selected from the data",
+            study.path.display()
+        )));
     }
+    Ok(CellModelRuns {
+        model: study.rbc_shear_model()?,
+        parameters: study.space.dimension(),
+    })
+}
 
-    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
-        let m = self.stresses.len();
-        let runs: Vec<Vec<f64>> = points
-            .iter()
-            .flat_map(|p| {
-                self.stresses.iter().map(move |s| {
-                    let mut x = p.clone();
-                    x.push(*s);
-                    x
-                })
-            })
-            .collect();
-        let outcomes = self.campaign.evaluate_batch(&runs)?;
-        Ok(outcomes
-            .chunks(m)
-            .map(|group| {
-                let mut values = Vec::with_capacity(m);
-                let mut stds = Vec::with_capacity(m);
-                for (o, s) in group.iter().zip(&self.stresses) {
-                    match o {
-                        Ok(e) => {
-                            let Some(&value) = e.outputs.first() else {
-                                return Err(EvaluationFailure::new(format!(
-                                    "at {s} Pa: the run has no output `el`"
-                                )));
-                            };
-                            values.push(value);
-                            stds.push(
-                                e.computational_std
-                                    .as_ref()
-                                    .and_then(|v| v.first().copied())
-                                    .unwrap_or(0.0),
-                            );
-                        }
-                        Err(f) => {
-                            return Err(EvaluationFailure::new(format!("at {s} Pa: {}", f.reason)));
-                        }
-                    }
-                }
-                Ok(Evaluation::with_std(values, stds))
-            })
-            .collect())
+impl InProcessModel for CellModelRuns {
+    fn evaluate(&self, parameters: &[f64]) -> std::result::Result<InProcessOutputs, String> {
+        let d = self.parameters;
+        let (theta, stress) = match parameters {
+            [theta @ .., stress] if theta.len() == d => (theta, *stress),
+            _ => {
+                return Err(format!(
+                    "expected {d} parameters and the stress, got {} values",
+                    parameters.len()
+                ));
+            }
+        };
+        let cell = self
+            .model
+            .cell_parameters(theta)
+            .map_err(|e| e.to_string())?;
+        let experiment = self.model.experiment(&cell, stress);
+        experiment.validate().map_err(|e| e.to_string())?;
+        let result = run_shear(&experiment).map_err(|e| e.to_string())?;
+        Ok((vec![result.el_mean], Some(vec![result.el_std])))
     }
 }
 

@@ -18,39 +18,49 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`cell_model_campaign`] | the cell model as a campaign of `iuq rbc shear` runs |
+//! | [`model_runs`] | the study's model (any kind) as a campaign; how runs map to data points |
+//! | [`cell_model_campaign`] | the cell model's campaign: `iuq rbc shear` runs, or in this process |
+//! | [`run_groups`] | the runs made, by run group and origin (initial, test, adaptive round) |
+//! | [`surrogate`] | GPs per data point and failure classifiers, as a model for BASIS |
+//! | [`adaptive`] | the adaptive engine: new runs where the posterior lies, until it converges |
 //! | [`settings`] | the pipeline's settings from `[surrogate]` and `[sensitivity]` |
 //! | [`report_data`] | from the results to the report and `pipeline.json` |
 
+pub mod adaptive;
+mod adaptive_report;
 pub mod cell_model_campaign;
+pub mod model_runs;
 pub mod report_data;
+pub mod run_groups;
 pub mod settings;
+pub mod surrogate;
 
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use serde_json::Value;
 
 use iuq_basis::BasisState;
 use iuq_campaign::Progress;
 use iuq_campaign::campaign_model::ProgressObserver;
-use iuq_core::{Model, Outcome, ParameterSpace};
+use iuq_core::ParameterSpace;
 use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
-use iuq_gp::{FitOptions, GaussianProcess, GpBank};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, SensitivityReport, analyse};
 
 use crate::error::{BadInput, Context, Result, StudyError, input_error};
 use crate::likelihood_section::{DataLikelihood, LikelihoodSection, parse_likelihood};
 use crate::posterior::{SampledPosterior, build_posterior_with, sample_posterior};
 use crate::sampler_section::{SamplerOverrides, parse_sampler};
-use crate::study::Study;
+use crate::study::{ModelSection, Study};
 use crate::table_io::{write_atomically, write_numeric_csv};
-use cell_model_campaign::{
-    CellModelAtStresses, campaign_directory, open_cell_campaign, output_name,
-};
-use report_data::{PipelineResults, StressRuns, write_pipeline_report};
+use adaptive::AdaptiveOutcome;
+use cell_model_campaign::campaign_directory;
+use model_runs::{ModelRuns, RunShape};
+use report_data::{PipelineResults, PointRuns, write_pipeline_report};
+use run_groups::{GroupRuns, RunOrigin};
 use settings::{PipelineSettings, parse_pipeline_settings};
+use surrogate::Surrogate;
 
 /// How to run the pipeline (the flags of `iuq pipeline`).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -117,7 +127,8 @@ pub struct PipelineOutcome {
     pub out: PathBuf,
     /// The report page (`None` with [`PipelineOptions::runs_only`]).
     pub report: Option<PathBuf>,
-    /// Model runs of the training and test designs (all stresses).
+    /// Model runs made by the pipeline in all: the initial and test designs and every adaptive
+    /// round, over all run groups (runs reused from the store included).
     pub runs: usize,
     /// How many of them failed.
     pub failed: usize,
@@ -125,6 +136,8 @@ pub struct PipelineOutcome {
     pub q2: Vec<f64>,
     /// The posterior tables as JSON (as in `pipeline.json`; `null` with `runs_only`).
     pub posterior: Value,
+    /// The adaptive engine's rounds, when `[surrogate] adaptive` is given.
+    pub adaptive: Option<AdaptiveOutcome>,
     /// Wall-clock seconds of each stage, in order.
     pub stage_seconds: Vec<(String, f64)>,
     /// Wall-clock seconds of the whole pipeline.
@@ -212,7 +225,7 @@ impl Events {
     }
 }
 
-/// The stresses of the study's data and the data themselves.
+/// The study's data (the pipeline calibrates a model on data).
 fn study_data(study: &Study) -> Result<DataLikelihood> {
     let file = study.path.display();
     match parse_likelihood(study)? {
@@ -223,11 +236,11 @@ fn study_data(study: &Study) -> Result<DataLikelihood> {
     }
 }
 
-/// The training points at stress index j: a maximin Latin hypercube mapped through the priors.
+/// The initial points of run group g: a maximin Latin hypercube mapped through the priors.
 fn training_points(
     space: &ParameterSpace,
     settings: &PipelineSettings,
-    j: usize,
+    g: usize,
 ) -> Result<Vec<Vec<f64>>> {
     let unit = latin_hypercube(
         settings.training_runs,
@@ -235,15 +248,18 @@ fn training_points(
         LhsMethod::Maximin {
             candidates: settings.maximin_candidates,
         },
-        settings.training_seed.wrapping_add(j as u64),
+        settings.training_seed.wrapping_add(g as u64),
     )?;
     unit.iter()
         .map(|u| space.from_unit_cube(u).map_err(StudyError::from))
         .collect()
 }
 
-/// The test points (the same at every stress): scrambled Sobol' points through the priors.
+/// The test points (the same in every group): scrambled Sobol' points through the priors.
 fn test_points(space: &ParameterSpace, settings: &PipelineSettings) -> Result<Vec<Vec<f64>>> {
+    if settings.test_runs == 0 {
+        return Ok(Vec::new());
+    }
     let unit = sobol_points(
         space.dimension(),
         settings.test_runs,
@@ -273,35 +289,6 @@ fn move_aside(dir: &Path) -> Result<Option<PathBuf>> {
     Ok(None)
 }
 
-fn split_runs(
-    outcomes: &[Outcome],
-    points: &[Vec<f64>],
-) -> (Vec<Vec<f64>>, Vec<f64>, Vec<f64>, Vec<String>) {
-    let mut x = Vec::new();
-    let mut y = Vec::new();
-    let mut std = Vec::new();
-    let mut failures = Vec::new();
-    for (o, p) in outcomes.iter().zip(points) {
-        match o {
-            Ok(e) => match e.outputs.first() {
-                Some(&value) => {
-                    x.push(p.clone());
-                    y.push(value);
-                    std.push(
-                        e.computational_std
-                            .as_ref()
-                            .and_then(|s| s.first().copied())
-                            .unwrap_or(0.0),
-                    );
-                }
-                None => failures.push("the run has no output `el`".to_string()),
-            },
-            Err(f) => failures.push(f.reason.clone()),
-        }
-    }
-    (x, y, std, failures)
-}
-
 /// Sobol' options of the pipeline with `n` base points.
 fn sobol_options(settings: &PipelineSettings, n: usize) -> SensitivityOptions {
     SensitivityOptions {
@@ -313,6 +300,38 @@ fn sobol_options(settings: &PipelineSettings, n: usize) -> SensitivityOptions {
         confidence_level: settings.confidence,
         ..Default::default()
     }
+}
+
+/// How a data point is named in messages: "at 1.36 Pa" for the cell model, "at t = 0.5"
+/// otherwise.
+fn point_description(study: &Study, data: &DataLikelihood, j: usize) -> String {
+    match (&study.model, &study.abscissa) {
+        (ModelSection::RbcShear { .. }, _) => format!("at {} Pa", data.x[j]),
+        (_, Some(name)) => format!("at {name} = {}", data.x[j]),
+        (_, None) => format!("at {} = {} (output {})", data.x_column, data.x[j], j + 1),
+    }
+}
+
+/// The runs of each data point, for the report and `model-runs.csv`.
+fn point_runs(groups: &[GroupRuns], runs: &ModelRuns, data: &DataLikelihood) -> Vec<PointRuns> {
+    let mut points = Vec::with_capacity(data.x.len());
+    for (g, group) in groups.iter().enumerate() {
+        for (k, j) in runs.group_outputs(g).enumerate() {
+            let training = group.training(k);
+            let test = group.test(k);
+            points.push(PointRuns {
+                x: data.x[j],
+                training_x: training.x,
+                training_y: training.y,
+                training_std: training.std,
+                test_x: test.x,
+                test_y: test.y,
+                test_std: test.std,
+                failures: group.failure_reasons(),
+            });
+        }
+    }
+    points
 }
 
 /// The stages of [`run`], on the pipeline's thread.
@@ -345,11 +364,11 @@ fn run_stages(
     if options.max_parallel == Some(0) {
         return Err(input_error("--max-parallel: must be at least 1"));
     }
-    let stresses = data.x.clone();
     let names = study.space.names();
+    let describe = |j: usize| point_description(study, &data, j);
     let mut stage_seconds: Vec<(String, f64)> = Vec::new();
 
-    // 1. Training and test runs through the campaign.
+    // 1. The initial and test runs through the campaign.
     let stage = Instant::now();
     if options.fresh {
         let dir = campaign_directory(study);
@@ -360,105 +379,112 @@ fn run_stages(
             ));
         }
     }
-    let campaign = std::sync::Arc::new(
-        open_cell_campaign(study, &stresses, options.max_parallel, events)?.with_progress(
-            Duration::from_secs(10),
-            events.campaign_progress("model runs"),
-        ),
-    );
+    let model_runs = ModelRuns::open(
+        study,
+        &data,
+        options.max_parallel,
+        events,
+        events.campaign_progress("model runs"),
+    )?;
+    let group_count = model_runs.groups();
     let test = test_points(&study.space, &settings)?;
-    let mut runs: Vec<Vec<f64>> = Vec::new();
-    let mut training: Vec<Vec<Vec<f64>>> = Vec::new();
-    for j in 0..stresses.len() {
-        training.push(training_points(&study.space, &settings, j)?);
-    }
-    for (j, s) in stresses.iter().enumerate() {
-        for p in training[j].iter().chain(&test) {
-            let mut x = p.clone();
-            x.push(*s);
-            runs.push(x);
-        }
+    let mut requests: Vec<(usize, Vec<f64>)> = Vec::new();
+    let mut initial: Vec<Vec<Vec<f64>>> = Vec::with_capacity(group_count);
+    for g in 0..group_count {
+        let points = training_points(&study.space, &settings, g)?;
+        requests.extend(points.iter().chain(&test).map(|p| (g, p.clone())));
+        initial.push(points);
     }
     events.message(format!(
-        "{} model runs ({} training + {} test at each of {} stresses; results already stored are reused)",
-        runs.len(),
+        "{} model runs ({} initial + {} test {}; results already stored are reused)",
+        requests.len(),
         settings.training_runs,
         settings.test_runs,
-        stresses.len()
+        match model_runs.shape() {
+            RunShape::PerAbscissa { .. } => format!("at each of {} data points", group_count),
+            RunShape::Curve => "parameter vectors, each run giving every data point".to_string(),
+        }
     ));
-    let outcomes = campaign.evaluate_batch(&runs)?;
-    let per_stress = settings.training_runs + settings.test_runs;
-    let mut stress_runs = Vec::new();
-    for (j, s) in stresses.iter().enumerate() {
-        let chunk = &outcomes[j * per_stress..(j + 1) * per_stress];
+    let outcomes = model_runs.run(None, &requests)?;
+    let per_group = settings.training_runs + test.len();
+    let mut groups: Vec<GroupRuns> = Vec::with_capacity(group_count);
+    for (g, points) in initial.into_iter().enumerate() {
+        let chunk = &outcomes[g * per_group..(g + 1) * per_group];
         let (train_out, test_out) = chunk.split_at(settings.training_runs);
-        let (x, y, y_std, train_fail) = split_runs(train_out, &training[j]);
-        let (xt, yt, yt_std, test_fail) = split_runs(test_out, &test);
-        stress_runs.push(StressRuns {
-            stress: *s,
-            training_x: x,
-            training_y: y,
-            training_std: y_std,
-            test_x: xt,
-            test_y: yt,
-            test_std: yt_std,
-            failures: train_fail.into_iter().chain(test_fail).collect(),
-        });
+        let mut group = GroupRuns::default();
+        group.extend(RunOrigin::Initial, points, train_out.to_vec());
+        group.extend(RunOrigin::Test, test.clone(), test_out.to_vec());
+        groups.push(group);
     }
-    write_runs_csv(&out.join("model-runs.csv"), &names, &stress_runs)?;
     stage_seconds.push((
-        "training and test runs".into(),
+        "initial and test runs".into(),
         stage.elapsed().as_secs_f64(),
     ));
-    let failed: usize = stress_runs.iter().map(|r| r.failures.len()).sum();
     if options.runs_only {
+        let point_runs = point_runs(&groups, &model_runs, &data);
+        write_runs_csv(&out.join("model-runs.csv"), &names, &point_runs)?;
         return Ok(PipelineOutcome {
             study: study.name.clone(),
             out,
             report: None,
-            runs: runs.len(),
-            failed,
+            runs: groups.iter().map(GroupRuns::len).sum(),
+            failed: groups.iter().map(|g| g.failure_reasons().len()).sum(),
             q2: Vec::new(),
             posterior: Value::Null,
+            adaptive: None,
             stage_seconds,
             seconds: started.elapsed().as_secs_f64(),
         });
     }
 
-    // 2. One GP per stress.
-    let stage = Instant::now();
-    let mut gps: Vec<GaussianProcess> = Vec::new();
-    let mut gp_checks: Vec<(f64, f64)> = Vec::new();
-    for (j, r) in stress_runs.iter().enumerate() {
-        if r.training_y.len() < 3 {
-            return Err(StudyError::Failure(format!(
-                "at {} Pa only {} training runs succeeded; a GP needs at least 3 (failures: {})",
-                r.stress,
-                r.training_y.len(),
-                r.failures.first().map_or("none", String::as_str)
-            )));
+    // 2. The adaptive rounds.
+    let adaptive = match &settings.adaptive {
+        Some(adaptive_settings) => {
+            let stage = Instant::now();
+            let outcome = adaptive::refine(
+                study,
+                &data,
+                adaptive_settings,
+                settings.training_seed,
+                &model_runs,
+                &mut groups,
+                &out,
+                events,
+                &describe,
+            )?;
+            stage_seconds.push(("adaptive rounds".into(), stage.elapsed().as_secs_f64()));
+            Some(outcome)
         }
-        let options = FitOptions {
-            seed: settings.training_seed.wrapping_add(j as u64),
-            ..Default::default()
-        };
-        let gp = GaussianProcess::fit(&r.training_x, &r.training_y, &options)
-            .with_context(|| format!("GP fit at {} Pa", r.stress))?;
+        None => None,
+    };
+    let point_runs = point_runs(&groups, &model_runs, &data);
+    write_runs_csv(&out.join("model-runs.csv"), &names, &point_runs)?;
+    let runs_made: usize = groups.iter().map(GroupRuns::len).sum();
+    let failed: usize = groups.iter().map(|g| g.failure_reasons().len()).sum();
+
+    // 3. The surrogate: one GP per data point, failure classifiers.
+    let stage = Instant::now();
+    let surrogate = Surrogate::fit(
+        &groups,
+        &model_runs,
+        &study.space,
+        settings.training_seed,
+        describe,
+    )?;
+    let mut gp_checks: Vec<(f64, f64)> = Vec::new();
+    for (gp, r) in surrogate.bank.gps().iter().zip(&point_runs) {
         let q2 = if r.test_y.len() >= 2 {
             gp.q2(&r.test_x, &r.test_y).unwrap_or(f64::NAN)
         } else {
             f64::NAN
         };
-        let loo = gp.loo_q2().unwrap_or(f64::NAN);
-        gp_checks.push((q2, loo));
-        gps.push(gp);
+        gp_checks.push((q2, gp.loo_q2().unwrap_or(f64::NAN)));
     }
-    let outputs: Vec<String> = stresses.iter().map(|s| output_name(*s)).collect();
-    let bank = GpBank::new(names.clone(), outputs.clone(), gps)?;
+    let bank = surrogate.bank.clone();
     write_atomically(&out.join("gp-bank.json"), bank.to_json_string()?.as_bytes())?;
     stage_seconds.push(("GP fits".into(), stage.elapsed().as_secs_f64()));
 
-    // 3. Sobol' indices.
+    // 4. Sobol' indices.
     let stage = Instant::now();
     let surrogate_sobol = analyse(
         &bank,
@@ -472,14 +498,13 @@ fn run_stages(
     ));
     let model_sobol: Option<SensitivityReport> = if settings.model_sobol_n >= 2 {
         let stage = Instant::now();
-        let cell = CellModelAtStresses::new(campaign.clone(), names.clone(), stresses.clone());
         events.message(format!(
             "Sobol' indices from model runs: N = {} base points, {} runs",
             settings.model_sobol_n,
-            settings.model_sobol_n * (names.len() + 2) * stresses.len()
+            settings.model_sobol_n * (names.len() + 2) * group_count
         ));
         let report = analyse(
-            &cell,
+            &model_runs.model_at_data(),
             &study.space,
             &sobol_options(&settings, settings.model_sobol_n),
         )
@@ -490,9 +515,9 @@ fn run_stages(
         None
     };
 
-    // 4. BASIS on the GP bank (and on the model).
+    // 5. BASIS on the surrogate (and on the model).
     let stage = Instant::now();
-    let posterior = build_posterior_with(study, || Ok(bank.clone()))?;
+    let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
     events.send(OwnedEvent::BasisStarted { label: "GP bank" });
     let gp_posterior = sample_posterior(
         &study.name,
@@ -513,11 +538,9 @@ fn run_stages(
             let stage = Instant::now();
             let dir = out.join("basis-model");
             let checkpoint = resume_checkpoint(&dir, events)?;
-            let cell = CellModelAtStresses::new(campaign.clone(), names.clone(), stresses.clone());
-            let posterior = build_posterior_with(study, || Ok(cell))?;
-            events.send(OwnedEvent::BasisStarted {
-                label: "cell model",
-            });
+            let model = model_runs.model_at_data();
+            let posterior = build_posterior_with(study, || Ok(model))?;
+            events.send(OwnedEvent::BasisStarted { label: "model" });
             let sampled = sample_posterior(
                 &study.name,
                 &study.path,
@@ -531,31 +554,33 @@ fn run_stages(
             );
             events.send(OwnedEvent::BasisFinished);
             let sampled = sampled?;
-            stage_seconds.push((
-                "BASIS on the cell model".into(),
-                stage.elapsed().as_secs_f64(),
-            ));
+            stage_seconds.push(("BASIS on the model".into(), stage.elapsed().as_secs_f64()));
             Some(sampled)
         }
         None => None,
     };
 
-    // 5. Propagation and the report.
+    // 6. Propagation and the report.
     let stage = Instant::now();
     let results = PipelineResults {
         study,
         data: &data,
         settings: &settings,
-        stress_runs: &stress_runs,
+        point_runs: &point_runs,
         gp_checks: &gp_checks,
         bank: &bank,
         surrogate_sobol: &surrogate_sobol,
         model_sobol: model_sobol.as_ref(),
         gp_posterior: &gp_posterior,
         model_posterior: model_posterior.as_ref(),
-        campaign_runs: campaign
+        campaign_runs: model_runs
+            .campaign()
             .run_statistics()
             .context("reading the run statistics of the campaign store")?,
+        adaptive: adaptive.as_ref(),
+        groups: &groups,
+        model_runs: &model_runs,
+        surrogate: &surrogate,
     };
     stage_seconds.push(("propagation and report".into(), 0.0));
     let summary = write_pipeline_report(&results, &out, &mut stage_seconds, stage)?;
@@ -563,10 +588,11 @@ fn run_stages(
         study: study.name.clone(),
         report: Some(out.join("report.html")),
         out,
-        runs: runs.len(),
+        runs: runs_made,
         failed,
         q2: gp_checks.iter().map(|c| c.0).collect(),
         posterior: summary,
+        adaptive,
         stage_seconds,
         seconds: started.elapsed().as_secs_f64(),
     })
@@ -588,11 +614,11 @@ fn resume_checkpoint(dir: &Path, events: &Events) -> Result<Option<BasisState>> 
     Ok(Some(state))
 }
 
-fn write_runs_csv(path: &Path, names: &[String], runs: &[StressRuns]) -> Result<()> {
-    let mut columns = vec!["stress".to_string(), "set".to_string()];
+fn write_runs_csv(path: &Path, names: &[String], runs: &[PointRuns]) -> Result<()> {
+    let mut columns = vec!["x".to_string(), "set".to_string()];
     columns.extend(names.iter().cloned());
-    columns.push("el".into());
-    columns.push("el_std".into());
+    columns.push("y".into());
+    columns.push("y_std".into());
     let mut rows = Vec::new();
     for r in runs {
         for (set, xs, ys, ss) in [
@@ -600,7 +626,7 @@ fn write_runs_csv(path: &Path, names: &[String], runs: &[StressRuns]) -> Result<
             (1.0, &r.test_x, &r.test_y, &r.test_std),
         ] {
             for ((x, y), s) in xs.iter().zip(ys).zip(ss) {
-                let mut row = vec![r.stress, set];
+                let mut row = vec![r.x, set];
                 row.extend(x.iter().copied());
                 row.push(*y);
                 row.push(*s);

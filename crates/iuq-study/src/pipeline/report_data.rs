@@ -18,25 +18,31 @@ use iuq_sensitivity::SensitivityReport;
 
 use crate::error::{Context, Result};
 use crate::likelihood_section::DataLikelihood;
+use crate::pipeline::adaptive::AdaptiveOutcome;
+use crate::pipeline::adaptive_report;
+use crate::pipeline::model_runs::ModelRuns;
+use crate::pipeline::run_groups::GroupRuns;
 use crate::pipeline::settings::PipelineSettings;
+use crate::pipeline::surrogate::Surrogate;
 use crate::posterior::SampledPosterior;
-use crate::study::Study;
+use crate::study::{ModelSection, Study};
 use crate::table_io::write_atomically;
 
-/// The runs of one stress: training and test sets (successful runs) and the failures.
+/// The runs informing one data point: training and test sets (successful runs) and the
+/// failures of its run group.
 #[derive(Debug, Clone)]
-pub struct StressRuns {
-    /// Shear stress in Pa.
-    pub stress: f64,
-    /// Parameters of the successful training runs.
+pub struct PointRuns {
+    /// The data point's abscissa.
+    pub x: f64,
+    /// Parameters of the successful training runs (initial and adaptive).
     pub training_x: Vec<Vec<f64>>,
-    /// Their elongation indices.
+    /// The model's output there.
     pub training_y: Vec<f64>,
     /// Their computational stds.
     pub training_std: Vec<f64>,
     /// Parameters of the successful test runs.
     pub test_x: Vec<Vec<f64>>,
-    /// Their elongation indices.
+    /// The model's output there.
     pub test_y: Vec<f64>,
     /// Their computational stds.
     pub test_std: Vec<f64>,
@@ -52,11 +58,11 @@ pub struct PipelineResults<'a> {
     pub data: &'a DataLikelihood,
     /// Its pipeline settings.
     pub settings: &'a PipelineSettings,
-    /// Runs per stress.
-    pub stress_runs: &'a [StressRuns],
-    /// (Q2 on the test set, leave-one-out Q2) per stress.
+    /// Runs per data point.
+    pub point_runs: &'a [PointRuns],
+    /// (Q2 on the test set, leave-one-out Q2) per data point.
     pub gp_checks: &'a [(f64, f64)],
-    /// The GP bank (one GP per stress).
+    /// The GP bank (one GP per data point).
     pub bank: &'a GpBank,
     /// Sobol' indices on the surrogate.
     pub surrogate_sobol: &'a SensitivityReport,
@@ -68,6 +74,65 @@ pub struct PipelineResults<'a> {
     pub model_posterior: Option<&'a SampledPosterior>,
     /// The campaign store's runs by status and the reasons of its failed runs.
     pub campaign_runs: (StatusCounts, Vec<String>),
+    /// The adaptive engine's rounds, when it ran.
+    pub adaptive: Option<&'a AdaptiveOutcome>,
+    /// The runs by run group.
+    pub groups: &'a [GroupRuns],
+    /// The model's campaign (how groups map to data points).
+    pub model_runs: &'a ModelRuns,
+    /// The surrogate (its failure classifiers draw the failure map).
+    pub surrogate: &'a Surrogate,
+}
+
+/// How the report names the data and the model: the cell model's physical labels, or the data
+/// file's column names.
+struct Labels {
+    x_label: String,
+    y_label: String,
+    model_source: &'static str,
+    rbc: bool,
+    x_column: String,
+    y_column: String,
+}
+
+impl Labels {
+    fn of(study: &Study, data: &DataLikelihood) -> Self {
+        let rbc = matches!(study.model, ModelSection::RbcShear { .. });
+        Self {
+            x_label: if rbc {
+                "shear stress (Pa)".into()
+            } else {
+                data.x_column.clone()
+            },
+            y_label: if rbc {
+                "elongation index EL (–)".into()
+            } else {
+                data.y_column.clone()
+            },
+            model_source: if rbc { "cell model" } else { "model" },
+            rbc,
+            x_column: data.x_column.clone(),
+            y_column: data.y_column.clone(),
+        }
+    }
+
+    /// "at 1.36 Pa" (the cell model) or "at t_min = 0.5".
+    fn at(&self, x: f64) -> String {
+        if self.rbc {
+            format!("at {x} Pa")
+        } else {
+            format!("at {} = {x}", self.x_column)
+        }
+    }
+
+    /// The label of the model's output at abscissa `x`.
+    fn output(&self, x: f64) -> String {
+        if self.rbc {
+            format!("EL at {x} Pa")
+        } else {
+            format!("{} at {} = {x}", self.y_column, self.x_column)
+        }
+    }
 }
 
 /// The `p` quantile of `sorted` (linear interpolation between order statistics).
@@ -153,13 +218,14 @@ fn sensitivity_results(
     report: &SensitivityReport,
     source: &str,
     stresses: &[f64],
+    labels: &Labels,
 ) -> Vec<SensitivityResult> {
     report
         .outputs
         .iter()
         .zip(stresses)
         .map(|(o, s)| SensitivityResult {
-            output_label: format!("EL at {s} Pa"),
+            output_label: labels.output(*s),
             x: *s,
             source: source.into(),
             indices: report
@@ -199,7 +265,8 @@ pub fn write_pipeline_report(
 ) -> Result<Value> {
     let study = results.study;
     let d = study.space.dimension();
-    let stresses: Vec<f64> = results.stress_runs.iter().map(|r| r.stress).collect();
+    let labels = Labels::of(study, results.data);
+    let stresses: Vec<f64> = results.point_runs.iter().map(|r| r.x).collect();
     let mut posteriors = vec![posterior_result(
         "GP surrogate",
         results.gp_posterior,
@@ -209,7 +276,7 @@ pub fn write_pipeline_report(
     )?];
     if let Some(m) = results.model_posterior {
         posteriors.push(posterior_result(
-            "cell model",
+            labels.model_source,
             m,
             results.bank,
             &stresses,
@@ -218,20 +285,26 @@ pub fn write_pipeline_report(
     }
     let mut sensitivity = Vec::new();
     if let Some(m) = results.model_sobol {
-        sensitivity.extend(sensitivity_results(m, "model runs", &stresses));
+        sensitivity.extend(sensitivity_results(m, "model runs", &stresses, &labels));
     }
     sensitivity.extend(sensitivity_results(
         results.surrogate_sobol,
         "surrogate",
         &stresses,
+        &labels,
     ));
     let mut gp_diagnostics = Vec::new();
     for ((r, gp), (q2, loo)) in results
-        .stress_runs
+        .point_runs
         .iter()
         .zip(results.bank.gps())
         .zip(results.gp_checks)
     {
+        // The diagnostic plots test runs against predictions; without a test set (the default
+        // of adaptive studies) `pipeline.json` keeps the leave-one-out Q2.
+        if r.test_y.len() < 2 || !q2.is_finite() || !loo.is_finite() {
+            continue;
+        }
         let prediction = gp.predict(&r.test_x)?;
         let h = gp.hyperparameters();
         let mut hyperparameters = vec![("signal variance".to_string(), h.signal_variance)];
@@ -241,8 +314,8 @@ pub fn write_pipeline_report(
         }
         hyperparameters.push(("noise variance".to_string(), h.noise_variance));
         gp_diagnostics.push(GpDiagnostic {
-            output_label: format!("EL at {} Pa", r.stress),
-            x: r.stress,
+            output_label: labels.output(r.x),
+            x: r.x,
             q2: *q2,
             loo_q2: *loo,
             simulated: r.test_y.clone(),
@@ -278,14 +351,14 @@ pub fn write_pipeline_report(
         (
             "training design".to_string(),
             format!(
-                "maximin LHS, {} runs per stress, seed {} + stress index",
+                "maximin LHS, {} runs per run group, seed {} + group index",
                 results.settings.training_runs, results.settings.training_seed
             ),
         ),
         (
             "test design".to_string(),
             format!(
-                "scrambled Sobol', {} runs per stress, seed {}",
+                "scrambled Sobol', {} runs per run group, seed {}",
                 results.settings.test_runs, results.settings.test_seed
             ),
         ),
@@ -311,8 +384,8 @@ pub fn write_pipeline_report(
         provenance,
         parameters: results.gp_posterior.run.state.parameter_names.clone(),
         data: DataSeries {
-            x_label: "shear stress (Pa)".into(),
-            y_label: "elongation index EL (–)".into(),
+            x_label: labels.x_label.clone(),
+            y_label: labels.y_label.clone(),
             x: data.x.clone(),
             y: data.observations.values.clone(),
             y_err,
@@ -320,6 +393,22 @@ pub fn write_pipeline_report(
         posteriors,
         sensitivity,
         gp_diagnostics,
+        convergence: results.adaptive.map(adaptive_report::convergence),
+        failure_map: adaptive_report::failure_map(
+            results.groups,
+            results.surrogate,
+            &study.space,
+            &results.gp_posterior.summary.mean,
+            &|g| match results.model_runs.group_abscissa(g) {
+                Some(x) => format!("runs {}", labels.at(x)),
+                None => "all runs".to_string(),
+            },
+        )?,
+        runs_per_point: adaptive_report::runs_per_point(
+            results.groups,
+            results.model_runs,
+            &data.x,
+        ),
         run_statistics: RunStatistics {
             runs,
             succeeded: counts.succeeded as usize,
@@ -331,7 +420,8 @@ pub fn write_pipeline_report(
     write_report(&report, out).context("writing the report")?;
     let summary = json!({
         "posteriors": report.posteriors.iter().map(posterior_json).collect::<Vec<_>>(),
-        "q2": report.gp_diagnostics.iter().map(|g| json!({"stress": g.x, "q2": g.q2, "loo_q2": g.loo_q2})).collect::<Vec<_>>(),
+        "q2": results.point_runs.iter().zip(results.gp_checks).map(|(r, (q2, loo))| json!({"x": r.x, "q2": finite_or_null(*q2), "loo_q2": finite_or_null(*loo)})).collect::<Vec<_>>(),
+        "adaptive": results.adaptive,
         "sensitivity": sobol_json(results.surrogate_sobol),
         "model_sensitivity": results.model_sobol.map(sobol_json),
     });
@@ -340,6 +430,11 @@ pub fn write_pipeline_report(
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     Ok(summary["posteriors"].clone())
+}
+
+/// A number for JSON, `null` when not finite (a Q2 without test runs).
+fn finite_or_null(v: f64) -> Value {
+    if v.is_finite() { json!(v) } else { Value::Null }
 }
 
 /// The cause of a failure, so that equal causes count together: the first line, its last

@@ -3,8 +3,11 @@
 //!
 //! ```toml
 //! [surrogate]
-//! design = { kind = "lhs", n = 24, seed = 11 }   # training runs per stress: maximin LHS
-//! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per stress: scrambled Sobol'
+//! design = { kind = "lhs", n = 24, seed = 11 }   # initial runs per run group: maximin LHS
+//! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per group (n = 0: none)
+//! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
+//! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.2,
+//!              samples = 2000, max_rounds = 30, candidates = 1000 }
 //! [sensitivity]
 //! n = 1024        # Saltelli base points on the surrogate
 //! model_n = 8     # Saltelli base points run on the model itself (0: skip)
@@ -37,6 +40,91 @@ pub struct PipelineSettings {
     pub confidence: f64,
     /// Bootstrap resamples of the Sobol' intervals.
     pub resamples: usize,
+    /// The adaptive refinement, when `[surrogate] adaptive` is given.
+    pub adaptive: Option<AdaptiveSettings>,
+}
+
+/// `[surrogate] adaptive = { ... }`: rounds of new runs placed where the posterior lies.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct AdaptiveSettings {
+    /// New runs per run group and round at most (`batch`, default 4).
+    pub batch: usize,
+    /// Model runs of the pipeline in all (initial, test and adaptive) at most (`max_runs`,
+    /// default 200).
+    pub max_runs: usize,
+    /// The largest shift of a posterior mean or std between rounds, in posterior stds, that
+    /// counts as converged (`tolerance`, default 0.1).
+    pub tolerance: f64,
+    /// The largest posterior-mean std of the log-likelihood due to the surrogate, in nats, that
+    /// counts as converged (`log_likelihood_tolerance`, default 0.2).
+    pub log_likelihood_tolerance: f64,
+    /// BASIS population of each round's posterior (`samples`, default 2000).
+    pub samples: usize,
+    /// Rounds at most (`max_rounds`, default 30).
+    pub max_rounds: usize,
+    /// Distinct posterior samples scored as candidates for new runs (`candidates`, default 1000).
+    pub candidates: usize,
+}
+
+/// The keys of `[surrogate] adaptive`.
+pub const ADAPTIVE_KEYS: [&str; 7] = [
+    "batch",
+    "max_runs",
+    "tolerance",
+    "log_likelihood_tolerance",
+    "samples",
+    "max_rounds",
+    "candidates",
+];
+
+fn positive_number(table: &toml::Table, key: &str, file: &str, default: f64) -> Result<f64> {
+    match table.get(key) {
+        None => Ok(default),
+        Some(v) => v
+            .as_float()
+            .or_else(|| v.as_integer().map(|i| i as f64))
+            .filter(|x| x.is_finite() && *x > 0.0)
+            .ok_or_else(|| {
+                input_error(format!(
+                    "{file}: key `surrogate.adaptive.{key}`: expected a positive number, found `{v}`"
+                ))
+            }),
+    }
+}
+
+/// Read `[surrogate] adaptive`.
+fn parse_adaptive(value: &toml::Value, file: &str) -> Result<AdaptiveSettings> {
+    let table = value.as_table().ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `surrogate.adaptive`: expected a table such as {{ batch = 4, max_runs = 200, tolerance = 0.1 }}"
+        ))
+    })?;
+    if let Some(k) = table.keys().find(|k| !ADAPTIVE_KEYS.contains(&k.as_str())) {
+        return Err(input_error(format!(
+            "{file}: key `surrogate.adaptive.{k}`: unknown key (expected one of {})",
+            ADAPTIVE_KEYS.join(", ")
+        )));
+    }
+    let count = |key: &str, default: u64, min: u64| -> Result<usize> {
+        let full = "surrogate.adaptive";
+        let v = integer(table, key, full, file, default)?;
+        if v < min {
+            return Err(input_error(format!(
+                "{file}: key `{full}.{key}`: must be at least {min}, got {v}"
+            )));
+        }
+        Ok(v as usize)
+    };
+    let settings = AdaptiveSettings {
+        batch: count("batch", 4, 1)?,
+        max_runs: count("max_runs", 200, 1)?,
+        tolerance: positive_number(table, "tolerance", file, 0.1)?,
+        log_likelihood_tolerance: positive_number(table, "log_likelihood_tolerance", file, 0.2)?,
+        samples: count("samples", 2000, 10)?,
+        max_rounds: count("max_rounds", 30, 1)?,
+        candidates: count("candidates", 1000, 1)?,
+    };
+    Ok(settings)
 }
 
 fn integer(table: &toml::Table, key: &str, full: &str, file: &str, default: u64) -> Result<u64> {
@@ -61,6 +149,7 @@ fn design(
     kind: &str,
     file: &str,
     defaults: (u64, u64),
+    min_runs: usize,
 ) -> Result<(usize, u64)> {
     let full = format!("surrogate.{key}");
     let Some(value) = surrogate.get(key) else {
@@ -89,9 +178,9 @@ fn design(
         }
     }
     let n = integer(table, "n", &full, file, defaults.0)? as usize;
-    if n < 2 {
+    if n < min_runs {
         return Err(input_error(format!(
-            "{file}: key `{full}.n`: at least 2 runs per stress are needed, got {n}"
+            "{file}: key `{full}.n`: at least {min_runs} runs per run group are needed, got {n}"
         )));
     }
     Ok((n, integer(table, "seed", &full, file, defaults.1)?))
@@ -104,14 +193,25 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
     let surrogate = study.surrogate.as_ref().unwrap_or(&empty);
     if let Some(k) = surrogate
         .keys()
-        .find(|k| !["design", "test", "maximin_candidates"].contains(&k.as_str()))
+        .find(|k| !["design", "test", "maximin_candidates", "adaptive"].contains(&k.as_str()))
     {
         return Err(input_error(format!(
-            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates)"
+            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates, adaptive)"
         )));
     }
-    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1))?;
-    let (test_runs, test_seed) = design(surrogate, "test", "sobol", &file, (8, 2))?;
+    let adaptive = surrogate
+        .get("adaptive")
+        .map(|v| parse_adaptive(v, &file))
+        .transpose()?;
+    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1), 2)?;
+    // An adaptive study spends its runs where the posterior lies: no test runs unless asked for.
+    let default_test = if adaptive.is_some() { 0 } else { 8 };
+    let (test_runs, test_seed) = design(surrogate, "test", "sobol", &file, (default_test, 2), 0)?;
+    if test_runs == 1 {
+        return Err(input_error(format!(
+            "{file}: key `surrogate.test.n`: 0 (no test runs) or at least 2 (a Q2 needs two), got 1"
+        )));
+    }
     let maximin_candidates = integer(surrogate, "maximin_candidates", "surrogate", &file, 100)?;
     if maximin_candidates == 0 {
         return Err(input_error(format!(
@@ -159,5 +259,6 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         sobol_seed: s.seed.unwrap_or(0),
         confidence,
         resamples,
+        adaptive,
     })
 }

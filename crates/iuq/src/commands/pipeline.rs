@@ -114,6 +114,11 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
                 "out": out.display().to_string(),
                 "report": report.display().to_string(),
                 "runs": outcome.runs,
+                "failed": outcome.failed,
+                // A one-shot design has nothing to converge; an adaptive one says.
+                "converged": outcome.adaptive.as_ref().is_none_or(|a| a.converged),
+                "rounds": outcome.adaptive.as_ref().map_or(0, |a| a.rounds.len()),
+                "adaptive": outcome.adaptive,
                 "q2": outcome.q2,
                 "posterior": outcome.posterior,
                 "stage_seconds": outcome
@@ -124,8 +129,22 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
                 "seconds": outcome.seconds,
             });
             emit(json_output, &value, || {
+                let adaptive = match &outcome.adaptive {
+                    Some(a) => format!(
+                        "; {} model runs in {} adaptive rounds, {} ({})",
+                        outcome.runs,
+                        a.rounds.len(),
+                        if a.converged {
+                            "converged"
+                        } else {
+                            "not converged"
+                        },
+                        a.stop_reason
+                    ),
+                    None => format!("; {} model runs", outcome.runs),
+                };
                 format!(
-                    "study `{}`: report in {} ({:.1} s)",
+                    "study `{}`: report in {} ({:.1} s){adaptive}",
                     outcome.study,
                     report.display(),
                     outcome.seconds

@@ -1,0 +1,412 @@
+//! The adaptive engine: after the initial design, rounds of
+//!
+//! 1. fit the surrogate (a GP per data point, a failure classifier per run group with failures);
+//! 2. sample its posterior with BASIS (`samples` per round, seed = the sampler's + round);
+//! 3. judge convergence (`iuq_adaptive::convergence`): every parameter's posterior mean and std
+//!    moved by less than `tolerance` posterior stds since the previous round, and the
+//!    surrogate's std of the log-likelihood, averaged over the posterior, is below
+//!    `log_likelihood_tolerance` nats;
+//! 4. otherwise score the distinct posterior samples by the variance the surrogate leaves in the
+//!    log-likelihood there, times their squared relative posterior density and the probability
+//!    that the model answers (`iuq_adaptive::acquisition`), pick up to `batch` runs per run group greedily with
+//!    kriging-believer updates (`iuq_adaptive::batch`), keep the best within `max_runs`, and run
+//!    them through the campaign as the design `adaptive-round-<k>`.
+//!
+//! The loop stops converged, at `max_runs` or `max_rounds`, or when no candidate's score exceeds
+//! the minimum worth a run ((log_likelihood_tolerance/2)² per run group): the surrogate can no
+//! longer be improved where the posterior lies, and convergence is then judged by its
+//! log-likelihood spread alone.
+//!
+//! Everything is seeded, so a rerun replays the rounds, finding every run in the campaign store:
+//! after a crash (or kill -9) it continues where it stopped, running only what was never
+//! finished.
+
+use std::path::Path;
+use std::time::Instant;
+
+use serde::Serialize;
+
+use iuq_adaptive::{
+    ConvergenceCriterion, LikelihoodTerm, PosteriorMoments, extrapolation_share,
+    likelihood_weights, log_likelihood_variance, select_batch, surrogate_log_likelihood_std,
+};
+
+use super::model_runs::ModelRuns;
+use super::run_groups::{GroupRuns, RunOrigin};
+use super::settings::AdaptiveSettings;
+use super::surrogate::Surrogate;
+use super::{Events, OwnedEvent};
+use crate::error::{BadInput, Result, StudyError};
+use crate::likelihood_section::DataLikelihood;
+use crate::posterior::{build_posterior_with, sample_posterior};
+use crate::sampler_section::{SamplerOverrides, parse_sampler};
+use crate::study::Study;
+use crate::table_io::{write_atomically, write_numeric_csv};
+
+/// Distance to the nearest training run, in length scales, beyond which the surrogate
+/// extrapolates.
+pub const EXTRAPOLATION_THRESHOLD: f64 = 1.0;
+
+/// One round of the adaptive engine, as `report.json` and the report show it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AdaptiveRound {
+    /// The round, from 1.
+    pub round: usize,
+    /// Model runs made before this round's new runs (initial, test and earlier rounds).
+    pub runs: usize,
+    /// New runs chosen in this round (0 in the last round).
+    pub new_runs: usize,
+    /// New runs per run group.
+    pub new_runs_per_group: Vec<usize>,
+    /// Posterior mean of each sampled parameter.
+    pub mean: Vec<f64>,
+    /// Posterior std of each sampled parameter.
+    pub std: Vec<f64>,
+    /// max_k of the parameters' shifts since the previous round, in posterior stds.
+    pub shift: Option<f64>,
+    /// The surrogate's std of the log-likelihood, averaged over the posterior (nats).
+    pub log_likelihood_std: f64,
+    /// Share of posterior samples farther than one length scale from every training run of
+    /// some data point's GP (the largest share over the GPs).
+    pub extrapolation_share: f64,
+    /// The log evidence of the round's surrogate posterior.
+    pub log_evidence: f64,
+    /// Both convergence criteria held.
+    pub converged: bool,
+    /// Wall-clock seconds of the round.
+    pub seconds: f64,
+}
+
+/// What the adaptive engine did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct AdaptiveOutcome {
+    /// Every round.
+    pub rounds: Vec<AdaptiveRound>,
+    /// Whether the posterior converged by the criterion.
+    pub converged: bool,
+    /// Why the loop stopped.
+    pub stop_reason: String,
+    /// The names of the sampled parameters (the columns of `mean` and `std`).
+    pub parameters: Vec<String>,
+    /// The criterion.
+    pub tolerance: f64,
+    /// The criterion's log-likelihood part (nats).
+    pub log_likelihood_tolerance: f64,
+}
+
+/// The indices of the distinct rows of `samples`, in order of first appearance, at most
+/// `limit`.
+fn distinct(samples: &[Vec<f64>], limit: usize) -> Vec<usize> {
+    let mut seen = std::collections::HashSet::new();
+    (0..samples.len())
+        .filter(|&i| seen.insert(samples[i].iter().map(|v| v.to_bits()).collect::<Vec<u64>>()))
+        .take(limit)
+        .collect()
+}
+
+/// s²_j at a posterior sample: the measurement variance (when used) plus (σ_m·y_j)².
+fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f64>) -> f64 {
+    let y = data.observations.values[j];
+    let measurement = match (&data.observations.measurement_std, data.measurement_error) {
+        (Some(e), true) => e[j] * e[j],
+        _ => 0.0,
+    };
+    let modelling = sigma_m.map_or(0.0, |s| (s * y).powi(2));
+    let total = measurement + modelling;
+    if total > 0.0 {
+        total
+    } else {
+        // No error term at all: a datum is then exact; keep the score finite.
+        1e-12 * y.abs().max(1.0).powi(2)
+    }
+}
+
+/// The inputs of one round's scoring: the candidates θ, s²_ij, and their log posterior
+/// densities (ℓ + ln π of the surrogate posterior).
+struct Candidates {
+    theta: Vec<Vec<f64>>,
+    variance: Vec<Vec<f64>>,
+    log_density: Vec<f64>,
+}
+
+fn candidates(
+    state: &iuq_basis::BasisState,
+    d: usize,
+    modelling_error: bool,
+    data: &DataLikelihood,
+    limit: usize,
+) -> Candidates {
+    let rows = distinct(&state.samples, limit);
+    let theta = rows
+        .iter()
+        .map(|&i| state.samples[i][..d].to_vec())
+        .collect();
+    let log_density = rows
+        .iter()
+        .map(|&i| state.log_likelihood[i] + state.log_prior[i])
+        .collect();
+    let variance = rows
+        .iter()
+        .map(|&i| {
+            let s = &state.samples[i];
+            let sigma_m = modelling_error.then(|| s[d]);
+            (0..data.x.len())
+                .map(|j| total_variance(data, j, sigma_m))
+                .collect()
+        })
+        .collect();
+    Candidates {
+        theta,
+        variance,
+        log_density,
+    }
+}
+
+/// Run the adaptive engine on `groups` (holding the initial and test runs), adding its runs to
+/// them. `out` receives `adaptive/round-<k>/` (each round's BASIS results),
+/// `adaptive/rounds.json` (the rounds' summaries) and `adaptive/runs.csv` (every new run: round,
+/// run group from 0, θ, and 1 where it failed).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn refine(
+    study: &Study,
+    data: &DataLikelihood,
+    settings: &AdaptiveSettings,
+    training_seed: u64,
+    runs: &ModelRuns,
+    groups: &mut [GroupRuns],
+    out: &Path,
+    events: &Events,
+    describe: &dyn Fn(usize) -> String,
+) -> Result<AdaptiveOutcome> {
+    let file = study.path.display().to_string();
+    let criterion = ConvergenceCriterion {
+        tolerance: settings.tolerance,
+        log_likelihood_tolerance: settings.log_likelihood_tolerance,
+    }
+    .check()
+    .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
+    let base_seed = parse_sampler(study, &SamplerOverrides::default())?.seed;
+    let d = study.space.dimension();
+    let modelling_error = data.modelling_error.is_some();
+    let min_score = (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64;
+    let dir = out.join("adaptive");
+    std::fs::create_dir_all(&dir)
+        .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
+    let mut rounds: Vec<AdaptiveRound> = Vec::new();
+    let mut previous: Option<PosteriorMoments> = None;
+    let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
+    let mut converged = false;
+    let mut parameters = Vec::new();
+    // Every adaptive run: round, group, θ, failed (written to `adaptive/runs.csv`).
+    let mut new_rows: Vec<Vec<f64>> = Vec::new();
+    for round in 1..=settings.max_rounds {
+        let started = Instant::now();
+        let made: usize = groups.iter().map(GroupRuns::len).sum();
+        let surrogate = Surrogate::fit(groups, runs, &study.space, training_seed, describe)?;
+        let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
+        let sampler = parse_sampler(
+            study,
+            &SamplerOverrides {
+                samples: Some(settings.samples),
+                seed: Some(base_seed.wrapping_add(round as u64)),
+                ..Default::default()
+            },
+        )?;
+        events.send(OwnedEvent::BasisStarted {
+            label: "adaptive round",
+        });
+        let sampled = sample_posterior(
+            &study.name,
+            &study.path,
+            &posterior,
+            sampler,
+            &dir.join(format!("round-{round}")),
+            None,
+            None,
+            None,
+            &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
+        );
+        events.send(OwnedEvent::BasisFinished);
+        let sampled = sampled?;
+        let state = &sampled.run.state;
+        parameters = state.parameter_names.clone();
+        let moments = PosteriorMoments {
+            mean: sampled.summary.mean.clone(),
+            std: sampled.summary.std.clone(),
+        };
+        let c = candidates(state, d, modelling_error, data, settings.candidates);
+        // The surrogate's predictions at the candidates, per data point.
+        let gps = surrogate.bank.gps();
+        let mut predictions = Vec::with_capacity(gps.len());
+        for gp in gps {
+            predictions.push(gp.predict(&c.theta)?);
+        }
+        let spread: Vec<f64> = (0..c.theta.len())
+            .map(|i| {
+                predictions
+                    .iter()
+                    .enumerate()
+                    .map(|(j, p)| {
+                        log_likelihood_variance(
+                            data.observations.values[j],
+                            p.mean[i],
+                            p.variance[i],
+                            c.variance[i][j],
+                        )
+                    })
+                    .sum()
+            })
+            .collect();
+        let u = surrogate_log_likelihood_std(&spread);
+        let assessment = criterion.assess(previous.as_ref(), &moments, u)?;
+        let posterior_theta: Vec<Vec<f64>> =
+            state.samples.iter().map(|s| s[..d].to_vec()).collect();
+        let mut extrapolation: f64 = 0.0;
+        for gp in gps {
+            let share = extrapolation_share(
+                &posterior_theta,
+                gp.training_inputs(),
+                &gp.length_scales_in_input_units(),
+                EXTRAPOLATION_THRESHOLD,
+            )?;
+            extrapolation = extrapolation.max(share);
+        }
+        let mut record = AdaptiveRound {
+            round,
+            runs: made,
+            new_runs: 0,
+            new_runs_per_group: vec![0; groups.len()],
+            mean: moments.mean.clone(),
+            std: moments.std.clone(),
+            shift: assessment.shift,
+            log_likelihood_std: u,
+            extrapolation_share: extrapolation,
+            log_evidence: state.log_evidence,
+            converged: assessment.converged,
+            seconds: 0.0,
+        };
+        let stop = if assessment.converged {
+            converged = true;
+            Some("converged".to_string())
+        } else if made >= settings.max_runs {
+            Some(format!("reached max_runs = {}", settings.max_runs))
+        } else {
+            None
+        };
+        let mut requests: Vec<(usize, Vec<f64>)> = Vec::new();
+        let mut no_candidate = false;
+        if stop.is_none() {
+            let remaining = settings.max_runs - made;
+            // (score, group, order within the group's batch, candidate index)
+            let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();
+            for g in 0..groups.len() {
+                let outputs = runs.group_outputs(g);
+                let terms: Vec<LikelihoodTerm<'_>> = outputs
+                    .map(|j| LikelihoodTerm {
+                        gp: &gps[j],
+                        datum: data.observations.values[j],
+                        total_variance: c.variance.iter().map(|v| v[j]).collect(),
+                    })
+                    .collect();
+                let p_answer: Vec<f64> = surrogate
+                    .group_failure_probability(g, &c.theta)?
+                    .into_iter()
+                    .map(|p| 1.0 - p)
+                    .collect();
+                let weights = likelihood_weights(&c.log_density, &p_answer);
+                let selection = select_batch(
+                    &terms,
+                    &c.theta,
+                    &weights,
+                    settings.batch.min(remaining),
+                    min_score,
+                )?;
+                for (order, (&i, &score)) in
+                    selection.indices.iter().zip(&selection.scores).enumerate()
+                {
+                    picks.push((score, g, order, i));
+                }
+            }
+            // Within the budget, the best picks first (a group's later picks already count
+            // its earlier ones).
+            picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            picks.truncate(remaining);
+            picks.sort_by(|a, b| a.1.cmp(&b.1).then(a.2.cmp(&b.2)));
+            for (_, g, _, i) in &picks {
+                requests.push((*g, c.theta[*i].clone()));
+                record.new_runs_per_group[*g] += 1;
+            }
+            no_candidate = requests.is_empty();
+        }
+        record.new_runs = requests.len();
+        events.message(format!(
+            "adaptive round {round}: {made} runs so far; posterior shift {}, surrogate log-likelihood std {u:.3}, {:.0} % of the posterior extrapolated; {}",
+            assessment
+                .shift
+                .map_or("-".to_string(), |s| format!("{s:.3}")),
+            100.0 * extrapolation,
+            match (&stop, no_candidate) {
+                (Some(reason), _) => format!("stop: {reason}"),
+                (None, true) => "no candidate run is worth making".to_string(),
+                (None, false) => format!("{} new runs", requests.len()),
+            }
+        ));
+        if !requests.is_empty() {
+            let label = format!("adaptive-round-{round}");
+            let outcomes = runs.run(Some(&label), &requests)?;
+            for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
+                let mut row = vec![round as f64, *g as f64];
+                row.extend(theta);
+                row.push(if outcome.is_ok() { 0.0 } else { 1.0 });
+                new_rows.push(row);
+            }
+            let mut columns = vec!["round".to_string(), "group".to_string()];
+            columns.extend(study.space.names());
+            columns.push("failed".into());
+            write_numeric_csv(&dir.join("runs.csv"), &columns, &new_rows)?;
+            let mut per_group: Vec<(Vec<Vec<f64>>, Vec<iuq_core::Outcome>)> =
+                vec![(Vec::new(), Vec::new()); groups.len()];
+            for ((g, theta), outcome) in requests.into_iter().zip(outcomes) {
+                per_group[g].0.push(theta);
+                per_group[g].1.push(outcome);
+            }
+            for (group, (points, outcomes)) in groups.iter_mut().zip(per_group) {
+                group.extend(RunOrigin::Adaptive { round }, points, outcomes);
+            }
+        }
+        record.seconds = started.elapsed().as_secs_f64();
+        rounds.push(record);
+        write_rounds(&dir, &rounds)?;
+        if let Some(reason) = stop {
+            outcome_reason = reason;
+            break;
+        }
+        if no_candidate {
+            converged = u < settings.log_likelihood_tolerance;
+            outcome_reason = format!(
+                "no candidate run is worth making (the surrogate's log-likelihood std over the posterior is {u:.3} nats{})",
+                if converged {
+                    ", within the tolerance"
+                } else {
+                    ", above the tolerance"
+                }
+            );
+            break;
+        }
+        previous = Some(moments);
+    }
+    Ok(AdaptiveOutcome {
+        rounds,
+        converged,
+        stop_reason: outcome_reason,
+        parameters,
+        tolerance: settings.tolerance,
+        log_likelihood_tolerance: settings.log_likelihood_tolerance,
+    })
+}
+
+fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {
+    let text = serde_json::to_string_pretty(rounds)
+        .map_err(|e| StudyError::Failure(format!("cannot write the rounds: {e}")))?;
+    write_atomically(&dir.join("rounds.json"), text.as_bytes())
+}

@@ -1,0 +1,352 @@
+//! End-to-end tests of the adaptive engine of `iuq pipeline` on the cooling example
+//! (`examples/cooling`): a real program run by the campaign executor (Python, one process per
+//! run), one GP per data point, the failure classifier, BASIS, the report.
+//!
+//! The reference is the exact posterior: BASIS on the closed-form curve
+//! (`cooling-exact.toml`, N = 20,000). With N = 10,000 in the pipeline and 20,000 in the
+//! reference, BASIS alone puts the two means about 0.02 posterior stds apart and the stds about
+//! 1.5 % apart (the spread of a mean over an effective sample of several thousand); the
+//! tolerances below (0.1 std, 10 %) leave the rest to the surrogate, whose log-likelihood error
+//! over the posterior the engine's convergence criterion bounds by 0.2 nats.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{iuq, json_of, scratch};
+
+/// A copy of `examples/cooling` in a scratch directory (runs and reports stay out of the
+/// repository).
+fn cooling(suite_name: &str) -> PathBuf {
+    let dir = scratch("adaptive", suite_name);
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/cooling");
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    dir
+}
+
+/// Mean and std per parameter from a `--json` output's posterior (the GP surrogate's).
+fn moments(value: &serde_json::Value) -> Moments {
+    value["posterior"][0]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|p| {
+            (
+                p["parameter"].as_str().unwrap().to_string(),
+                p["mean"].as_f64().unwrap(),
+                p["std"].as_f64().unwrap(),
+            )
+        })
+        .collect()
+}
+
+/// Mean and std of each parameter, by name.
+type Moments = Vec<(String, f64, f64)>;
+
+/// The exact posterior's samples (columns k, T0) and its mean and std per parameter.
+fn exact_posterior(dir: &Path) -> (Vec<[f64; 2]>, Moments) {
+    let out = dir.join("exact");
+    let output = iuq(&[
+        "basis",
+        dir.join("cooling-exact.toml").to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let v = json_of(&output);
+    let stats = ["k", "T0"]
+        .iter()
+        .map(|p| {
+            (
+                p.to_string(),
+                v["mean"][p].as_f64().unwrap(),
+                v["std"][p].as_f64().unwrap(),
+            )
+        })
+        .collect();
+    let text = std::fs::read_to_string(out.join("samples.csv")).unwrap();
+    let samples = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+            [v[0], v[1]]
+        })
+        .collect();
+    (samples, stats)
+}
+
+/// The adaptive runs of `adaptive/runs.csv`: (round, θ = [k, T0], failed).
+fn adaptive_runs(out: &Path) -> Vec<(usize, [f64; 2], bool)> {
+    let text = std::fs::read_to_string(out.join("adaptive/runs.csv")).unwrap();
+    text.lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|c| c.parse().unwrap()).collect();
+            (v[0] as usize, [v[2], v[3]], v[4] != 0.0)
+        })
+        .collect()
+}
+
+fn pipeline(study: &Path, out: &Path) -> serde_json::Value {
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    json_of(&output)
+}
+
+fn assert_close_to_exact(value: &serde_json::Value, exact: &[(String, f64, f64)]) {
+    for ((name, mean, std), (exact_name, exact_mean, exact_std)) in moments(value).iter().zip(exact)
+    {
+        assert_eq!(name, exact_name);
+        assert!(
+            (mean - exact_mean).abs() < 0.1 * exact_std,
+            "{name}: mean {mean} vs exact {exact_mean} ± {exact_std}"
+        );
+        assert!(
+            (std / exact_std - 1.0).abs() < 0.1,
+            "{name}: std {std} vs exact {exact_std}"
+        );
+    }
+}
+
+/// Squared Mahalanobis distance of θ from the samples' mean under their covariance.
+fn mahalanobis2(samples: &[[f64; 2]], theta: [f64; 2]) -> f64 {
+    let n = samples.len() as f64;
+    let m = [0, 1].map(|k| samples.iter().map(|s| s[k]).sum::<f64>() / n);
+    let c = |a: usize, b: usize| {
+        samples
+            .iter()
+            .map(|s| (s[a] - m[a]) * (s[b] - m[b]))
+            .sum::<f64>()
+            / n
+    };
+    let (a, b, d) = (c(0, 0), c(0, 1), c(1, 1));
+    let det = a * d - b * b;
+    let (x, y) = (theta[0] - m[0], theta[1] - m[1]);
+    (d * x * x - 2.0 * b * x * y + a * y * y) / det
+}
+
+#[test]
+fn the_adaptive_loop_converges_to_the_exact_posterior_with_runs_where_it_lies() {
+    let dir = cooling("converges");
+    let (samples, exact) = exact_posterior(&dir);
+    for study in ["cooling-curve.toml", "cooling-per-time.toml"] {
+        let out = dir.join(format!("{study}-report"));
+        let v = pipeline(&dir.join(study), &out);
+        assert_eq!(v["converged"], true, "{study}: {v}");
+        let rounds = v["rounds"].as_u64().unwrap();
+        assert!(rounds >= 2, "{study}: {rounds} rounds");
+        assert_eq!(
+            v["adaptive"]["rounds"].as_array().unwrap().len() as u64,
+            rounds
+        );
+        assert_close_to_exact(&v, &exact);
+        // Most new runs fall inside the exact posterior's 95 % region (χ²₂ 0.95 = 5.991; the
+        // posterior is close to Gaussian).
+        let runs = adaptive_runs(&out);
+        assert!(!runs.is_empty(), "{study}: no adaptive run");
+        let inside = runs
+            .iter()
+            .filter(|(_, theta, _)| mahalanobis2(&samples, *theta) < 5.991)
+            .count();
+        assert!(
+            2 * inside > runs.len(),
+            "{study}: {inside} of {} new runs in the 95 % region",
+            runs.len()
+        );
+        // The report shows the rounds.
+        let report = std::fs::read_to_string(out.join("report.html")).unwrap();
+        assert!(report.contains("Convergence"), "{study}");
+    }
+}
+
+#[test]
+fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() {
+    let dir = cooling("failing");
+    // The program refuses k > 0.305: the boundary cuts the exact posterior (k = 0.3076 ±
+    // 0.0069) in two, so the failure region lies right beside the calibrated one. Two thirds of
+    // the prior fail, so the initial design is larger than the example's.
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "[surrogate]",
+            "env = { COOLING_K_UNSTABLE = \"0.305\" }\n\n[surrogate]",
+        )
+        .replace(
+            "design = { kind = \"lhs\", n = 8, seed = 1 }",
+            "design = { kind = \"lhs\", n = 12, seed = 1 }",
+        );
+    assert!(study.contains("n = 12"));
+    let path = dir.join("failing.toml");
+    std::fs::write(&path, study).unwrap();
+    let out = dir.join("failing-report");
+    let v = pipeline(&path, &out);
+    assert!(v["failed"].as_u64().unwrap() > 0);
+    let text = std::fs::read_to_string(out.join("basis-gp/samples.csv")).unwrap();
+    let ks: Vec<f64> = text
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').next().unwrap().parse().unwrap())
+        .collect();
+    // No posterior mass where the model fails, up to the classifier's resolution of the
+    // boundary (0.3 posterior stds).
+    let beyond = ks.iter().filter(|k| **k > 0.305 + 0.002).count();
+    assert!(
+        (beyond as f64) < 0.01 * ks.len() as f64,
+        "{beyond} of {} samples beyond the failure boundary",
+        ks.len()
+    );
+    // Most of the exact posterior's mass below the boundary is kept.
+    assert!(ks.iter().filter(|k| **k < 0.305).count() as f64 > 0.95 * ks.len() as f64);
+    // Few runs where the model fails: the engine fails only while it locates the boundary (every
+    // failed adaptive run lies within 2 exact posterior stds of it), never deep in the region
+    // that gives no answer (two thirds of the prior), and most of its runs succeed.
+    let runs = adaptive_runs(&out);
+    let failed: Vec<f64> = runs.iter().filter(|r| r.2).map(|r| r.1[0]).collect();
+    assert!(
+        3 * failed.len() <= runs.len(),
+        "{} of {} adaptive runs failed",
+        failed.len(),
+        runs.len()
+    );
+    for k in &failed {
+        assert!(*k < 0.305 + 2.0 * 0.0069, "a failed adaptive run at k = {k}");
+    }
+}
+
+#[test]
+fn a_killed_pipeline_continues_where_it_stopped_without_losing_or_repeating_runs() {
+    let dir = cooling("resume");
+    let log = dir.join("finished-runs.jsonl");
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "[surrogate]",
+            &format!(
+                "env = {{ COOLING_SLEEP = \"0.4\", COOLING_RUN_LOG = \"{}\" }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[surrogate]",
+                log.display()
+            ),
+        );
+    let path = dir.join("resume.toml");
+    std::fs::write(&path, &study).unwrap();
+    let out = dir.join("resume-report");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(["pipeline", path.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    // Kill it (SIGKILL) once the first adaptive round has chosen its runs and they are under way.
+    let started = Instant::now();
+    while !out.join("adaptive/rounds.json").exists() {
+        assert!(started.elapsed() < Duration::from_secs(120), "no round");
+        assert!(child.try_wait().unwrap().is_none(), "finished too early");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(200));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = std::fs::read_to_string(&log).unwrap_or_default();
+    let v = pipeline(&path, &out);
+    assert_eq!(v["converged"], true, "{v}");
+    // Every finished run ran once: none repeated after the restart, none lost (the log of the
+    // killed pipeline's finished runs is a prefix of the whole).
+    let text = std::fs::read_to_string(&log).unwrap();
+    let all: Vec<&str> = text.lines().collect();
+    let mut unique = all.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), all.len(), "a finished run was repeated");
+    assert!(text.starts_with(&before) && !before.is_empty());
+    // Nothing lost: the restarted pipeline ends exactly where an uninterrupted one does.
+    let clean_dir = cooling("resume-clean");
+    let clean_study = study.replace(
+        &log.display().to_string(),
+        &clean_dir.join("log.jsonl").display().to_string(),
+    );
+    let clean_path = clean_dir.join("resume.toml");
+    std::fs::write(&clean_path, clean_study).unwrap();
+    let clean = pipeline(&clean_path, &clean_dir.join("report"));
+    assert_eq!(v["runs"], clean["runs"]);
+    assert_eq!(v["rounds"], clean["rounds"]);
+    assert_eq!(moments(&v), moments(&clean));
+}
+
+#[test]
+fn bad_adaptive_keys_exit_2_naming_the_file_and_key() {
+    let dir = cooling("bad-keys");
+    let original = std::fs::read_to_string(dir.join("cooling-curve.toml")).unwrap();
+    let line = original
+        .lines()
+        .find(|l| l.starts_with("adaptive = "))
+        .unwrap()
+        .to_string();
+    for (replacement, key) in [
+        ("adaptive = { batch = 0 }", "surrogate.adaptive.batch"),
+        ("adaptive = { bacth = 3 }", "surrogate.adaptive.bacth"),
+        (
+            "adaptive = { tolerance = -0.1 }",
+            "surrogate.adaptive.tolerance",
+        ),
+        (
+            "adaptive = { log_likelihood_tolerance = \"small\" }",
+            "surrogate.adaptive.log_likelihood_tolerance",
+        ),
+        ("adaptive = 3", "surrogate.adaptive"),
+    ] {
+        let path = dir.join("bad.toml");
+        std::fs::write(&path, original.replace(&line, replacement)).unwrap();
+        let output = iuq(&["pipeline", path.to_str().unwrap(), "--json"]);
+        assert_eq!(output.status.code(), Some(2), "{replacement}");
+        let message = json_of(&output)["error"]["message"]
+            .as_str()
+            .unwrap()
+            .to_string();
+        assert!(
+            message.contains("bad.toml") && message.contains(&format!("`{key}`")),
+            "{replacement}: {message}"
+        );
+        // Nothing was run or written.
+        assert!(!dir.join("bad.campaign").exists(), "{replacement}");
+    }
+}
+
+#[test]
+fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
+    let dir = cooling("expression");
+    let (_, exact) = exact_posterior(&dir);
+    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
+        .unwrap()
+        .replace(
+            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
+            "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
+        );
+    assert!(study.contains("kind = \"expression\""));
+    let path = dir.join("expression.toml");
+    std::fs::write(&path, study).unwrap();
+    let v = pipeline(&path, &dir.join("expression-report"));
+    assert_eq!(v["converged"], true, "{v}");
+    assert_eq!(v["failed"], 0);
+    assert_close_to_exact(&v, &exact);
+    // The runs are in a campaign store like a program's.
+    assert!(dir.join("expression.campaign/campaign.sqlite").exists());
+}

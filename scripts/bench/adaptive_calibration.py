@@ -1,0 +1,283 @@
+#!/usr/bin/env python3
+"""How many model runs a calibration needs: iuq's adaptive engine against a one-shot maximin
+Latin hypercube of growing size and against GPry, side by side, on problems with known
+posteriors.
+
+    python3 -m venv .venv-adaptive && .venv-adaptive/bin/pip install -r scripts/bench/requirements-adaptive.txt
+    cargo build --release -p iuq
+    .venv-adaptive/bin/python scripts/bench/adaptive_calibration.py [--problems cooling,logistic,oscillator] [--skip-gpry]
+
+Each problem is a model y(θ, x) evaluated at the data's abscissae in one run (the "curve" shape:
+one run per parameter vector returns every data point), with synthetic data made here from
+known parameters and Gaussian noise (fixed seeds). The truth is BASIS on the exact curve
+(`iuq basis` with `likelihood.prediction`, N = 20,000). A posterior is *accurate* when every
+parameter's mean lies within 0.1 posterior std of the truth's and its std within 10 % of the
+truth's. Reported per method: the model runs it made and whether its posterior is accurate.
+
+- iuq adaptive: `iuq pipeline` with `[surrogate] adaptive`, the model a command (one process
+  per run); runs = every run the pipeline made; also the runs after which a round's posterior
+  (N = 2,000) first met the accuracy criterion.
+- one-shot LHS: `iuq pipeline` without `adaptive`, design n = 8, 16, …, 256; the smallest n
+  whose posterior is accurate.
+- GPry (Gammal et al. 2023; `pip install gpry`): its Runner with the true log-likelihood, its
+  default acquisition (LogExp), batches and convergence criterion, then its MC sample of the
+  surrogate posterior; runs = truth evaluations. A model failure is a log-likelihood of −∞,
+  which GPry's classifier learns.
+
+The cooling problem's model fails (exits non-zero) for k > 0.4, next to the posterior
+(k ≈ 0.31).
+"""
+
+import argparse
+import json
+import math
+import os
+import random
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+IUQ = ROOT / "target" / "release" / "iuq"
+
+PROBLEMS = {
+    "cooling": {
+        "parameters": {"k": (0.05, 0.8), "T0": (60.0, 100.0)},
+        "truth": {"k": 0.3, "T0": 88.0},
+        "x": [0.5, 1, 2, 3, 4, 6, 8, 10],
+        "noise": 0.8,
+        "formula": "20 + (T0 - 20) * exp(-k * x)",
+        "fails": "k > 0.4",
+    },
+    "logistic": {
+        "parameters": {"K": (5.0, 15.0), "r": (0.2, 2.0), "t0": (2.0, 8.0)},
+        "truth": {"K": 10.0, "r": 0.8, "t0": 5.0},
+        "x": [float(t) for t in range(0, 11)],
+        "noise": 0.3,
+        "formula": "K / (1 + exp(-r * (x - t0)))",
+        "fails": None,
+    },
+    "oscillator": {
+        "parameters": {"A": (0.5, 2.0), "g": (0.05, 0.5), "w": (1.0, 3.0)},
+        "truth": {"A": 1.2, "g": 0.2, "w": 2.0},
+        "x": [0.5 * i for i in range(0, 17)],
+        "noise": 0.05,
+        "formula": "A * exp(-g * x) * cos(w * x)",
+        "fails": None,
+    },
+}
+
+
+def curve(problem, theta):
+    """The model's outputs at every abscissa; None where the model fails."""
+    p = PROBLEMS[problem]
+    v = dict(zip(p["parameters"], theta))
+    if problem == "cooling":
+        if v["k"] > 0.4:
+            return None
+        return [20 + (v["T0"] - 20) * math.exp(-v["k"] * x) for x in p["x"]]
+    if problem == "logistic":
+        return [v["K"] / (1 + math.exp(-v["r"] * (x - v["t0"]))) for x in p["x"]]
+    return [v["A"] * math.exp(-v["g"] * x) * math.cos(v["w"] * x) for x in p["x"]]
+
+
+def run_model(problem):
+    """The command model: params.json in, result.json out (exit 3 where the model fails)."""
+    with open("params.json", encoding="utf-8") as f:
+        params = json.load(f)
+    theta = [float(params[name]) for name in PROBLEMS[problem]["parameters"]]
+    y = curve(problem, theta)
+    if y is None:
+        print(f"the model gives no answer at {params}", file=sys.stderr)
+        return 3
+    with open("result.json", "w", encoding="utf-8") as f:
+        json.dump({f"y{j}": v for j, v in enumerate(y)}, f)
+    return 0
+
+
+def data(problem):
+    p = PROBLEMS[problem]
+    rng = random.Random(hash(problem) % 1000 + 7)
+    exact = curve(problem, list(p["truth"].values())) or []
+    return [(x, y + rng.gauss(0, p["noise"])) for x, y in zip(p["x"], exact)]
+
+
+def study_text(problem, name, design_n, adaptive, seed=1):
+    p = PROBLEMS[problem]
+    outputs = [f"y{j}" for j in range(len(p["x"]))]
+    lines = [f'name = "{name}"', "[parameters]"]
+    lines += [f"{k} = {{ uniform = [{lo}, {hi}] }}" for k, (lo, hi) in p["parameters"].items()]
+    lines += [
+        "[likelihood]",
+        'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
+        "modelling_error = false",
+        "[model]",
+        'kind = "command"',
+        f'command = ["{sys.executable}", "{Path(__file__).resolve()}", "--model", "{problem}"]',
+        f"outputs = {json.dumps(outputs)}",
+        'output = { file = "result.json", format = "json" }',
+        "[surrogate]",
+        f'design = {{ kind = "lhs", n = {design_n}, seed = {seed} }}',
+    ]
+    if adaptive:
+        lines.append("adaptive = { batch = 2, max_runs = 300, tolerance = 0.1 }")
+    lines += ["[sensitivity]", "n = 256", "[sampler]", "samples = 10000", f"seed = {seed}"]
+    return "\n".join(lines) + "\n"
+
+
+def exact_study(problem):
+    p = PROBLEMS[problem]
+    lines = [f'name = "{problem}-exact"', "[parameters]"]
+    lines += [f"{k} = {{ uniform = [{lo}, {hi}] }}" for k, (lo, hi) in p["parameters"].items()]
+    lines += [
+        "[likelihood]",
+        'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
+        "modelling_error = false",
+        f'prediction = "{p["formula"]}"',
+        "[sampler]",
+        "samples = 20000",
+        "seed = 5",
+    ]
+    return "\n".join(lines) + "\n"
+
+
+def iuq_json(args, cwd):
+    out = subprocess.run([str(IUQ), *args, "--json"], cwd=cwd, capture_output=True, text=True)
+    if out.returncode != 0:
+        raise RuntimeError(f"iuq {' '.join(args)} failed: {out.stderr[-2000:]}")
+    return json.loads(out.stdout)
+
+
+def moments_of(value):
+    return {p["parameter"]: (p["mean"], p["std"]) for p in value["posterior"][0]["parameters"]}
+
+
+def accurate(moments, truth):
+    return all(
+        abs(moments[k][0] - m) < 0.1 * s and abs(moments[k][1] / s - 1) < 0.1
+        for k, (m, s) in truth.items()
+    )
+
+
+def worst(moments, truth):
+    """The largest |Δmean|/std and |Δstd|/std over the parameters."""
+    dm = max(abs(moments[k][0] - m) / s for k, (m, s) in truth.items())
+    ds = max(abs(moments[k][1] / s - 1) for k, (m, s) in truth.items())
+    return dm, ds
+
+
+def gpry_run(problem, truth, seed=1):
+    import numpy as np
+    from gpry import Runner
+
+    p = PROBLEMS[problem]
+    obs = data(problem)
+    noise = p["noise"]
+    count = [0]
+
+    def loglike(*theta):
+        count[0] += 1
+        y = curve(problem, list(theta))
+        if y is None:
+            return -np.inf
+        return -0.5 * sum(((yo - ym) / noise) ** 2 for (_, yo), ym in zip(obs, y))
+
+    names = list(p["parameters"])
+    bounds = [list(p["parameters"][n]) for n in names]
+    runner = Runner(loglike, bounds=bounds, params=names, seed=seed, verbose=0)
+    started = time.time()
+    runner.run()
+    runner.generate_mc_sample()
+    s = runner.last_mc_samples()
+    X = s["X"]
+    w = s["w"] if s["w"] is not None else np.ones(len(X))
+    mean = np.average(X, axis=0, weights=w)
+    std = np.sqrt(np.average((X - mean) ** 2, axis=0, weights=w))
+    moments = {n: (mean[i], std[i]) for i, n in enumerate(names)}
+    return count[0], moments, time.time() - started
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--model", help=argparse.SUPPRESS)
+    parser.add_argument("--problems", default=",".join(PROBLEMS))
+    parser.add_argument("--skip-gpry", action="store_true")
+    parser.add_argument("--work", default=str(ROOT / "target" / "bench-adaptive"))
+    args = parser.parse_args()
+    if args.model:
+        return run_model(args.model)
+    if not IUQ.exists():
+        sys.exit(f"{IUQ} is missing: cargo build --release -p iuq")
+    rows = []
+    for problem in args.problems.split(","):
+        work = Path(args.work) / problem
+        shutil.rmtree(work, ignore_errors=True)
+        work.mkdir(parents=True)
+        with open(work / "data.csv", "w", encoding="utf-8") as f:
+            f.write("x,y,y_err\n")
+            for x, y in data(problem):
+                f.write(f"{x},{y:.6f},{PROBLEMS[problem]['noise']}\n")
+        (work / "exact.toml").write_text(exact_study(problem))
+        t = iuq_json(["basis", "exact.toml", "--out", "exact"], work)
+        truth = {k: (t["mean"][k], t["std"][k]) for k in PROBLEMS[problem]["parameters"]}
+        print(f"\n{problem}: truth " + ", ".join(f"{k} = {m:.5g} ± {s:.3g}" for k, (m, s) in truth.items()))
+
+        (work / "adaptive.toml").write_text(study_text(problem, f"{problem}-adaptive", 8, True))
+        started = time.time()
+        v = iuq_json(["pipeline", "adaptive.toml", "--out", "adaptive-report"], work)
+        seconds = time.time() - started
+        m = moments_of(v)
+        first = None
+        for r in v["adaptive"]["rounds"]:
+            rm = dict(zip(v["adaptive"]["parameters"], zip(r["mean"], r["std"])))
+            if accurate(rm, truth):
+                first = r["runs"]
+                break
+        dm, ds = worst(m, truth)
+        rows.append((problem, "iuq adaptive", v["runs"], accurate(m, truth), dm, ds,
+                     f"{v['rounds']} rounds, converged {v['converged']}, first accurate round after {first} runs, {seconds:.0f} s"))
+        print(f"  iuq adaptive: {v['runs']} runs, accurate {accurate(m, truth)} (mean off {dm:.3f} std, std off {100 * ds:.1f} %)")
+
+        needed = None
+        last = None
+        for n in [8, 16, 32, 64, 128, 256]:
+            name = f"lhs-{n}"
+            (work / f"{name}.toml").write_text(study_text(problem, f"{problem}-{name}", n, False))
+            try:
+                v = iuq_json(["pipeline", f"{name}.toml", "--out", f"{name}-report"], work)
+            except RuntimeError as e:
+                print(f"  one-shot LHS n = {n}: {str(e).splitlines()[-1]}")
+                continue
+            m = moments_of(v)
+            dm, ds = worst(m, truth)
+            last = (n, dm, ds)
+            ok = accurate(m, truth)
+            print(f"  one-shot LHS n = {n}: accurate {ok} (mean off {dm:.3f} std, std off {100 * ds:.1f} %)")
+            if ok:
+                needed = n
+                break
+        rows.append((problem, "one-shot maximin LHS", needed if needed else f"> {last[0] if last else 256}",
+                     needed is not None, last[1] if last else float("nan"), last[2] if last else float("nan"),
+                     "smallest n of 8, 16, ..., 256 whose posterior is accurate"))
+
+        if not args.skip_gpry:
+            try:
+                evals, m, seconds = gpry_run(problem, truth)
+                dm, ds = worst(m, truth)
+                rows.append((problem, "GPry", evals, accurate(m, truth), dm, ds, f"default settings, {seconds:.0f} s"))
+                print(f"  GPry: {evals} runs, accurate {accurate(m, truth)} (mean off {dm:.3f} std, std off {100 * ds:.1f} %)")
+            except Exception as e:  # report, do not hide
+                rows.append((problem, "GPry", "failed", False, float("nan"), float("nan"), repr(e)[:120]))
+                print(f"  GPry failed: {e!r}")
+
+    print("\n| problem | method | model runs | accurate | worst mean error (stds) | worst std error | note |")
+    print("|---|---|---|---|---|---|---|")
+    for problem, method, runs, ok, dm, ds, note in rows:
+        print(f"| {problem} | {method} | {runs} | {'yes' if ok else 'no'} | {dm:.3f} | {100 * ds:.1f} % | {note} |")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
