@@ -38,7 +38,7 @@ impl Default for ConvergenceCriterion {
     fn default() -> Self {
         Self {
             tolerance: 0.1,
-            log_likelihood_tolerance: 0.2,
+            log_likelihood_tolerance: 0.05,
         }
     }
 }

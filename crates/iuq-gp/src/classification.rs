@@ -41,7 +41,7 @@ pub struct ClassifierOptions {
 impl Default for ClassifierOptions {
     fn default() -> Self {
         Self {
-            length_scales: vec![0.05, 0.08, 0.12, 0.2, 0.3, 0.5, 0.8, 1.2],
+            length_scales: vec![0.01, 0.02, 0.03, 0.05, 0.08, 0.12, 0.2, 0.3, 0.5, 0.8, 1.2],
             signal_variances: vec![1.0, 4.0, 16.0],
             refinement_factors: vec![0.5, 2.0, 4.0],
             refinement_passes: 2,

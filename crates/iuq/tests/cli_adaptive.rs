@@ -7,7 +7,7 @@
 //! reference, BASIS alone puts the two means about 0.02 posterior stds apart and the stds about
 //! 1.5 % apart (the spread of a mean over an effective sample of several thousand); the
 //! tolerances below (0.1 std, 10 %) leave the rest to the surrogate, whose log-likelihood error
-//! over the posterior the engine's convergence criterion bounds by 0.2 nats.
+//! over the posterior the engine's convergence criterion bounds by 0.05 nats.
 
 mod common;
 
@@ -214,8 +214,15 @@ fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() 
         "{beyond} of {} samples beyond the failure boundary",
         ks.len()
     );
-    // Most of the exact posterior's mass below the boundary is kept.
-    assert!(ks.iter().filter(|k| **k < 0.305).count() as f64 > 0.95 * ks.len() as f64);
+    // ... and the posterior reaches the boundary (it is not cut short of it): its 99th
+    // percentile lies within the classifier's resolution of 0.305.
+    let mut sorted = ks.clone();
+    sorted.sort_by(f64::total_cmp);
+    let p99 = sorted[(0.99 * sorted.len() as f64) as usize];
+    assert!(
+        (0.305 - 0.003..0.305 + 0.002).contains(&p99),
+        "99th percentile {p99}"
+    );
     // Few runs where the model fails: the engine fails only while it locates the boundary (every
     // failed adaptive run lies within 2 exact posterior stds of it), never deep in the region
     // that gives no answer (two thirds of the prior), and most of its runs succeed.
@@ -228,7 +235,10 @@ fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() 
         runs.len()
     );
     for k in &failed {
-        assert!(*k < 0.305 + 2.0 * 0.0069, "a failed adaptive run at k = {k}");
+        assert!(
+            *k < 0.305 + 2.0 * 0.0069,
+            "a failed adaptive run at k = {k}"
+        );
     }
 }
 
@@ -349,4 +359,60 @@ fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
     assert_close_to_exact(&v, &exact);
     // The runs are in a campaign store like a program's.
     assert!(dir.join("expression.campaign/campaign.sqlite").exists());
+}
+
+#[test]
+fn a_umbridge_model_with_an_abscissa_is_calibrated_through_its_server() {
+    let dir = cooling("umbridge");
+    let (_, exact) = exact_posterior(&dir);
+    // The server: the cooling curve as a model of (k, T0, t), served by `iuq serve umbridge`.
+    let served_study = dir.join("served.toml");
+    std::fs::write(
+        &served_study,
+        "name = \"cooling\"\n[parameters]\nk = { uniform = [0.05, 0.8] }\nT0 = { uniform = [60, 100] }\nt = { uniform = [0, 20] }\n[model]\nkind = \"expression\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }\n",
+    )
+    .unwrap();
+    let served = common::Served::start(&served_study, &[]);
+    let name = served.announcement["models"][0]["name"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
+        .unwrap()
+        .replace(
+            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
+            &format!(
+                "kind = \"umbridge\"\nurl = \"{}\"\nname = \"{name}\"\nabscissa = \"t\"",
+                served.url()
+            ),
+        );
+    assert!(study.contains("kind = \"umbridge\""));
+    let path = dir.join("umbridge.toml");
+    std::fs::write(&path, study).unwrap();
+    let v = pipeline(&path, &dir.join("umbridge-report"));
+    assert_eq!(v["converged"], true, "{v}");
+    assert_close_to_exact(&v, &exact);
+}
+
+#[test]
+fn a_minimal_study_needs_parameters_likelihood_model_and_a_design() {
+    let dir = cooling("minimal");
+    let path = dir.join("minimal.toml");
+    std::fs::write(
+        &path,
+        "name = \"minimal\"\n[parameters]\nk = { uniform = [0.05, 0.8] }\nT0 = { uniform = [60, 100] }\n[likelihood]\ndata = { file = \"cooling.csv\", x = \"t_min\", y = \"temperature_c\", y_err = \"temperature_err_c\" }\n[model]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }\n[surrogate]\ndesign = { kind = \"lhs\", n = 6 }\nadaptive = { max_runs = 60 }\n",
+    )
+    .unwrap();
+    let out = dir.join("minimal-report");
+    let v = pipeline(&path, &out);
+    // Defaults: σ_m sampled (U(0.001, 0.1)), no test runs, BASIS with 1000 samples, Sobol'
+    // on the surrogate with N = 1024, the local executor and `minimal.campaign`.
+    assert_eq!(
+        v["posterior"][0]["parameters"].as_array().unwrap().len(),
+        3,
+        "k, T0 and sigma_m"
+    );
+    assert!(v["runs"].as_u64().unwrap() <= 60);
+    assert!(out.join("report.html").is_file());
+    assert!(dir.join("minimal.campaign/campaign.sqlite").is_file());
 }

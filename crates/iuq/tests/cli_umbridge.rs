@@ -3,40 +3,22 @@
 //! `iuq basis` against it, the reference Python client against it (skipped with a message when
 //! the Python package `umbridge` is missing), and the errors a user can make.
 
-use std::io::{BufRead, BufReader, Read, Write};
+mod common;
+
+use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::Duration;
+
+use common::{Served, iuq, json_of};
 
 use iuq_core::Model;
 use iuq_umbridge::{ClientOptions, UmBridgeModel};
 use serde_json::{Value, json};
 
-fn iuq(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_iuq"))
-        .args(args)
-        .output()
-        .expect("the iuq binary runs")
-}
-
-fn json_of(output: &Output) -> Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "exactly one JSON line expected, got: {stdout}\nstderr: {}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    serde_json::from_str(lines[0]).expect("valid JSON")
-}
-
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-umbridge-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    common::scratch("cli-umbridge", name)
 }
 
 fn write(path: &Path, text: &str) {
@@ -49,54 +31,6 @@ fn s(path: &Path) -> &str {
 
 fn names(v: &[&str]) -> Vec<String> {
     v.iter().map(|s| s.to_string()).collect()
-}
-
-/// `iuq serve umbridge` running in the background; killed when dropped.
-struct Served {
-    child: Child,
-    announcement: Value,
-}
-
-impl Served {
-    fn start(study: &Path, extra: &[&str]) -> Self {
-        let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
-            .args(["serve", "umbridge", s(study), "--port", "0", "--json"])
-            .args(extra)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::piped())
-            .spawn()
-            .expect("start iuq serve");
-        let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap())
-            .read_line(&mut line)
-            .unwrap();
-        if line.trim().is_empty() {
-            let mut err = String::new();
-            child
-                .stderr
-                .take()
-                .unwrap()
-                .read_to_string(&mut err)
-                .unwrap();
-            panic!("iuq serve did not start: {err}");
-        }
-        let announcement: Value = serde_json::from_str(&line).expect("one JSON object");
-        Self {
-            child,
-            announcement,
-        }
-    }
-
-    fn url(&self) -> String {
-        self.announcement["url"].as_str().unwrap().to_string()
-    }
-}
-
-impl Drop for Served {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
 }
 
 fn linear_data(dir: &Path) {

@@ -3,9 +3,11 @@
 //! 1. fit the surrogate (a GP per data point, a failure classifier per run group with failures);
 //! 2. sample its posterior with BASIS (`samples` per round, seed = the sampler's + round);
 //! 3. judge convergence (`iuq_adaptive::convergence`): every parameter's posterior mean and std
-//!    moved by less than `tolerance` posterior stds since the previous round, and the
-//!    surrogate's std of the log-likelihood, averaged over the posterior, is below
-//!    `log_likelihood_tolerance` nats;
+//!    moved by less than `tolerance` posterior stds since the previous round, the surrogate's
+//!    std of the log-likelihood, averaged over the posterior, is below `log_likelihood_tolerance`
+//!    nats, and the region of the posterior where a failure classifier is unsure
+//!    (0.1 ≤ p_fail ≤ 0.9) has runs every [`BOUNDARY_RESOLUTION`] posterior stds — else boundary
+//!    runs go there;
 //! 4. otherwise score the distinct posterior samples by the variance the surrogate leaves in the
 //!    log-likelihood there, times their squared relative posterior density and the probability
 //!    that the model answers (`iuq_adaptive::acquisition`), pick up to `batch` runs per run group greedily with
@@ -47,6 +49,85 @@ use crate::table_io::{write_atomically, write_numeric_csv};
 /// extrapolates.
 pub const EXTRAPOLATION_THRESHOLD: f64 = 1.0;
 
+/// A failure classifier is unsure at θ when 0.1 ≤ p_fail(θ) ≤ 0.9.
+const UNSURE: (f64, f64) = (0.1, 0.9);
+
+/// The spacing, in posterior stds, at which boundary runs sample the region where a failure
+/// classifier is unsure: a candidate there that is farther than this from every run of its group
+/// gets a run.
+pub const BOUNDARY_RESOLUTION: f64 = 0.25;
+
+/// How near, in posterior stds, a failed run must be for the posterior to meet the boundary of
+/// the failure region there.
+pub const BOUNDARY_REACH: f64 = 3.0;
+
+/// Runs on the boundary of a group's failure region where it meets the posterior: among the
+/// candidates on which the classifier is unsure ([`UNSURE`]) and that lie within
+/// [`BOUNDARY_REACH`] of a failed run, greedily the one farthest from every run of the group and
+/// every earlier pick — distance in posterior stds per parameter — while
+/// that distance exceeds [`BOUNDARY_RESOLUTION`], at most `batch`. A run there tells whether the
+/// posterior mass there exists; when the unsure region is sampled at that spacing, the
+/// classifier's boundary is as sharp as the posterior needs. Returns the unsure share and the
+/// picks.
+fn boundary_picks(
+    p_fail: &[f64],
+    candidates: &[Vec<f64>],
+    runs: &[Vec<f64>],
+    failed: &[bool],
+    scale: &[f64],
+    batch: usize,
+) -> (f64, Vec<usize>) {
+    if p_fail.is_empty() {
+        return (0.0, Vec::new());
+    }
+    let distance = |a: &[f64], b: &[f64]| -> f64 {
+        a.iter()
+            .zip(b)
+            .zip(scale)
+            .map(|((x, y), s)| ((x - y) / s.max(1e-300)).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let near_failure = |c: &[f64]| {
+        runs.iter()
+            .zip(failed)
+            .any(|(r, f)| *f && distance(c, r) <= BOUNDARY_REACH)
+    };
+    let unsure: Vec<usize> = (0..p_fail.len())
+        .filter(|&i| (UNSURE.0..=UNSURE.1).contains(&p_fail[i]) && near_failure(&candidates[i]))
+        .collect();
+    let share = unsure.len() as f64 / p_fail.len() as f64;
+    let mut nearest: Vec<f64> = unsure
+        .iter()
+        .map(|&i| {
+            runs.iter()
+                .map(|r| distance(&candidates[i], r))
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let mut picks = Vec::new();
+    while picks.len() < batch {
+        let Some((k, &d)) = nearest.iter().enumerate().fold(
+            None,
+            |best: Option<(usize, &f64)>, (k, d)| match best {
+                Some((_, b)) if *b >= *d => best,
+                _ => Some((k, d)),
+            },
+        ) else {
+            break;
+        };
+        if d <= BOUNDARY_RESOLUTION {
+            break;
+        }
+        let pick = unsure[k];
+        picks.push(pick);
+        for (n, &i) in nearest.iter_mut().zip(&unsure) {
+            *n = n.min(distance(&candidates[i], &candidates[pick]));
+        }
+    }
+    (share, picks)
+}
+
 /// One round of the adaptive engine, as `report.json` and the report show it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct AdaptiveRound {
@@ -69,6 +150,10 @@ pub struct AdaptiveRound {
     /// Share of posterior samples farther than one length scale from every training run of
     /// some data point's GP (the largest share over the GPs).
     pub extrapolation_share: f64,
+    /// Share of posterior samples where a failure classifier is unsure (0.1 ≤ p_fail ≤ 0.9)
+    /// within 3 posterior stds of a failed run: where the posterior meets the boundary of a
+    /// failure region (the largest share over the run groups).
+    pub unsure_share: f64,
     /// The log evidence of the round's surrogate posterior.
     pub log_evidence: f64,
     /// Both convergence criteria held.
@@ -281,11 +366,38 @@ pub(super) fn refine(
             shift: assessment.shift,
             log_likelihood_std: u,
             extrapolation_share: extrapolation,
+            unsure_share: 0.0,
             log_evidence: state.log_evidence,
             converged: assessment.converged,
             seconds: 0.0,
         };
-        let stop = if assessment.converged {
+        // Where a classifier is unsure over the posterior, runs on the boundary of its failure
+        // region (the acquisition below does not go there: the GPs are sure of their
+        // extrapolation, the classifier is not). Only once the GPs are sure where the posterior
+        // lies: before, the posterior is not yet where it will be, and far from every run the
+        // classifier is unsure of everything.
+        let mut boundary: Vec<(usize, usize)> = Vec::new();
+        let mut unsure_share: f64 = 0.0;
+        let surrogate_sure = u < settings.log_likelihood_tolerance;
+        for (g, group) in groups.iter().enumerate() {
+            if surrogate.classifiers[g].is_none() {
+                continue;
+            }
+            let p_fail = surrogate.group_failure_probability(g, &c.theta)?;
+            let (_, failed) = group.failure_labels();
+            let (share, picks) = boundary_picks(
+                &p_fail,
+                &c.theta,
+                &group.points,
+                &failed,
+                &moments.std[..d],
+                if surrogate_sure { settings.batch } else { 0 },
+            );
+            unsure_share = unsure_share.max(share);
+            boundary.extend(picks.into_iter().map(|i| (g, i)));
+        }
+        record.unsure_share = unsure_share;
+        let stop = if assessment.converged && boundary.is_empty() {
             converged = true;
             Some("converged".to_string())
         } else if made >= settings.max_runs {
@@ -327,8 +439,13 @@ pub(super) fn refine(
                     picks.push((score, g, order, i));
                 }
             }
-            // Within the budget, the best picks first (a group's later picks already count
-            // its earlier ones).
+            // Within the budget, the boundary runs and then the best picks first (a group's
+            // later picks already count its earlier ones).
+            for (order, &(g, i)) in boundary.iter().enumerate() {
+                if !picks.iter().any(|p| p.1 == g && p.3 == i) {
+                    picks.push((f64::INFINITY, g, usize::MAX - boundary.len() + order, i));
+                }
+            }
             picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
             picks.truncate(remaining);
             picks.sort_by(|a, b| a.1.cmp(&b.1).then(a.2.cmp(&b.2)));

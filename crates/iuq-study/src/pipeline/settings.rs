@@ -6,7 +6,7 @@
 //! design = { kind = "lhs", n = 24, seed = 11 }   # initial runs per run group: maximin LHS
 //! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per group (n = 0: none)
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
-//! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.2,
+//! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.05,
 //!              samples = 2000, max_rounds = 30, candidates = 1000 }
 //! [sensitivity]
 //! n = 1024        # Saltelli base points on the surrogate
@@ -56,7 +56,7 @@ pub struct AdaptiveSettings {
     /// counts as converged (`tolerance`, default 0.1).
     pub tolerance: f64,
     /// The largest posterior-mean std of the log-likelihood due to the surrogate, in nats, that
-    /// counts as converged (`log_likelihood_tolerance`, default 0.2).
+    /// counts as converged (`log_likelihood_tolerance`, default 0.05).
     pub log_likelihood_tolerance: f64,
     /// BASIS population of each round's posterior (`samples`, default 2000).
     pub samples: usize,
@@ -119,7 +119,7 @@ fn parse_adaptive(value: &toml::Value, file: &str) -> Result<AdaptiveSettings> {
         batch: count("batch", 4, 1)?,
         max_runs: count("max_runs", 200, 1)?,
         tolerance: positive_number(table, "tolerance", file, 0.1)?,
-        log_likelihood_tolerance: positive_number(table, "log_likelihood_tolerance", file, 0.2)?,
+        log_likelihood_tolerance: positive_number(table, "log_likelihood_tolerance", file, 0.05)?,
         samples: count("samples", 2000, 10)?,
         max_rounds: count("max_rounds", 30, 1)?,
         candidates: count("candidates", 1000, 1)?,

@@ -2,8 +2,9 @@
 //! scratch directory of its own.
 #![allow(dead_code)] // each test binary uses its own subset
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
+use std::io::{BufRead, BufReader, Read};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
 
 /// Run the `iuq` binary built for these tests with `args`.
 pub fn iuq(args: &[&str]) -> Output {
@@ -32,4 +33,61 @@ pub fn scratch(suite: &str, name: &str) -> PathBuf {
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("a scratch directory can be made");
     dir
+}
+
+/// `iuq serve umbridge STUDY` running in the background on a free port of 127.0.0.1; killed
+/// when dropped.
+pub struct Served {
+    child: Child,
+    /// The server's announcement (its one JSON line): `url`, `models`, …
+    pub announcement: serde_json::Value,
+}
+
+impl Served {
+    /// Start serving `study` with the extra flags `extra`.
+    pub fn start(study: &Path, extra: &[&str]) -> Self {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+            .args(["serve", "umbridge"])
+            .arg(study)
+            .args(["--port", "0", "--json"])
+            .args(extra)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .expect("start iuq serve");
+        let mut line = String::new();
+        BufReader::new(child.stdout.take().expect("stdout is piped"))
+            .read_line(&mut line)
+            .expect("the announcement line");
+        if line.trim().is_empty() {
+            let mut err = String::new();
+            child
+                .stderr
+                .take()
+                .expect("stderr is piped")
+                .read_to_string(&mut err)
+                .expect("the server's stderr");
+            panic!("iuq serve did not start: {err}");
+        }
+        let announcement = serde_json::from_str(&line).expect("one JSON object");
+        Self {
+            child,
+            announcement,
+        }
+    }
+
+    /// The server's URL.
+    pub fn url(&self) -> String {
+        self.announcement["url"]
+            .as_str()
+            .expect("the announcement has a url")
+            .to_string()
+    }
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
 }
