@@ -17,8 +17,9 @@ the size of the accuracy criterion itself). A posterior is *accurate* when every
 parameter's mean lies within 0.1 posterior std of the truth's and its std within 10 % of the
 truth's. Reported per method: the model runs it made and whether its posterior is accurate.
 
-- iuq adaptive: `iuq pipeline` with `[surrogate] adaptive`, the model a command (one process
-  per run); runs = every run the pipeline made; also the runs after which a round's posterior
+- iuq adaptive: `iuq pipeline` with `[surrogate] adaptive = { batch = 2 }` after an initial
+  maximin LHS of 6 runs, the model a command (one process per run); runs = every run the
+  pipeline made; also the runs after which a round's posterior
   (N = 2,000) first met the accuracy criterion.
 - one-shot LHS: `iuq pipeline` without `adaptive`, design n = 8, 16, …, 256; the smallest n
   whose posterior is accurate.
@@ -45,6 +46,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]
 # Extra keys of `[surrogate] adaptive` (e.g. ", log_likelihood_tolerance = 0.05"), for experiments.
 ADAPTIVE_EXTRA = os.environ.get("IUQ_BENCH_ADAPTIVE_EXTRA", "")
+# The adaptive study's initial maximin LHS (then batches of 2 per round).
+INITIAL_RUNS = 6
 IUQ = ROOT / "target" / "release" / "iuq"
 
 PROBLEMS = {
@@ -234,7 +237,7 @@ def main():
         truth = {k: (t["mean"][k], t["std"][k]) for k in PROBLEMS[problem]["parameters"]}
         print(f"\n{problem}: truth " + ", ".join(f"{k} = {m:.5g} ± {s:.3g}" for k, (m, s) in truth.items()))
 
-        (work / "adaptive.toml").write_text(study_text(problem, f"{problem}-adaptive", 8, True))
+        (work / "adaptive.toml").write_text(study_text(problem, f"{problem}-adaptive", INITIAL_RUNS, True))
         started = time.time()
         v = iuq_json(["pipeline", "adaptive.toml", "--out", "adaptive-report"], work)
         seconds = time.time() - started
