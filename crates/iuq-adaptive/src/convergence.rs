@@ -103,9 +103,16 @@ impl ConvergenceCriterion {
                 }
                 (0..d)
                     .map(|k| {
-                        let moved = (current.mean[k] - p.mean[k])
-                            .abs()
-                            .max((current.std[k] - p.std[k]).abs());
+                        let (dm, ds) = (
+                            (current.mean[k] - p.mean[k]).abs(),
+                            (current.std[k] - p.std[k]).abs(),
+                        );
+                        // f64::max would drop a NaN; a NaN moment must show.
+                        let moved = if dm.is_nan() || ds.is_nan() {
+                            f64::NAN
+                        } else {
+                            dm.max(ds)
+                        };
                         if moved == 0.0 {
                             0.0
                         } else {
@@ -115,8 +122,14 @@ impl ConvergenceCriterion {
                     .collect()
             }
         };
+        // A NaN shift (a NaN moment) is no evidence of convergence: it counts as infinite.
         let shift = if previous.is_some() {
-            Some(shifts.iter().copied().fold(0.0, f64::max))
+            Some(
+                shifts
+                    .iter()
+                    .map(|s| if s.is_nan() { f64::INFINITY } else { *s })
+                    .fold(0.0, f64::max),
+            )
         } else {
             None
         };
@@ -162,6 +175,9 @@ mod tests {
         assert!((second.shifts[0] - 0.02 / 0.51).abs() < 1e-12);
         assert!((second.shifts[1] - 0.1 / 2.0).abs() < 1e-12);
         assert!(second.converged);
+        // A NaN moment is not convergence.
+        let nan = moments([f64::NAN, 10.0], [0.5, 2.0]);
+        assert!(!c.assess(Some(&a), &nan, 0.01).unwrap().converged);
         // The same moments with an unsure surrogate are not converged.
         assert!(!c.assess(Some(&a), &b, 0.5).unwrap().converged);
         // A std that moved by 20 % is not converged.

@@ -4,7 +4,9 @@
 //! calls [`InProcessModel::evaluate`] on its worker threads where it would start a process.
 //!
 //! A run of an in-process model cannot be killed at a timeout and dies with the coordinator; a
-//! resumed campaign finds it lost and runs it again (the retry policy's `lost`).
+//! resumed campaign finds it lost and runs it again (the retry policy's `lost`). A model that
+//! cannot be reached ([`InProcessError::Unavailable`]) is an infrastructure failure, retried by
+//! default; a panic of the model is the run's failure.
 
 use std::sync::Arc;
 
@@ -14,12 +16,23 @@ use crate::run_directory::Task;
 /// The outputs of one in-process run and, when known, their computational standard deviations.
 pub type InProcessOutputs = (Vec<f64>, Option<Vec<f64>>);
 
+/// Why an in-process run gave no outputs.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum InProcessError {
+    /// The model's answer at these parameters is a failure (a solver that diverged, a mesh that
+    /// broke): stored as the run's outcome.
+    Failed(String),
+    /// The model could not be evaluated (a server down, a connection lost): an infrastructure
+    /// failure, which the retry policy retries by default.
+    Unavailable(String),
+}
+
 /// A model evaluated in this process: `parameters` are a run's values in the campaign's
-/// parameter order; the result is the outputs in the campaign's output order, or the reason the
-/// run failed.
+/// parameter order; the result is the outputs in the campaign's output order, or why there are
+/// none.
 pub trait InProcessModel: Send + Sync {
     /// Evaluate one run.
-    fn evaluate(&self, parameters: &[f64]) -> Result<InProcessOutputs, String>;
+    fn evaluate(&self, parameters: &[f64]) -> Result<InProcessOutputs, InProcessError>;
 }
 
 /// A shared in-process model, as [`crate::CampaignOptions`] carries it.
@@ -42,8 +55,26 @@ pub fn execute_in_process(model: &dyn InProcessModel, task: &Task, outputs: usiz
         .map(|run| {
             let failure =
                 |kind, reason: String| RunResult::failure(run.run_id, run.attempt, kind, reason);
-            match model.evaluate(&run.parameters) {
-                Err(reason) => failure(OutcomeKind::ExitStatus, reason),
+            // A panic of the model is the run's failure, not the worker thread's end (which would
+            // leave the coordinator waiting for a run that never finishes).
+            let evaluated = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                model.evaluate(&run.parameters)
+            }))
+            .unwrap_or_else(|panic| {
+                let message = panic
+                    .downcast_ref::<&str>()
+                    .map(|s| s.to_string())
+                    .or_else(|| panic.downcast_ref::<String>().cloned())
+                    .unwrap_or_else(|| "no message".into());
+                Err(InProcessError::Failed(format!(
+                    "the model panicked: {message}"
+                )))
+            });
+            match evaluated {
+                Err(InProcessError::Failed(reason)) => failure(OutcomeKind::ExitStatus, reason),
+                Err(InProcessError::Unavailable(reason)) => {
+                    failure(OutcomeKind::Infrastructure, reason)
+                }
                 Ok((values, _)) if values.len() != outputs => failure(
                     OutcomeKind::BadOutput,
                     format!(
@@ -81,5 +112,61 @@ pub fn execute_in_process(model: &dyn InProcessModel, task: &Task, outputs: usiz
         started_at,
         finished_at: unix_now(),
         stderr_tail: String::new(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::run_directory::TaskRun;
+
+    struct Model;
+
+    impl InProcessModel for Model {
+        fn evaluate(&self, p: &[f64]) -> Result<InProcessOutputs, InProcessError> {
+            match p[0] as i64 {
+                0 => Ok((vec![p[0] + 1.0], None)),
+                1 => Err(InProcessError::Failed("diverged".into())),
+                2 => Err(InProcessError::Unavailable("connection refused".into())),
+                3 => Ok((vec![f64::NAN], None)),
+                4 => Ok((vec![1.0, 2.0], None)),
+                _ => panic!("boom"),
+            }
+        }
+    }
+
+    #[test]
+    fn outcomes_failures_unavailability_and_panics_become_run_results() {
+        let task = Task {
+            directory: std::env::temp_dir(),
+            runs: (0..6)
+                .map(|i| TaskRun {
+                    run_id: i,
+                    attempt: 1,
+                    parameters: vec![i as f64],
+                })
+                .collect(),
+        };
+        let report = execute_in_process(&Model, &task, 1);
+        let kinds: Vec<OutcomeKind> = report.runs.iter().map(|r| r.kind).collect();
+        assert_eq!(
+            kinds,
+            vec![
+                OutcomeKind::Succeeded,
+                OutcomeKind::ExitStatus,
+                OutcomeKind::Infrastructure,
+                OutcomeKind::NonFinite,
+                OutcomeKind::BadOutput,
+                OutcomeKind::ExitStatus,
+            ]
+        );
+        assert_eq!(report.runs[0].outputs, vec![1.0]);
+        assert!(
+            report.runs[5]
+                .reason
+                .as_deref()
+                .unwrap()
+                .contains("panicked: boom")
+        );
     }
 }

@@ -49,7 +49,7 @@ pub mod worker;
 pub use campaign::{Campaign, CampaignOptions, Progress, ResumeSummary, STORE_FILE, store_path};
 pub use campaign_model::CampaignModel;
 pub use error::{CampaignError, Result};
-pub use in_process::{InProcessModel, InProcessOutputs, SharedModel};
+pub use in_process::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};
 pub use outcome::{OutcomeKind, RunResult, TaskReport};
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};

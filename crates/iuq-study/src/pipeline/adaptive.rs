@@ -15,7 +15,8 @@
 //!    them through the campaign as the design `adaptive-round-<k>`.
 //!
 //! The loop stops converged, at `max_runs` or `max_rounds`, or when no candidate's score exceeds
-//! the minimum worth a run ((log_likelihood_tolerance/2)² per run group): the surrogate can no
+//! the minimum worth a run ((log_likelihood_tolerance/2)² divided by the number of run groups):
+//! the surrogate can no
 //! longer be improved where the posterior lies, and convergence is then judged by its
 //! log-likelihood spread alone.
 //!
@@ -61,6 +62,11 @@ pub const BOUNDARY_RESOLUTION: f64 = 0.25;
 /// the failure region there.
 pub const BOUNDARY_REACH: f64 = 3.0;
 
+/// The share of the candidates on which a classifier may be unsure near a failed run without
+/// boundary runs: a boundary band of a few percent of the posterior need not be resolved
+/// further (in many dimensions it could not be, at any affordable number of runs).
+pub const BOUNDARY_SHARE: f64 = 0.02;
+
 /// Runs on the boundary of a group's failure region where it meets the posterior: among the
 /// candidates on which the classifier is unsure ([`UNSURE`]) and that lie within
 /// [`BOUNDARY_REACH`] of a failed run, greedily the one farthest from every run of the group and
@@ -97,6 +103,9 @@ fn boundary_picks(
         .filter(|&i| (UNSURE.0..=UNSURE.1).contains(&p_fail[i]) && near_failure(&candidates[i]))
         .collect();
     let share = unsure.len() as f64 / p_fail.len() as f64;
+    if share <= BOUNDARY_SHARE {
+        return (share, Vec::new());
+    }
     let mut nearest: Vec<f64> = unsure
         .iter()
         .map(|&i| {
@@ -135,7 +144,8 @@ pub struct AdaptiveRound {
     pub round: usize,
     /// Model runs made before this round's new runs (initial, test and earlier rounds).
     pub runs: usize,
-    /// New runs chosen in this round (0 in the last round).
+    /// New runs chosen in this round (0 when the loop stopped at this round for convergence or
+    /// `max_runs`).
     pub new_runs: usize,
     /// New runs per run group.
     pub new_runs_per_group: Vec<usize>,
@@ -179,14 +189,26 @@ pub struct AdaptiveOutcome {
     pub log_likelihood_tolerance: f64,
 }
 
-/// The indices of the distinct rows of `samples`, in order of first appearance, at most
-/// `limit`.
-fn distinct(samples: &[Vec<f64>], limit: usize) -> Vec<usize> {
-    let mut seen = std::collections::HashSet::new();
-    (0..samples.len())
-        .filter(|&i| seen.insert(samples[i].iter().map(|v| v.to_bits()).collect::<Vec<u64>>()))
-        .take(limit)
-        .collect()
+/// The distinct rows of `samples` (index of the first copy, number of copies), in order of
+/// first appearance; when there are more than `limit`, an evenly spaced deterministic subset of
+/// them (so that no lineage of the sampler's population is left out).
+fn distinct(samples: &[Vec<f64>], limit: usize) -> Vec<(usize, usize)> {
+    let mut first: std::collections::HashMap<Vec<u64>, usize> = std::collections::HashMap::new();
+    let mut rows: Vec<(usize, usize)> = Vec::new();
+    for (i, sample) in samples.iter().enumerate() {
+        let key: Vec<u64> = sample.iter().map(|v| v.to_bits()).collect();
+        match first.get(&key) {
+            Some(&k) => rows[k].1 += 1,
+            None => {
+                first.insert(key, rows.len());
+                rows.push((i, 1));
+            }
+        }
+    }
+    if rows.len() <= limit || limit == 0 {
+        return rows;
+    }
+    (0..limit).map(|k| rows[k * rows.len() / limit]).collect()
 }
 
 /// s²_j at a posterior sample: the measurement variance (when used) plus (σ_m·y_j)².
@@ -206,12 +228,13 @@ fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f64>) -> f64 
     }
 }
 
-/// The inputs of one round's scoring: the candidates θ, s²_ij, and their log posterior
-/// densities (ℓ + ln π of the surrogate posterior).
+/// The inputs of one round's scoring: the candidates θ, s²_ij, their log posterior densities
+/// (ℓ + ln π of the surrogate posterior), and how many posterior samples each stands for.
 struct Candidates {
     theta: Vec<Vec<f64>>,
     variance: Vec<Vec<f64>>,
     log_density: Vec<f64>,
+    copies: Vec<f64>,
 }
 
 fn candidates(
@@ -224,15 +247,16 @@ fn candidates(
     let rows = distinct(&state.samples, limit);
     let theta = rows
         .iter()
-        .map(|&i| state.samples[i][..d].to_vec())
+        .map(|&(i, _)| state.samples[i][..d].to_vec())
         .collect();
     let log_density = rows
         .iter()
-        .map(|&i| state.log_likelihood[i] + state.log_prior[i])
+        .map(|&(i, _)| state.log_likelihood[i] + state.log_prior[i])
         .collect();
+    let copies = rows.iter().map(|&(_, n)| n as f64).collect();
     let variance = rows
         .iter()
-        .map(|&i| {
+        .map(|&(i, _)| {
             let s = &state.samples[i];
             let sigma_m = modelling_error.then(|| s[d]);
             (0..data.x.len())
@@ -244,6 +268,7 @@ fn candidates(
         theta,
         variance,
         log_density,
+        copies,
     }
 }
 
@@ -342,7 +367,18 @@ pub(super) fn refine(
                     .sum()
             })
             .collect();
-        let u = surrogate_log_likelihood_std(&spread);
+        // The posterior mean of the spread: each candidate weighted by the samples it stands for.
+        let total: f64 = c.copies.iter().sum();
+        let u = if total > 0.0 {
+            spread
+                .iter()
+                .zip(&c.copies)
+                .map(|(v, n)| v.max(0.0).sqrt() * n)
+                .sum::<f64>()
+                / total
+        } else {
+            surrogate_log_likelihood_std(&spread)
+        };
         let assessment = criterion.assess(previous.as_ref(), &moments, u)?;
         let posterior_theta: Vec<Vec<f64>> =
             state.samples.iter().map(|s| s[..d].to_vec()).collect();
@@ -447,6 +483,12 @@ pub(super) fn refine(
                 }
             }
             picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+            // At most `batch` per group: its boundary runs first, then its best acquisitions.
+            let mut per_group = vec![0usize; groups.len()];
+            picks.retain(|p| {
+                per_group[p.1] += 1;
+                per_group[p.1] <= settings.batch
+            });
             picks.truncate(remaining);
             picks.sort_by(|a, b| a.1.cmp(&b.1).then(a.2.cmp(&b.2)));
             for (_, g, _, i) in &picks {

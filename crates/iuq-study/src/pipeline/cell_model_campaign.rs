@@ -15,7 +15,7 @@ use std::path::Path;
 
 use toml::{Table, Value};
 
-use iuq_campaign::{InProcessModel, InProcessOutputs};
+use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs};
 use iuq_rbc::{RbcShearModel, run_shear};
 
 use crate::error::{Result, StudyError, input_error};
@@ -177,7 +177,16 @@ pub(super) fn cell_model_runs(study: &Study, stresses: &[f64]) -> Result<CellMod
 }
 
 impl InProcessModel for CellModelRuns {
-    fn evaluate(&self, parameters: &[f64]) -> std::result::Result<InProcessOutputs, String> {
+    fn evaluate(
+        &self,
+        parameters: &[f64],
+    ) -> std::result::Result<InProcessOutputs, InProcessError> {
+        self.run(parameters).map_err(InProcessError::Failed)
+    }
+}
+
+impl CellModelRuns {
+    fn run(&self, parameters: &[f64]) -> std::result::Result<InProcessOutputs, String> {
         let d = self.parameters;
         let (theta, stress) = match parameters {
             [theta @ .., stress] if theta.len() == d => (theta, *stress),

@@ -29,8 +29,8 @@ use toml::{Table, Value};
 
 use iuq_campaign::campaign_model::ProgressObserver;
 use iuq_campaign::{
-    CampaignModel, CampaignOptions, CampaignStudy, ExecutorKind, InProcessModel, InProcessOutputs,
-    SharedModel,
+    CampaignModel, CampaignOptions, CampaignStudy, InProcessError, InProcessModel,
+    InProcessOutputs, SharedModel,
 };
 use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
 
@@ -68,13 +68,21 @@ pub struct ModelRuns {
 struct InProcess<M>(M);
 
 impl<M: Model + Send + Sync> InProcessModel for InProcess<M> {
-    fn evaluate(&self, parameters: &[f64]) -> std::result::Result<InProcessOutputs, String> {
+    fn evaluate(
+        &self,
+        parameters: &[f64],
+    ) -> std::result::Result<InProcessOutputs, InProcessError> {
         match self.0.evaluate_batch(&[parameters.to_vec()]) {
-            Err(e) => Err(e.to_string()),
+            // The model could not be reached (a server down, a connection lost): not an answer
+            // of the model at these parameters, so the run is retried rather than stored as a
+            // failure.
+            Err(e) => Err(InProcessError::Unavailable(e.to_string())),
             Ok(mut outcomes) => match outcomes.pop() {
                 Some(Ok(e)) => Ok((e.outputs, e.computational_std)),
-                Some(Err(f)) => Err(f.reason),
-                None => Err("the model returned no outcome".into()),
+                Some(Err(f)) => Err(InProcessError::Failed(f.reason)),
+                None => Err(InProcessError::Failed(
+                    "the model returned no outcome".into(),
+                )),
             },
         }
     }
@@ -289,7 +297,6 @@ impl ModelRuns {
                 .collect(),
             (_, RunShape::Curve) => campaign_outputs,
         };
-        let _ = ExecutorKind::Local;
         Ok(Self {
             campaign: Arc::new(
                 CampaignModel::new(campaign)

@@ -20,13 +20,13 @@ use crate::study::Study;
 /// Settings of the surrogate and sensitivity stages.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct PipelineSettings {
-    /// Training runs per stress (maximin Latin hypercube).
+    /// Initial training runs per run group (maximin Latin hypercube).
     pub training_runs: usize,
-    /// Seed of the training designs (stress j uses `training_seed + j`).
+    /// Seed of the training designs (run group j uses `training_seed + j`).
     pub training_seed: u64,
     /// Random designs of which the maximin criterion keeps the best.
     pub maximin_candidates: usize,
-    /// Test runs per stress (scrambled Sobol').
+    /// Test runs per run group (scrambled Sobol').
     pub test_runs: usize,
     /// Seed of the test design's scrambling.
     pub test_seed: u64,
@@ -203,7 +203,8 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         .get("adaptive")
         .map(|v| parse_adaptive(v, &file))
         .transpose()?;
-    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1), 2)?;
+    // A GP needs 3 successful runs.
+    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1), 3)?;
     // An adaptive study spends its runs where the posterior lies: no test runs unless asked for.
     let default_test = if adaptive.is_some() { 0 } else { 8 };
     let (test_runs, test_seed) = design(surrogate, "test", "sobol", &file, (default_test, 2), 0)?;
