@@ -9,7 +9,10 @@ that iuq prepares) and writes `result.json`:
 - one run per (parameters, time): `params.json` holds `k`, `T0` and the time `t`, and the
   result is {"T": T(t)};
 - one run per parameter vector (`--curve`): the result is {"T": [T(t_1), ..., T(t_n)]} at the
-  measurement times given after `--curve` (the times of the data file, in file order).
+  measurement times given after `--curve` (the times of the data file, in file order);
+- many runs per process (`--batch`, for `kind = "batch-command"`): it reads `inputs.csv`
+  (`run_id`, `k`, `T0`, `t`, one row per run) and writes `outputs.csv` (`T`, `error`: one row
+  per input row, the reason in `error` where the run fails).
 
 Like a real solver with an explicit time step, it refuses to run where the cooling rate makes the
 step unstable: for k > 0.5 (or $COOLING_K_UNSTABLE) it prints a reason on stderr and exits with
@@ -32,7 +35,27 @@ def temperature(k: float, t0: float, t: float) -> float:
     return T_ENV + (t0 - T_ENV) * math.exp(-k * t)
 
 
+def batch() -> int:
+    import csv
+
+    k_unstable = float(os.environ.get("COOLING_K_UNSTABLE", K_UNSTABLE))
+    with open("inputs.csv", encoding="utf-8", newline="") as f:
+        rows = list(csv.DictReader(f))
+    with open("outputs.csv", "w", encoding="utf-8", newline="") as f:
+        out = csv.writer(f)
+        out.writerow(["T", "error"])
+        for row in rows:
+            k, t0, t = float(row["k"]), float(row["T0"]), float(row["t"])
+            if k > k_unstable:
+                out.writerow(["", f"unstable time step: cooling rate k = {k:.4g} > {k_unstable} per minute"])
+            else:
+                out.writerow([temperature(k, t0, t), ""])
+    return 0
+
+
 def main() -> int:
+    if len(sys.argv) > 1 and sys.argv[1] == "--batch":
+        return batch()
     with open("params.json", encoding="utf-8") as f:
         params = json.load(f)
     k = float(params["k"])

@@ -23,7 +23,7 @@ truth's. Reported per method: the model runs it made and whether its posterior i
   (N = 2,000) first met the accuracy criterion.
 - one-shot LHS: `iuq pipeline` without `adaptive`, design n = 8, 16, …, 256; the smallest n
   whose posterior is accurate.
-- GPry (Gammal et al. 2023; `pip install gpry`): its Runner with the true log-likelihood, its
+- GPry (El Gammal et al. 2023; `pip install gpry`): its Runner with the true log-likelihood, its
   default acquisition (LogExp), batches and convergence criterion, then its MC sample of the
   surrogate posterior; runs = truth evaluations. A model failure is a log-likelihood of −∞,
   which GPry's classifier learns.

@@ -17,7 +17,7 @@
 //! the candidates, times the probability that the model answers. Without the squared density
 //! the variance of ℓ grows with the residual r² into the posterior's tails, and runs would go
 //! there; with it they go where the posterior mass is uncertain. This is the form of GPry's
-//! acquisition (Gammal, Schöneberg, Torrado & Fidler 2023: exp(2ζ·μ_log p)·σ_log p, here with
+//! acquisition (El Gammal, Schöneberg, Torrado & Fidler 2023: exp(2ζ·μ_log p)·σ_log p, here with
 //! ζ = 1 and the variance) and of the integrated likelihood variance that the sequential design
 //! for calibration of Sürer, Plumlee & Wild (2023) drives down.
 

@@ -9,7 +9,7 @@
 //! `tolerance` and u < `log_likelihood_tolerance`: the first guards the summaries a user reads,
 //! the second that they are not the same wrong answer twice (a surrogate that has not yet seen
 //! the posterior region can be stable and wrong). The criterion is that of Dakota's
-//! posterior-adaptive surrogates and GPry's (Gammal et al. 2023) in spirit: judge convergence on
+//! posterior-adaptive surrogates and GPry's (El Gammal et al. 2023) in spirit: judge convergence on
 //! the posterior, not on the surrogate's global error.
 
 use serde::{Deserialize, Serialize};

@@ -416,3 +416,30 @@ fn a_minimal_study_needs_parameters_likelihood_model_and_a_design() {
     assert!(out.join("report.html").is_file());
     assert!(dir.join("minimal.campaign/campaign.sqlite").is_file());
 }
+
+#[test]
+fn a_batch_command_model_runs_many_runs_per_process_and_converges() {
+    let dir = cooling("batch");
+    let (_, exact) = exact_posterior(&dir);
+    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
+        .unwrap()
+        .replace(
+            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
+            "kind = \"batch-command\"\ncommand = [\"./cooling_model.py\", \"--batch\"]\nbatch_size = 4\nabscissa = \"t\"\noutputs = [\"T\"]",
+        );
+    assert!(study.contains("batch-command"));
+    let path = dir.join("batch.toml");
+    std::fs::write(&path, study).unwrap();
+    let v = pipeline(&path, &dir.join("batch-report"));
+    assert_eq!(v["converged"], true, "{v}");
+    // The program refuses k > 0.5: its `error` column makes those runs failures.
+    assert!(v["failed"].as_u64().unwrap() > 0);
+    assert_close_to_exact(&v, &exact);
+    let batches = std::fs::read_dir(dir.join("batch.campaign/batches"))
+        .unwrap()
+        .count();
+    // Runs go to processes in batches of up to 4 (rounds add fewer): on average at least two
+    // runs per process.
+    let runs = v["runs"].as_u64().unwrap() as usize;
+    assert!(2 * batches <= runs, "{batches} processes for {runs} runs");
+}
