@@ -68,6 +68,16 @@ impl CampaignModel {
         Ok((counts, reasons))
     }
 
+    /// The points of the design recorded in the store under `label`, if any (see
+    /// [`crate::CampaignStore::design_points`]).
+    pub fn recorded_design(&self, label: &str) -> crate::Result<Option<Vec<Vec<f64>>>> {
+        let guard = self
+            .state
+            .lock()
+            .map_err(|_| CampaignError::BadInput("the campaign's lock is poisoned".into()))?;
+        guard.0.store().design_points(label)
+    }
+
     /// Give the campaign back.
     pub fn into_campaign(self) -> Option<Campaign> {
         self.state.into_inner().ok().map(|s| s.0)

@@ -519,6 +519,36 @@ impl CampaignStore {
         Ok(ids)
     }
 
+    /// The points of the latest design of this study recorded under `label`, in order, if there
+    /// is one: what an earlier coordinator chose, read back bit for bit (so that a rerun can
+    /// replay its choices even where recomputing them would differ in the last bits).
+    pub fn design_points(&self, label: &str) -> Result<Option<Vec<Vec<f64>>>> {
+        let design: Option<i64> = self
+            .connection
+            .query_row(
+                "SELECT max(id) FROM designs WHERE study_id = ?1 AND label = ?2",
+                params![self.study_id, label],
+                |r| r.get(0),
+            )
+            .map_err(|e| self.err(e))?;
+        let Some(design) = design else {
+            return Ok(None);
+        };
+        let mut points = self
+            .connection
+            .prepare_cached(
+                "SELECT r.parameters FROM design_points dp JOIN runs r ON r.id = dp.run_id WHERE dp.design_id = ?1 ORDER BY dp.position",
+            )
+            .map_err(|e| self.err(e))?;
+        let rows = points
+            .query_map([design], |r| r.get::<_, String>(0))
+            .map_err(|e| self.err(e))?
+            .map(|t| t.map(|text| decode_parameters(&text)))
+            .collect::<rusqlite::Result<Vec<_>>>()
+            .map_err(|e| self.err(e))?;
+        Ok(Some(rows))
+    }
+
     /// The run ids of a design of this study recorded under `label` with exactly the runs of
     /// `points`, if there is one.
     fn recorded_design(
@@ -1047,6 +1077,19 @@ output = { file = "r.json", format = "json" }
         store.add_design("b", &[vec![0.5], vec![0.25]]).unwrap();
         store.add_design("d", &[vec![0.25], vec![0.5]]).unwrap();
         assert_eq!(designs(&store), 4);
+        // A design's points read back in order, bit for bit; the latest of a label wins.
+        assert_eq!(
+            store.design_points("b").unwrap(),
+            Some(vec![vec![0.5], vec![0.25]])
+        );
+        let a = store.design_points("a").unwrap().unwrap();
+        assert_eq!(a.len(), 4);
+        assert_eq!(
+            a[3][0].to_bits(),
+            0.0f64.to_bits(),
+            "-0.0 and 0.0 are one run"
+        );
+        assert_eq!(store.design_points("nope").unwrap(), None);
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -22,7 +22,8 @@
 //!
 //! Everything is seeded, so a rerun replays the rounds, finding every run in the campaign store:
 //! after a crash (or kill -9) it continues where it stopped, running only what was never
-//! finished.
+//! finished. A round whose design the store already holds (`adaptive-round-<k>`) takes its
+//! runs from there, so the replay does not depend on recomputing the choice to the last bit.
 
 use std::path::Path;
 use std::time::Instant;
@@ -443,7 +444,21 @@ pub(super) fn refine(
         };
         let mut requests: Vec<(usize, Vec<f64>)> = Vec::new();
         let mut no_candidate = false;
-        if stop.is_none() {
+        let label = format!("adaptive-round-{round}");
+        // A round an earlier pipeline already chose (the same study, a rerun after a stop) is
+        // replayed from the store as it was chosen, bit for bit, even where recomputing the
+        // choice would differ in the last bits (another processor, another library version).
+        let recorded = if stop.is_none() {
+            runs.recorded_requests(&label)?
+        } else {
+            None
+        };
+        if let Some(recorded) = recorded {
+            for (g, theta) in recorded {
+                record.new_runs_per_group[g] += 1;
+                requests.push((g, theta));
+            }
+        } else if stop.is_none() {
             let remaining = settings.max_runs - made;
             // (score, group, order within the group's batch, candidate index)
             let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();
@@ -511,7 +526,6 @@ pub(super) fn refine(
             }
         ));
         if !requests.is_empty() {
-            let label = format!("adaptive-round-{round}");
             let outcomes = runs.run(Some(&label), &requests)?;
             for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
                 let mut row = vec![round as f64, *g as f64];

@@ -373,6 +373,30 @@ impl ModelRuns {
         Ok(self.campaign.evaluate_labelled(label, &points)?)
     }
 
+    /// The requests of the design recorded under `label`, if the store has it: each point back
+    /// as (run group, θ), the group found by its abscissa. `None` also when a point's abscissa
+    /// is none of the data's (the store belongs to other data).
+    pub fn recorded_requests(&self, label: &str) -> Result<Option<Vec<(usize, Vec<f64>)>>> {
+        let Some(points) = self.campaign.recorded_design(label)? else {
+            return Ok(None);
+        };
+        let d = self.parameters.len();
+        let mut requests = Vec::with_capacity(points.len());
+        for p in points {
+            match self.shape {
+                RunShape::Curve if p.len() == d => requests.push((0, p)),
+                RunShape::PerAbscissa { .. } if p.len() == d + 1 => {
+                    let Some(g) = self.abscissae.iter().position(|x| *x == p[d]) else {
+                        return Ok(None);
+                    };
+                    requests.push((g, p[..d].to_vec()));
+                }
+                _ => return Ok(None),
+            }
+        }
+        Ok(Some(requests))
+    }
+
     /// The model at the data as a [`Model`] of θ with one output per data point: a point's runs
     /// (one per abscissa, or one) go into the same campaign batch; it fails when one fails.
     pub fn model_at_data(&self) -> ModelAtData {
