@@ -41,6 +41,9 @@ use crate::error::{Result, StudyError, input_error};
 use crate::likelihood_section::DataLikelihood;
 use crate::study::{ModelSection, Study};
 
+/// Runs to make: each a run group and a parameter vector θ.
+pub type RunRequests = Vec<(usize, Vec<f64>)>;
+
 /// How runs map to data points (see the module documentation).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum RunShape {
@@ -376,7 +379,7 @@ impl ModelRuns {
     /// The requests of the design recorded under `label`, if the store has it: each point back
     /// as (run group, θ), the group found by its abscissa. `None` also when a point's abscissa
     /// is none of the data's (the store belongs to other data).
-    pub fn recorded_requests(&self, label: &str) -> Result<Option<Vec<(usize, Vec<f64>)>>> {
+    pub fn recorded_requests(&self, label: &str) -> Result<Option<RunRequests>> {
         let Some(points) = self.campaign.recorded_design(label)? else {
             return Ok(None);
         };
