@@ -144,13 +144,20 @@ impl ConvergenceCriterion {
     }
 }
 
-/// u = the mean over posterior samples of √(Σ_t Var[ℓ_t]): `variances[i]` is the summed
-/// log-likelihood variance at sample i. Zero for no samples.
-pub fn surrogate_log_likelihood_std(variances: &[f64]) -> f64 {
-    if variances.is_empty() {
+/// u = the posterior mean of √(Σ_t Var[ℓ_t]): `variances[i]` is the summed log-likelihood
+/// variance at distinct posterior sample i, which stands for `copies[i]` samples of the
+/// population. Zero for no samples.
+pub fn surrogate_log_likelihood_std(variances: &[f64], copies: &[f64]) -> f64 {
+    let total: f64 = copies.iter().sum();
+    if total <= 0.0 {
         return 0.0;
     }
-    variances.iter().map(|v| v.max(0.0).sqrt()).sum::<f64>() / variances.len() as f64
+    variances
+        .iter()
+        .zip(copies)
+        .map(|(v, n)| v.max(0.0).sqrt() * n)
+        .sum::<f64>()
+        / total
 }
 
 #[cfg(test)]
@@ -214,7 +221,9 @@ mod tests {
 
     #[test]
     fn the_spread_is_the_mean_std() {
-        assert_eq!(surrogate_log_likelihood_std(&[]), 0.0);
-        assert!((surrogate_log_likelihood_std(&[0.04, 0.16]) - 0.3).abs() < 1e-12);
+        assert_eq!(surrogate_log_likelihood_std(&[], &[]), 0.0);
+        assert!((surrogate_log_likelihood_std(&[0.04, 0.16], &[1.0, 1.0]) - 0.3).abs() < 1e-12);
+        // A sample standing for three of the population counts three times.
+        assert!((surrogate_log_likelihood_std(&[0.04, 0.16], &[3.0, 1.0]) - 0.25).abs() < 1e-12);
     }
 }

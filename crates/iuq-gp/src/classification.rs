@@ -171,27 +171,7 @@ fn laplace_mode(
     let mut a = vec![0.0; n];
     let mut previous = f64::NEG_INFINITY;
     for _ in 0..max_iterations {
-        let pi: Vec<f64> = latent.iter().map(|f| logistic(*f)).collect();
-        for i in 0..n {
-            w_sqrt[i] = (pi[i] * (1.0 - pi[i])).sqrt();
-        }
-        for j in 0..n {
-            for i in j..n {
-                let mut v = w_sqrt[i] * k[j * n + i] * w_sqrt[j];
-                if i == j {
-                    v += 1.0;
-                }
-                factor[j * n + i] = v;
-            }
-        }
-        llt::factor::cholesky_in_place(
-            MatMut::from_column_major_slice_mut(&mut factor, n, n),
-            Default::default(),
-            Par::Seq,
-            MemStack::new(&mut stack),
-            Default::default(),
-        )
-        .map_err(|_| GpError::NotPositiveDefinite { pivot: 0 })?;
+        let pi = factor_b(&k, &latent, &mut w_sqrt, &mut factor, &mut stack)?;
         // b = W(f − m) + (t − π); a = b − W^½ B⁻¹ W^½ K b.
         let b: Vec<f64> = (0..n)
             .map(|i| w_sqrt[i] * w_sqrt[i] * (latent[i] - prior_mean) + (targets[i] - pi[i]))
@@ -206,15 +186,7 @@ fn laplace_mode(
         for i in 0..n {
             latent[i] = prior_mean + (0..n).map(|j| k[j * n + i] * a[j]).sum::<f64>();
         }
-        let objective =
-            -0.5 * dot(
-                &a,
-                &latent.iter().map(|f| f - prior_mean).collect::<Vec<_>>(),
-            ) + latent
-                .iter()
-                .zip(targets)
-                .map(|(f, t)| log_logistic(if *t > 0.5 { *f } else { -*f }))
-                .sum::<f64>();
+        let objective = laplace_objective(&a, &latent, prior_mean, targets);
         let converged = (objective - previous).abs() < 1e-10 * (1.0 + objective.abs());
         previous = objective;
         if converged {
@@ -222,6 +194,28 @@ fn laplace_mode(
         }
     }
     // The quantities at the final mode.
+    let pi = factor_b(&k, &latent, &mut w_sqrt, &mut factor, &mut stack)?;
+    let log_det_half: f64 = (0..n).map(|i| factor[i * n + i].ln()).sum();
+    let log_marginal_likelihood =
+        laplace_objective(&a, &latent, prior_mean, targets) - log_det_half;
+    Ok(LaplaceMode {
+        residual: targets.iter().zip(&pi).map(|(t, p)| t - p).collect(),
+        w_sqrt,
+        factor,
+        log_marginal_likelihood,
+    })
+}
+
+/// At the latent values f: W^½ from π = σ(f), and B = I + W^½ K W^½
+/// factorised into `factor` (lower Cholesky, column-major); returns π.
+fn factor_b(
+    k: &[f64],
+    latent: &[f64],
+    w_sqrt: &mut [f64],
+    factor: &mut [f64],
+    stack: &mut MemBuffer,
+) -> Result<Vec<f64>> {
+    let n = latent.len();
     let pi: Vec<f64> = latent.iter().map(|f| logistic(*f)).collect();
     for i in 0..n {
         w_sqrt[i] = (pi[i] * (1.0 - pi[i])).sqrt();
@@ -236,28 +230,26 @@ fn laplace_mode(
         }
     }
     llt::factor::cholesky_in_place(
-        MatMut::from_column_major_slice_mut(&mut factor, n, n),
+        MatMut::from_column_major_slice_mut(factor, n, n),
         Default::default(),
         Par::Seq,
-        MemStack::new(&mut stack),
+        MemStack::new(stack),
         Default::default(),
     )
     .map_err(|_| GpError::NotPositiveDefinite { pivot: 0 })?;
-    let log_det_half: f64 = (0..n).map(|i| factor[i * n + i].ln()).sum();
+    Ok(pi)
+}
+
+/// Ψ(f) = −½ aᵀ(f − m) + Σ ln σ(y_i f_i), the Laplace objective at the latent values f
+/// (a = K⁻¹(f − m), y_i = ±1 from the targets).
+fn laplace_objective(a: &[f64], latent: &[f64], prior_mean: f64, targets: &[f64]) -> f64 {
     let centred: Vec<f64> = latent.iter().map(|f| f - prior_mean).collect();
-    let log_marginal_likelihood = -0.5 * dot(&a, &centred)
+    -0.5 * dot(a, &centred)
         + latent
             .iter()
             .zip(targets)
             .map(|(f, t)| log_logistic(if *t > 0.5 { *f } else { -*f }))
             .sum::<f64>()
-        - log_det_half;
-    Ok(LaplaceMode {
-        residual: targets.iter().zip(&pi).map(|(t, p)| t - p).collect(),
-        w_sqrt,
-        factor,
-        log_marginal_likelihood,
-    })
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {

@@ -35,14 +35,14 @@ use iuq_adaptive::{
     likelihood_weights, log_likelihood_variance, select_batch, surrogate_log_likelihood_std,
 };
 
+use super::Events;
 use super::model_runs::ModelRuns;
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::AdaptiveSettings;
 use super::surrogate::Surrogate;
-use super::{Events, OwnedEvent};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
-use crate::posterior::{build_posterior_with, sample_posterior};
+use crate::posterior::build_posterior_with;
 use crate::sampler_section::{SamplerOverrides, parse_sampler};
 use crate::study::Study;
 use crate::table_io::{write_atomically, write_numeric_csv};
@@ -323,22 +323,14 @@ pub(super) fn refine(
                 ..Default::default()
             },
         )?;
-        events.send(OwnedEvent::BasisStarted {
-            label: "adaptive round",
-        });
-        let sampled = sample_posterior(
-            &study.name,
-            &study.path,
+        let sampled = events.sample(
+            "adaptive round",
+            study,
             &posterior,
             sampler,
             &dir.join(format!("round-{round}")),
             None,
-            None,
-            None,
-            &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
-        );
-        events.send(OwnedEvent::BasisFinished);
-        let sampled = sampled?;
+        )?;
         let state = &sampled.run.state;
         parameters = state.parameter_names.clone();
         let moments = PosteriorMoments {
@@ -369,17 +361,7 @@ pub(super) fn refine(
             })
             .collect();
         // The posterior mean of the spread: each candidate weighted by the samples it stands for.
-        let total: f64 = c.copies.iter().sum();
-        let u = if total > 0.0 {
-            spread
-                .iter()
-                .zip(&c.copies)
-                .map(|(v, n)| v.max(0.0).sqrt() * n)
-                .sum::<f64>()
-                / total
-        } else {
-            surrogate_log_likelihood_std(&spread)
-        };
+        let u = surrogate_log_likelihood_std(&spread, &c.copies);
         let assessment = criterion.assess(previous.as_ref(), &moments, u)?;
         let posterior_theta: Vec<Vec<f64>> =
             state.samples.iter().map(|s| s[..d].to_vec()).collect();

@@ -18,7 +18,8 @@ use toml::{Table, Value};
 use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs};
 use iuq_rbc::{RbcShearModel, run_shear};
 
-use crate::error::{Result, StudyError, input_error};
+use super::model_runs::campaign_text;
+use crate::error::{Result, input_error};
 use crate::study::{ModelSection, Study};
 
 /// Name of the stress parameter of the campaign.
@@ -67,19 +68,11 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
             "{file}: section `[likelihood]`: no positive shear stress selected from the data"
         )));
     }
-    let mut parameters = Table::new();
-    for p in study.space.parameters() {
-        let prior = Value::try_from(p.prior).map_err(|e| {
-            StudyError::Failure(format!("cannot write the prior of `{}`: {e}", p.name))
-        })?;
-        parameters.insert(p.name.clone(), prior);
-    }
     let mut stress = Table::new();
     stress.insert(
         "uniform".into(),
         Value::Array(vec![Value::Float(0.5 * lo), Value::Float(2.0 * hi)]),
     );
-    parameters.insert(STRESS.into(), Value::Table(stress));
 
     let mut command: Vec<Value> = ["iuq", "rbc", "shear", "--json"]
         .iter()
@@ -127,25 +120,12 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     env.insert("RAYON_NUM_THREADS".into(), Value::String("1".into()));
     model.insert("env".into(), Value::Table(env));
 
-    let mut root = Table::new();
-    root.insert("name".into(), Value::String(study.name.clone()));
-    root.insert(
-        "description".into(),
-        Value::String(format!(
-            "Cell-model runs of the study {} (written by iuq pipeline; do not edit)",
-            // The file name only: the same study called by another path keeps one text.
-            study.path.file_name().map_or_else(
-                || study.path.display().to_string(),
-                |n| n.to_string_lossy().into_owned()
-            )
-        )),
-    );
-    root.insert("parameters".into(), Value::Table(parameters));
-    root.insert("model".into(), Value::Table(model));
-    if let Some(executor) = &study.executor {
-        root.insert("executor".into(), Value::Table(executor.clone()));
-    }
-    Ok(toml::to_string(&root)?)
+    campaign_text(
+        study,
+        "Cell-model runs",
+        Some((STRESS.to_string(), Value::Table(stress))),
+        model,
+    )
 }
 
 /// The name of the output at stress `s` (Pa).

@@ -213,6 +213,33 @@ impl Events {
         self.send(OwnedEvent::Message(line));
     }
 
+    /// Sample `posterior` with BASIS into `dir` (resuming `checkpoint`, read from `dir`),
+    /// reporting the start, every stage and the end under `label`.
+    fn sample(
+        &self,
+        label: &'static str,
+        study: &Study,
+        posterior: &crate::posterior::StudyPosterior,
+        settings: iuq_basis::CheckedSettings,
+        dir: &Path,
+        checkpoint: Option<BasisState>,
+    ) -> Result<SampledPosterior> {
+        self.send(OwnedEvent::BasisStarted { label });
+        let sampled = sample_posterior(
+            &study.name,
+            &study.path,
+            posterior,
+            settings,
+            dir,
+            checkpoint,
+            Some(dir),
+            None,
+            &mut |state| self.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
+        );
+        self.send(OwnedEvent::BasisFinished);
+        sampled
+    }
+
     /// The campaign's progress observer, forwarding to the pipeline's observer.
     fn campaign_progress(&self, label: &'static str) -> ProgressObserver {
         let sender = self.0.clone();
@@ -518,20 +545,14 @@ fn run_stages(
     // 5. BASIS on the surrogate (and on the model).
     let stage = Instant::now();
     let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
-    events.send(OwnedEvent::BasisStarted { label: "GP bank" });
-    let gp_posterior = sample_posterior(
-        &study.name,
-        &study.path,
+    let gp_posterior = events.sample(
+        "GP bank",
+        study,
         &posterior,
         sampler_settings,
         &out.join("basis-gp"),
         None,
-        None,
-        None,
-        &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
-    );
-    events.send(OwnedEvent::BasisFinished);
-    let gp_posterior = gp_posterior?;
+    )?;
     stage_seconds.push(("BASIS on the GP bank".into(), stage.elapsed().as_secs_f64()));
     let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
         Some(settings) => {
@@ -540,20 +561,7 @@ fn run_stages(
             let checkpoint = resume_checkpoint(&dir, events)?;
             let model = model_runs.model_at_data();
             let posterior = build_posterior_with(study, || Ok(model))?;
-            events.send(OwnedEvent::BasisStarted { label: "model" });
-            let sampled = sample_posterior(
-                &study.name,
-                &study.path,
-                &posterior,
-                settings,
-                &dir,
-                checkpoint,
-                Some(&dir),
-                None,
-                &mut |state| events.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
-            );
-            events.send(OwnedEvent::BasisFinished);
-            let sampled = sampled?;
+            let sampled = events.sample("model", study, &posterior, settings, &dir, checkpoint)?;
             stage_seconds.push(("BASIS on the model".into(), stage.elapsed().as_secs_f64()));
             Some(sampled)
         }

@@ -64,7 +64,6 @@ pub struct ModelRuns {
     abscissae: Vec<f64>,
     parameters: Vec<String>,
     outputs: Vec<String>,
-    in_process: bool,
 }
 
 /// A [`Model`] evaluated one point at a time as an in-process campaign model.
@@ -106,10 +105,16 @@ fn abscissa_prior(abscissae: &[f64]) -> Value {
     Value::Table(table)
 }
 
-/// The campaign text of a study whose model runs as a command or in this process: the study's
-/// parameters (and the abscissa), its `[model]` (as given for a command; a description of the
-/// in-process model otherwise) and its `[executor]`.
-fn campaign_text(study: &Study, model: Table, abscissae: &[f64]) -> Result<String> {
+/// The campaign text of `study`'s runs: its name, a description `"<what> of the study <file>
+/// (written by iuq pipeline; do not edit)"`, its parameters followed by `extra` (the abscissa,
+/// with a prior that covers the data's; the campaign needs a prior for every input, and never
+/// samples it), the `[model]` table `model`, and the study's `[executor]`.
+pub(super) fn campaign_text(
+    study: &Study,
+    what: &str,
+    extra: Option<(String, Value)>,
+    model: Table,
+) -> Result<String> {
     let mut parameters = Table::new();
     for p in study.space.parameters() {
         let prior = Value::try_from(p.prior).map_err(|e| {
@@ -117,15 +122,16 @@ fn campaign_text(study: &Study, model: Table, abscissae: &[f64]) -> Result<Strin
         })?;
         parameters.insert(p.name.clone(), prior);
     }
-    if let Some(name) = &study.abscissa {
-        parameters.insert(name.clone(), abscissa_prior(abscissae));
+    if let Some((name, prior)) = extra {
+        parameters.insert(name, prior);
     }
     let mut root = Table::new();
     root.insert("name".into(), Value::String(study.name.clone()));
     root.insert(
         "description".into(),
         Value::String(format!(
-            "Model runs of the study {} (written by iuq pipeline; do not edit)",
+            "{what} of the study {} (written by iuq pipeline; do not edit)",
+            // The file name only: the same study called by another path keeps one text.
             study.path.file_name().map_or_else(
                 || study.path.display().to_string(),
                 |n| n.to_string_lossy().into_owned()
@@ -139,6 +145,16 @@ fn campaign_text(study: &Study, model: Table, abscissae: &[f64]) -> Result<Strin
     }
     toml::to_string(&root)
         .map_err(|e| StudyError::Failure(format!("cannot write the campaign study: {e}")))
+}
+
+/// The study's own campaign text (command and in-process kinds), the abscissa added when
+/// `[model] abscissa` names one.
+fn model_campaign_text(study: &Study, model: Table, abscissae: &[f64]) -> Result<String> {
+    let extra = study
+        .abscissa
+        .as_ref()
+        .map(|name| (name.clone(), abscissa_prior(abscissae)));
+    campaign_text(study, "Model runs", extra, model)
 }
 
 /// The `[model]` table of an in-process model: a command that names the model (it is never
@@ -231,7 +247,7 @@ impl ModelRuns {
                     .and_then(Value::as_array)
                     .map_or(0, Vec::len);
                 check_outputs(count)?;
-                (campaign_text(study, table.clone(), &data.x)?, None)
+                (model_campaign_text(study, table.clone(), &data.x)?, None)
             }
             ModelSection::Expression { outputs } => {
                 in_process_only("expression")?;
@@ -245,7 +261,7 @@ impl ModelRuns {
                 let names: Vec<String> = outputs.keys().cloned().collect();
                 let table = in_process_model_table(description, &names);
                 (
-                    campaign_text(study, table, &data.x)?,
+                    model_campaign_text(study, table, &data.x)?,
                     Some(SharedModel(Arc::new(InProcess(model)))),
                 )
             }
@@ -262,7 +278,7 @@ impl ModelRuns {
                 let names = model.output_names().to_vec();
                 let table = in_process_model_table(description, &names);
                 (
-                    campaign_text(study, table, &data.x)?,
+                    model_campaign_text(study, table, &data.x)?,
                     Some(SharedModel(Arc::new(InProcess(model)))),
                 )
             }
@@ -277,7 +293,7 @@ impl ModelRuns {
             campaign_study,
             CampaignOptions {
                 max_parallel,
-                in_process: in_process.clone(),
+                in_process,
                 ..Default::default()
             },
         )?;
@@ -309,18 +325,12 @@ impl ModelRuns {
             abscissae: data.x.clone(),
             parameters,
             outputs,
-            in_process: in_process.is_some(),
         })
     }
 
     /// How runs map to data points.
     pub fn shape(&self) -> &RunShape {
         &self.shape
-    }
-
-    /// Whether runs are evaluated in this process.
-    pub fn in_process(&self) -> bool {
-        self.in_process
     }
 
     /// The campaign.

@@ -97,29 +97,12 @@ impl Surrogate {
         Ok(Self { bank, classifiers })
     }
 
-    /// The probability that the model answers at each point: the product over the run groups
-    /// of 1 − p_fail (1 where no run has failed).
-    pub fn answer_probability(&self, points: &[Vec<f64>]) -> Result<Vec<f64>> {
-        let mut p = vec![1.0; points.len()];
-        for c in self.classifiers.iter().flatten() {
-            for (q, f) in p.iter_mut().zip(c.failure_probability(points)?) {
-                *q *= 1.0 - f;
-            }
-        }
-        Ok(p)
-    }
-
     /// The probability that a run of group `g` fails at each point.
     pub fn group_failure_probability(&self, g: usize, points: &[Vec<f64>]) -> Result<Vec<f64>> {
         match self.classifiers.get(g).and_then(Option::as_ref) {
             Some(c) => Ok(c.failure_probability(points)?),
             None => Ok(vec![0.0; points.len()]),
         }
-    }
-
-    /// Whether any run failed.
-    pub fn has_failures(&self) -> bool {
-        self.classifiers.iter().any(Option::is_some)
     }
 }
 
