@@ -24,7 +24,8 @@ pub enum RbcError {
     #[error("invalid data: {0}")]
     InvalidData(String),
     /// The membrane passed a singularity of its force laws (edge strain |ε| ≥ 3, triangle area
-    /// change |α| ≥ 0.3, volume change |ν| ≥ 0.1 or bending deviation |δ| ≥ √0.055).
+    /// change |α| ≥ 0.3, volume change |ν| ≥ 0.1 or bending deviation |δ| ≥ √0.055) under
+    /// [`crate::PastSingularity::Fail`].
     #[error("mesh broke at step {step}: {reason}")]
     MeshBroken {
         /// The time step at which the breakage was detected.

@@ -16,10 +16,11 @@
 //!    its n neighbours;
 //! 5. the total force on each vertex is capped at 50 pN.
 //!
-//! The singular terms confine each strain to the interval where the denominator is positive;
-//! a strain at or beyond a singularity means the mesh broke and is reported as
-//! [`RbcError::MeshBroken`] (HemoCell's `FORCE_LIMIT` variant takes the absolute value and
-//! carries on, producing the unusable shapes the IUQ study discarded).
+//! The denominators are absolute values, as in HemoCell: a strain past a singularity still
+//! meets a restoring force, whose magnitude falls as the strain grows, and the 50 pN cap bounds
+//! it near the singularity, so the run carries on ([`PastSingularity::CarryOn`], the default).
+//! [`PastSingularity::Fail`] instead reports a strain at or beyond a singularity as
+//! [`RbcError::MeshBroken`], for users who want to discard such runs.
 //!
 //! Every term's net force vanishes exactly. The link, area and volume terms also have zero net
 //! torque; the umbrella bending term does not (its force on i is along N while the reactions sit
@@ -214,18 +215,21 @@ fn umbrella(mesh: &Mesh, x: &[[f64; 3]], normals: &[[f64; 3]], i: usize) -> ([f6
 
 /// What a strain at or beyond a singularity of its force law means.
 ///
-/// The force laws `x + x/|s − x²|` are singular at `x² = s`. The spec (and the default here)
-/// takes reaching it as a broken mesh; HemoCell built with `FORCE_LIMIT` (the 50 pN cap) keeps
-/// the absolute value in the denominator and carries on: past the singularity the force still
-/// restores, with a magnitude that falls as the strain grows, and the cap bounds it near the
-/// singularity.
+/// The force laws `x + x/|s − x²|` are singular at `x² = s`. HemoCell divides by the absolute
+/// value and carries on (`mechanics/rbcHighOrderModel.cpp`, e.g. `k_link * (edge_frac +
+/// edge_frac/std::fabs(9.0-edge_frac*edge_frac))`, unconditionally), and caps each vertex's
+/// total force at `FORCE_LIMIT` = 50 pN (`config/constant_defaults.h` defines it unless the
+/// build overrides it; `HemoCellParticleField::spreadParticleForce` applies it): past the
+/// singularity the force still restores, with a magnitude that falls as the strain grows, and
+/// the cap bounds it near the singularity. That is the default here; `Fail` takes reaching a
+/// singularity as a broken mesh instead.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PastSingularity {
-    /// The run fails with [`RbcError::MeshBroken`] (the spec's definition of a broken mesh).
-    #[default]
+    /// The run fails with [`RbcError::MeshBroken`].
     Fail,
-    /// The forces are evaluated as HemoCell's `FORCE_LIMIT` build does; only non-finite values
-    /// and shapes without an ellipse fail.
+    /// The forces are evaluated as HemoCell does; only non-finite values and shapes without an
+    /// ellipse fail.
+    #[default]
     CarryOn,
 }
 
@@ -261,7 +265,7 @@ pub struct ForceTerms {
     pub bending: bool,
     /// The per-vertex force cap.
     pub cap: bool,
-    /// Whether a strain past a singularity breaks the mesh.
+    /// Whether a strain past a singularity carries on (the default) or breaks the mesh.
     pub past_singularity: PastSingularity,
 }
 
@@ -273,7 +277,7 @@ impl Default for ForceTerms {
             volume: true,
             bending: true,
             cap: true,
-            past_singularity: PastSingularity::Fail,
+            past_singularity: PastSingularity::default(),
         }
     }
 }
@@ -592,7 +596,8 @@ mod tests {
     }
 
     #[test]
-    fn stretching_an_edge_past_the_singularity_breaks_the_mesh() {
+    fn stretching_an_edge_past_the_singularity_carries_on_by_default_and_breaks_the_mesh_on_request()
+     {
         let (mesh, reference, c) = cell();
         let mut x = mesh.vertices.clone();
         let [a, b] = mesh.edges[0];
@@ -600,17 +605,21 @@ mod tests {
         x[b] = add(x[a], scale(v, 4.5));
         let mut f = vec![[0.0; 3]; x.len()];
         let err = MembraneForces::new(c)
+            .with_terms(ForceTerms {
+                past_singularity: PastSingularity::Fail,
+                ..Default::default()
+            })
             .compute(&mesh, &reference, &x, &mut f, 7)
             .unwrap_err();
         assert!(matches!(err, RbcError::MeshBroken { step: 7, .. }), "{err}");
-        // HemoCell's FORCE_LIMIT build carries on with a finite force that still pulls the
-        // edge back (|ε| = 3.5: ε + ε/|9 − ε²| = 3.5 + 3.5/3.25 > 0 along the edge).
+        // As HemoCell, the default carries on with a finite force that still pulls the edge
+        // back (|ε| = 3.5: ε + ε/|9 − ε²| = 3.5 + 3.5/3.25 > 0 along the edge).
+        assert_eq!(
+            ForceTerms::default().past_singularity,
+            PastSingularity::CarryOn
+        );
         let mut carry_on = vec![[0.0; 3]; x.len()];
         MembraneForces::new(c)
-            .with_terms(ForceTerms {
-                past_singularity: PastSingularity::CarryOn,
-                ..Default::default()
-            })
             .compute(&mesh, &reference, &x, &mut carry_on, 7)
             .unwrap();
         assert!(carry_on.iter().flatten().all(|f| f.is_finite()));

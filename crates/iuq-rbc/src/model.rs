@@ -4,7 +4,8 @@
 //! parameter names); the others keep fixed values (HemoCell's defaults unless set). Outputs are
 //! the mean elongation index at each shear stress, with the sample standard deviation of the
 //! measuring window as computational std. A point fails, with the reason, when any of its runs
-//! fails (broken mesh, non-finite values, no ellipse) or its parameters are out of range.
+//! fails (non-finite values, no ellipse, or a strain past a force singularity under
+//! `past_singularity = "fail"`) or its parameters are out of range.
 //!
 //! The runs of a batch (points × stresses) are spread over rayon's threads; each run uses one
 //! thread when there are at least as many runs as threads, and all threads (for its fluid
@@ -17,7 +18,7 @@ use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
 use crate::error::{RbcError, Result};
 use crate::lattice::Precision;
 use crate::membrane_forces::{MembraneParameters, PastSingularity};
-use crate::protocol::{FRAMES, Protocol, START_STRAIN, ShearExperiment, run_shear};
+use crate::protocol::{FRAMES, Protocol, START_STRAIN, ShearExperiment, WINDOW_FACTOR, run_shear};
 
 /// Names of the parameters the model understands, in the spec's spelling.
 pub const PARAMETER_NAMES: [&str; 5] = ["kLink", "kBend", "viscosityRatio", "kArea", "kVolume"];
@@ -74,7 +75,10 @@ pub struct RbcShearSettings {
     pub start_strain: f64,
     /// Recorded shapes per run (10).
     pub frames: usize,
-    /// Whether a strain past a force singularity fails the run (the default, as in the spec).
+    /// The measuring window ends at this factor × its start (1.25).
+    pub window_factor: f64,
+    /// Whether a strain past a force singularity carries on as HemoCell does (the default) or
+    /// fails the run.
     pub past_singularity: PastSingularity,
 }
 
@@ -85,8 +89,9 @@ impl Default for RbcShearSettings {
             fixed: CellParameters::default(),
             precision: Precision::default(),
             start_strain: START_STRAIN,
+            window_factor: WINDOW_FACTOR,
             frames: FRAMES,
-            past_singularity: PastSingularity::Fail,
+            past_singularity: PastSingularity::default(),
         }
     }
 }
@@ -202,6 +207,7 @@ impl RbcShearModel {
         ShearExperiment {
             protocol: self.settings.protocol,
             start_strain: self.settings.start_strain,
+            window_factor: self.settings.window_factor,
             frames: self.settings.frames,
             precision: self.settings.precision,
             past_singularity: self.settings.past_singularity,

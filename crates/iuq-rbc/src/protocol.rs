@@ -134,14 +134,17 @@ pub struct ShearExperiment {
     pub protocol: Protocol,
     /// Strain at the start of the measuring window (7.5; shorter only for quick tests).
     pub start_strain: f64,
+    /// The window ends at `t_max = ⌈window_factor·t_start⌉` (1.25, the study's window; a larger
+    /// factor follows the cell further, e.g. to its periodic state at high stress).
+    pub window_factor: f64,
     /// Number of recorded shapes (10).
     pub frames: usize,
     /// Storage precision of the fluid.
     pub precision: Precision,
     /// Spread the fluid update over rayon's threads (identical results either way).
     pub parallel: bool,
-    /// Whether a strain past a force singularity fails the run (the spec) or carries on (HemoCell
-    /// built with `FORCE_LIMIT`).
+    /// Whether a strain past a force singularity carries on as HemoCell does (the default) or
+    /// fails the run.
     pub past_singularity: PastSingularity,
 }
 
@@ -154,10 +157,11 @@ impl ShearExperiment {
             stress,
             protocol: Protocol::default(),
             start_strain: START_STRAIN,
+            window_factor: WINDOW_FACTOR,
             frames: FRAMES,
             precision: Precision::default(),
             parallel: true,
-            past_singularity: PastSingularity::Fail,
+            past_singularity: PastSingularity::default(),
         }
     }
 
@@ -200,6 +204,16 @@ impl ShearExperiment {
                 "must be positive",
             ));
         }
+        if !(self.window_factor.is_finite()
+            && self.window_factor > 1.0
+            && self.window_factor <= 100.0)
+        {
+            return Err(RbcError::invalid(
+                "window_factor",
+                self.window_factor,
+                "the window ends at window_factor × its start: must lie in (1, 100]",
+            ));
+        }
         if self.frames < 2 {
             return Err(RbcError::invalid(
                 "frames",
@@ -236,7 +250,7 @@ impl ShearExperiment {
         let coefficients =
             ForceCoefficients::hemocell(&self.membrane, &units, 1280).scaled(force_scale);
         let t_start = (self.start_strain / lattice_shear_rate) as u64;
-        let t_max = (WINDOW_FACTOR * t_start as f64).ceil() as u64;
+        let t_max = (self.window_factor * t_start as f64).ceil() as u64;
         let n = self.frames.max(2) as u64;
         let frames = (0..n)
             .map(|i| t_start + ((i * (t_max - t_start)) as f64 / (n - 1) as f64).round() as u64)
@@ -319,6 +333,32 @@ impl ShearResult {
     pub fn el_frames(&self) -> Vec<f64> {
         self.frames.iter().map(|f| f.elongation_index).collect()
     }
+
+    /// The elongation's drift over the measuring window: the least-squares slope of the frames'
+    /// elongation indices against their steps, times the window's length in steps. Near zero
+    /// when the cell has reached a steady shape; of the order of the frames' standard deviation
+    /// (or larger) when the shape still moves through the window.
+    pub fn el_drift(&self) -> f64 {
+        let points: Vec<(f64, f64)> = self
+            .frames
+            .iter()
+            .map(|f| (f.step as f64, f.elongation_index))
+            .collect();
+        least_squares_slope(&points) * (self.setup.t_max - self.setup.t_start) as f64
+    }
+}
+
+/// Slope of the least-squares line through `points` (0 with fewer than two distinct abscissae).
+pub fn least_squares_slope(points: &[(f64, f64)]) -> f64 {
+    let n = points.len() as f64;
+    if points.len() < 2 {
+        return 0.0;
+    }
+    let mx = points.iter().map(|p| p.0).sum::<f64>() / n;
+    let my = points.iter().map(|p| p.1).sum::<f64>() / n;
+    let sxx: f64 = points.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = points.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    if sxx > 0.0 { sxy / sxx } else { 0.0 }
 }
 
 /// Mean and sample standard deviation (n − 1).
@@ -517,5 +557,64 @@ mod tests {
         let (m, s) = mean_and_sample_std(&[1.0, 2.0, 3.0, 4.0]);
         assert_eq!(m, 2.5);
         assert!((s - (5.0f64 / 3.0).sqrt()).abs() < 1e-15);
+    }
+
+    #[test]
+    fn the_drift_is_the_least_squares_change_over_the_window() {
+        // Frames on the line EL = 0.5 − 0.02·(step − t_start)/(t_max − t_start): the drift is
+        // the line's change over the window, −0.02.
+        assert!((least_squares_slope(&[(0.0, 1.0), (1.0, 3.0), (2.0, 5.0)]) - 2.0).abs() < 1e-15);
+        assert_eq!(least_squares_slope(&[(1.0, 1.0)]), 0.0);
+        assert_eq!(least_squares_slope(&[(1.0, 1.0), (1.0, 2.0)]), 0.0);
+        let experiment = ShearExperiment::new(MembraneParameters::default(), 5.0, 9.04);
+        let setup = experiment.setup();
+        let span = (setup.t_max - setup.t_start) as f64;
+        let frames = setup
+            .frames
+            .iter()
+            .map(|&step| Frame {
+                step,
+                vertices: Vec::new(),
+                elongation_index: 0.5 - 0.02 * (step - setup.t_start) as f64 / span,
+            })
+            .collect();
+        let result = ShearResult {
+            el_mean: 0.49,
+            el_std: 0.0,
+            frames,
+            triangles: Vec::new(),
+            steps: setup.t_max,
+            seconds: 0.0,
+            mlups: 0.0,
+            setup,
+        };
+        assert!(
+            (result.el_drift() + 0.02).abs() < 1e-12,
+            "{}",
+            result.el_drift()
+        );
+    }
+
+    #[test]
+    fn a_longer_window_keeps_its_start_and_spreads_the_frames_to_its_end() {
+        let study = ShearExperiment::new(MembraneParameters::default(), 5.0, 9.04);
+        let long = ShearExperiment {
+            window_factor: 4.0,
+            frames: 31,
+            ..study.clone()
+        };
+        let (a, b) = (study.setup(), long.setup());
+        assert_eq!(a.t_start, b.t_start);
+        assert_eq!(b.t_max, (4.0 * b.t_start as f64).ceil() as u64);
+        assert_eq!(b.frames.len(), 31);
+        assert_eq!((b.frames[0], b.frames[30]), (b.t_start, b.t_max));
+        for bad in [1.0, 0.5, f64::NAN, 101.0] {
+            let e = ShearExperiment {
+                window_factor: bad,
+                ..study.clone()
+            };
+            let err = e.validate().unwrap_err().to_string();
+            assert!(err.contains("window_factor"), "{err}");
+        }
     }
 }

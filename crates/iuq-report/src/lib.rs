@@ -36,9 +36,9 @@ pub use error::{ReportError, Result};
 pub use figure::FigureInfo;
 pub use format::format_number;
 pub use model::{
-    Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic, ParameterSummary,
-    PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
-    SensitivityResult, StudyReport,
+    CheckedPoint, Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic,
+    ParameterSummary, PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics,
+    RunsAtPoint, SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
 };
 pub use report::{REPORT_FORMAT, ReportDocument, ReportFiles, write_report};
 pub use tables::TableInfo;

@@ -39,6 +39,57 @@ pub struct StudyReport {
     /// Model runs per data point (per run group); empty omits the table.
     #[serde(default)]
     pub runs_per_point: Vec<RunsAtPoint>,
+    /// The model run at the posterior beside the surrogate; `None` omits the section.
+    #[serde(default)]
+    pub posterior_check: Option<PosteriorCheckReport>,
+}
+
+/// The model itself run at the MAP of the surrogate's posterior and at posterior samples, beside
+/// the surrogate's prediction at the same parameters: the surrogate checked where the
+/// calibration relies on it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct PosteriorCheckReport {
+    /// The posterior whose MAP and samples were run, e.g. "GP surrogate".
+    pub source: String,
+    /// The posterior samples run besides the MAP.
+    pub samples: usize,
+    /// Name of the model's diagnostic shown per run, e.g. "EL drift over the window"; `None`
+    /// when the model has none.
+    pub diagnostic: Option<String>,
+    /// One entry per data point.
+    pub points: Vec<CheckedPoint>,
+}
+
+/// The posterior check at one data point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CheckedPoint {
+    /// The data point's control value.
+    pub x: f64,
+    /// The model's output at the MAP and its computational std; `None` when the run failed.
+    pub map_model: Option<(f64, f64)>,
+    /// The surrogate's mean and predictive std at the MAP.
+    pub map_surrogate: (f64, f64),
+    /// The model's outputs at the posterior samples whose runs succeeded.
+    pub model: Vec<f64>,
+    /// The surrogate's means at the same samples.
+    pub surrogate: Vec<f64>,
+    /// The surrogate's predictive stds there.
+    pub surrogate_std: Vec<f64>,
+    /// The runs' computational stds.
+    pub model_std: Vec<f64>,
+    /// The model's diagnostic at each successful run, the MAP's first (empty without one).
+    pub diagnostic: Vec<f64>,
+    /// The median of the diagnostic's absolute values (`None` without one).
+    pub diagnostic_median_abs: Option<f64>,
+    /// The largest of them.
+    pub diagnostic_largest_abs: Option<f64>,
+    /// Runs that failed (MAP and samples).
+    pub failed: usize,
+    /// Root mean square of model − surrogate over the successful runs, MAP included.
+    pub rmse: f64,
+    /// Share of those runs within two predictive stds (surrogate and computational) of the
+    /// surrogate.
+    pub within_two_std: f64,
 }
 
 /// How the adaptive engine converged: one entry per round.

@@ -2,8 +2,9 @@
 //! numeric cell points at its value in `report.json` (`/report/…` for input, `/derived/…` for
 //! computed values).
 
+use crate::charts::sensitivity::informative;
 use crate::derived::DerivedResults;
-use crate::model::{Convergence, DataSeries, StudyReport};
+use crate::model::{Convergence, DataSeries, PosteriorCheckReport, StudyReport};
 use crate::tables::{Cell, Column, Table};
 
 /// The leading columns of the tables per data point: the abscissa, the measurement, its std.
@@ -157,6 +158,7 @@ pub(crate) fn sensitivity(report: &StudyReport) -> Table {
         "ST",
         "ST low",
         "ST high",
+        "informative",
     ]
     .map(Column::plain)
     .to_vec();
@@ -175,6 +177,17 @@ pub(crate) fn sensitivity(report: &StudyReport) -> Table {
                 Cell::number(index.total, at("total")),
                 Cell::number(index.total_low, at("total_low")),
                 Cell::number(index.total_high, at("total_high")),
+                Cell::text(
+                    match (
+                        informative(index.first_order_low, index.first_order_high),
+                        informative(index.total_low, index.total_high),
+                    ) {
+                        (true, true) => "yes",
+                        (false, false) => "no: intervals wider than [0, 1]",
+                        (true, false) => "S1 only: ST's interval wider than [0, 1]",
+                        (false, true) => "ST only: S1's interval wider than [0, 1]",
+                    },
+                ),
             ]);
         }
     }
@@ -481,6 +494,65 @@ pub(crate) fn runs_per_point(report: &StudyReport) -> Table {
     Table {
         name: "runs_per_point".into(),
         title: "Model runs per data point".into(),
+        columns,
+        rows,
+    }
+}
+
+/// The posterior check per data point: the model and the surrogate at the MAP, the RMSE and
+/// coverage over the checked runs, failures, and the model's diagnostic.
+pub(crate) fn posterior_check(report: &StudyReport, check: &PosteriorCheckReport) -> Table {
+    let diagnostic = check.diagnostic.clone();
+    let mut names = vec![
+        report.data.x_label.clone(),
+        "model at MAP".to_string(),
+        "model std".to_string(),
+        "surrogate at MAP".to_string(),
+        "surrogate std".to_string(),
+        "RMSE".to_string(),
+        "within 2σ".to_string(),
+        "runs".to_string(),
+        "failed".to_string(),
+    ];
+    if let Some(d) = &diagnostic {
+        names.push(format!("median |{d}|"));
+        names.push(format!("largest |{d}|"));
+    }
+    let columns = names.into_iter().map(Column::plain).collect();
+    let mut rows = Vec::new();
+    for (i, p) in check.points.iter().enumerate() {
+        let at = |field: &str| format!("/report/posterior_check/points/{i}/{field}");
+        let runs = p.model.len() + usize::from(p.map_model.is_some()) + p.failed;
+        let mut row = vec![
+            Cell::number(p.x, at("x")),
+            p.map_model.map_or_else(
+                || Cell::text("failed"),
+                |(v, _)| Cell::number(v, at("map_model/0")),
+            ),
+            p.map_model.map_or_else(
+                || Cell::text("–"),
+                |(_, s)| Cell::number(s, at("map_model/1")),
+            ),
+            Cell::number(p.map_surrogate.0, at("map_surrogate/0")),
+            Cell::number(p.map_surrogate.1, at("map_surrogate/1")),
+            Cell::number(p.rmse, at("rmse")),
+            Cell::number(p.within_two_std, at("within_two_std")),
+            Cell::text(runs.to_string()),
+            Cell::text(p.failed.to_string()),
+        ];
+        if diagnostic.is_some() {
+            for (value, field) in [
+                (p.diagnostic_median_abs, "diagnostic_median_abs"),
+                (p.diagnostic_largest_abs, "diagnostic_largest_abs"),
+            ] {
+                row.push(value.map_or_else(|| Cell::text("–"), |v| Cell::number(v, at(field))));
+            }
+        }
+        rows.push(row);
+    }
+    Table {
+        name: "posterior_check".into(),
+        title: "The model at the posterior, beside the surrogate".into(),
         columns,
         rows,
     }

@@ -9,6 +9,7 @@ use crate::charts::data_fit::DataFitChart;
 use crate::charts::failure_map::{self, FailureMapChart};
 use crate::charts::gp_diagnostics::GpDiagnosticsChart;
 use crate::charts::map_error::MapErrorChart;
+use crate::charts::posterior_check::{self, PosteriorCheckChart};
 use crate::charts::sampler_stages::{self, SamplerStagesChart};
 use crate::charts::sensitivity::{DISPLAY_RANGE, SensitivityChart};
 use crate::charts::violins::ViolinChart;
@@ -132,7 +133,16 @@ pub(crate) fn build_sections(
             size: (920, 600),
             tables: &["propagated"],
         },
-        &DataFitChart { data: &report.data, derived },
+        &DataFitChart {
+            data: &report.data,
+            derived,
+            map_runs: report
+                .posterior_check
+                .iter()
+                .flat_map(|c| &c.points)
+                .filter_map(|p| p.map_model.map(|(y, s)| (p.x, y, s)))
+                .collect(),
+        },
         figures_dir,
     )?);
     fit.tables.push(build::propagated(report, derived));
@@ -174,7 +184,7 @@ pub(crate) fn build_sections(
                 name: "sensitivity",
                 title: "Sobol' indices per output",
                 caption: format!(
-                    "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group. The axis stops at {} and {}: bars or intervals beyond are cut and marked with an arrowhead (the table gives their values).",
+                    "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group. An estimate whose interval is wider than the index's whole range [0, 1] says nothing and is not drawn: a grey question mark stands in its place. The axis stops at {} and {}: bars or intervals beyond are cut and marked with an arrowhead (the table gives their values).",
                     DISPLAY_RANGE.0, DISPLAY_RANGE.1
                 ),
                 size: chart.size(),
@@ -303,6 +313,36 @@ pub(crate) fn build_sections(
 
     if let Some(convergence) = &report.convergence {
         sections.push(convergence_section(convergence, figures_dir)?);
+    }
+
+    if let Some(check) = &report.posterior_check {
+        let mut section = Section::new(
+            "posterior-check",
+            "The model at the posterior",
+            format!(
+                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two predictive stds (surrogate and computational) of the surrogate.",
+                check.source, check.samples
+            ),
+        );
+        section.figures.push(figure(
+            FigureSpec {
+                name: "posterior_check",
+                title: "Model − surrogate at the posterior",
+                caption: format!(
+                    "Model output minus surrogate mean at every data point ({}): posterior samples (blue), the MAP (red), and twice the surrogate's median predictive std (grey band). The MAP runs also appear in the first figure.",
+                    report.data.x_label
+                ),
+                size: posterior_check::SIZE,
+                tables: &["posterior_check"],
+            },
+            &PosteriorCheckChart {
+                check,
+                x_label: &report.data.x_label,
+            },
+            figures_dir,
+        )?);
+        section.tables.push(build::posterior_check(report, check));
+        sections.push(section);
     }
 
     // Shown with the failure map, or else with the run statistics.

@@ -3,8 +3,8 @@
 
 use crate::error::{ReportError, Result};
 use crate::model::{
-    Convergence, DataSeries, FailureMapPanel, GpDiagnostic, PosteriorResult, RunsAtPoint,
-    StudyReport,
+    Convergence, DataSeries, FailureMapPanel, GpDiagnostic, PosteriorCheckReport, PosteriorResult,
+    RunsAtPoint, StudyReport,
 };
 
 /// Checks that `report` can be rendered: returns the first problem found.
@@ -77,6 +77,50 @@ pub(crate) fn validate(report: &StudyReport) -> Result<()> {
         validate_failure_panel(panel, &format!("failure_map[{k}]"))?;
     }
     validate_runs_per_point(&report.runs_per_point)?;
+    if let Some(check) = &report.posterior_check {
+        validate_posterior_check(check)?;
+    }
+    Ok(())
+}
+
+/// Checks the posterior check: paired model and surrogate values, finite numbers, non-negative
+/// stds.
+fn validate_posterior_check(check: &PosteriorCheckReport) -> Result<()> {
+    for (i, p) in check.points.iter().enumerate() {
+        let f = format!("posterior_check.points[{i}]");
+        finite(&format!("{f}.x"), p.x)?;
+        let n = p.model.len();
+        same_length(
+            &format!("{f}.surrogate"),
+            p.surrogate.len(),
+            &format!("{f}.model"),
+            n,
+        )?;
+        same_length(
+            &format!("{f}.surrogate_std"),
+            p.surrogate_std.len(),
+            &format!("{f}.model"),
+            n,
+        )?;
+        same_length(
+            &format!("{f}.model_std"),
+            p.model_std.len(),
+            &format!("{f}.model"),
+            n,
+        )?;
+        for (k, v) in p.model.iter().chain(&p.surrogate).enumerate() {
+            finite(&format!("{f}.values[{k}]"), *v)?;
+        }
+        for (k, v) in p.surrogate_std.iter().chain(&p.model_std).enumerate() {
+            non_negative(&format!("{f}.stds[{k}]"), *v)?;
+        }
+        finite(&format!("{f}.map_surrogate"), p.map_surrogate.0)?;
+        non_negative(&format!("{f}.map_surrogate"), p.map_surrogate.1)?;
+        if let Some((value, std)) = p.map_model {
+            finite(&format!("{f}.map_model"), value)?;
+            non_negative(&format!("{f}.map_model"), std)?;
+        }
+    }
     Ok(())
 }
 

@@ -38,7 +38,7 @@ fn fresh_dir(name: &str) -> Scratch {
     Scratch(dir)
 }
 
-const FIGURES: [&str; 7] = [
+const FIGURES: [&str; 8] = [
     "data_fit",
     "sensitivity",
     "corner",
@@ -46,9 +46,10 @@ const FIGURES: [&str; 7] = [
     "map_error",
     "gp_diagnostics",
     "sampler_stages",
+    "posterior_check",
 ];
 
-const TABLES: [&str; 13] = [
+const TABLES: [&str; 14] = [
     "propagated",
     "posterior_summary",
     "posterior_evidence",
@@ -62,6 +63,7 @@ const TABLES: [&str; 13] = [
     "run_counts",
     "failures_by_reason",
     "stage_times",
+    "posterior_check",
 ];
 
 fn read_document(dir: &Path) -> (ReportDocument, Value) {
@@ -236,6 +238,7 @@ fn the_page_is_self_contained() {
         "map-error",
         "surrogate",
         "sampler",
+        "posterior-check",
         "runs",
     ];
     let positions: Vec<usize> = order

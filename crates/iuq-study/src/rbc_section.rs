@@ -4,12 +4,14 @@
 //! ```toml
 //! [model]
 //! kind = "rbc-shear"
-//! protocol = "scaled"          # or "reference" (HemoCell's time step)
-//! lattice_shear_rate = 3e-4    # scaled protocol only
-//! precision = "single"         # or "double"
-//! past_singularity = "fail"    # or "carry-on"
-//! stresses = [0.64, 1.36]      # Pa; default: the `x` column of `[likelihood] data`
-//! kArea = 5                    # fixed values of the cell parameters not in [parameters]
+//! protocol = "scaled"           # or "reference" (HemoCell's time step)
+//! lattice_shear_rate = 3e-4     # scaled protocol only
+//! precision = "single"          # or "double"
+//! past_singularity = "carry-on" # as HemoCell (default), or "fail"
+//! window_factor = 1.25          # the window ends at this × its start (strain 7.5 to 9.4)
+//! frames = 10                   # shapes measured over the window
+//! stresses = [0.64, 1.36]       # Pa; default: the `x` column of `[likelihood] data`
+//! kArea = 5                     # fixed values of the cell parameters not in [parameters]
 //! ```
 
 use std::path::{Path, PathBuf};
@@ -68,6 +70,25 @@ pub fn rbc_shear_model(
             }
             // Quick checks and tests only: the spec's window starts at 7.5 strain units.
             "start_strain" => settings.start_strain = number(&full, value)?,
+            "window_factor" => {
+                let v = number(&full, value)?;
+                if !(v.is_finite() && v > 1.0 && v <= 100.0) {
+                    return Err(key_error(
+                        &full,
+                        "the window ends at window_factor × its start: expected a number in (1, 100]",
+                    ));
+                }
+                settings.window_factor = v;
+            }
+            "frames" => {
+                settings.frames = value
+                    .as_integer()
+                    .filter(|n| (2..=1000).contains(n))
+                    .map(|n| n as usize)
+                    .ok_or_else(|| {
+                        key_error(&full, "expected a whole number of frames, 2 to 1000")
+                    })?;
+            }
             "precision" => {
                 settings.precision = match value.as_str() {
                     Some("single") => Precision::Single,
@@ -112,7 +133,7 @@ pub fn rbc_shear_model(
                 return Err(key_error(
                     &format!("model.{other}"),
                     &format!(
-                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, past_singularity, start_strain, stresses or one of {})",
+                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, past_singularity, start_strain, window_factor, frames, stresses or one of {})",
                         PARAMETER_NAMES.join(", ")
                     ),
                 ));

@@ -351,14 +351,42 @@ fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
             "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
         );
     assert!(study.contains("kind = \"expression\""));
+    let study = study.replace(
+        "[surrogate]\n",
+        "[surrogate]\nposterior_check = { samples = 20, seed = 5 }\n",
+    );
     let path = dir.join("expression.toml");
     std::fs::write(&path, study).unwrap();
-    let v = pipeline(&path, &dir.join("expression-report"));
+    let out = dir.join("expression-report");
+    let v = pipeline(&path, &out);
     assert_eq!(v["converged"], true, "{v}");
     assert_eq!(v["failed"], 0);
     assert_close_to_exact(&v, &exact);
     // The runs are in a campaign store like a program's.
     assert!(dir.join("expression.campaign/campaign.sqlite").exists());
+
+    // The model at the posterior: the MAP and 20 samples at each of the 8 times. A converged
+    // surrogate (log-likelihood std < 0.05 nats over the posterior) is off by far less than the
+    // measurement std of 0.8 °C there: a tenth of it bounds the error of any point whose
+    // log-likelihood term moves by 0.05 nats (|Δ|·|residual|/σ² ≈ 0.05 with residuals ~ σ).
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let check = &report["report"]["posterior_check"];
+    assert_eq!(check["samples"], 20);
+    let points = check["points"].as_array().unwrap();
+    assert_eq!(points.len(), 8);
+    for p in points {
+        assert_eq!(p["model"].as_array().unwrap().len(), 20, "{p}");
+        assert!(p["map_model"].is_array(), "{p}");
+        assert!(p["rmse"].as_f64().unwrap() < 0.08, "{p}");
+    }
+    let check_json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("posterior-check.json")).unwrap())
+            .unwrap();
+    assert_eq!(check_json["samples"].as_array().unwrap().len(), 20);
+    // A rerun computes the same posterior and takes the check's runs from the store.
+    let again = pipeline(&path, &dir.join("expression-report-again"));
+    assert_eq!(again["posterior_check"], v["posterior_check"]);
 }
 
 #[test]

@@ -33,6 +33,7 @@ start_strain = 0.05
 [surrogate]
 design = {{ kind = "lhs", n = 5, seed = 11 }}
 test = {{ kind = "sobol", n = 3, seed = 12 }}
+posterior_check = {{ samples = 2, seed = 1 }}
 [sensitivity]
 n = 256
 model_n = 2
@@ -109,6 +110,7 @@ fn the_pipeline_writes_every_artefact_and_the_html_shows_the_json_numbers() {
         "map_error",
         "gp_diagnostics",
         "sampler_stages",
+        "posterior_check",
     ] {
         let svg = std::fs::read_to_string(out.join(format!("figures/{figure}.svg"))).unwrap();
         assert!(svg.contains("<svg"), "{figure}.svg");
@@ -173,6 +175,16 @@ fn the_pipeline_writes_every_artefact_and_the_html_shows_the_json_numbers() {
         .map(|p| p.as_str().unwrap())
         .collect();
     assert_eq!(parameters, ["kLink", "kBend", "viscosityRatio", "sigma_m"]);
+    // The cell model at the MAP and 2 posterior samples per stress, each run with its drift over
+    // the measuring window, beside the surrogate.
+    let check = &report["posterior_check"];
+    assert_eq!(check["diagnostic"], "EL drift over the window");
+    for p in check["points"].as_array().unwrap() {
+        let ok = p["model"].as_array().unwrap().len() + usize::from(p["map_model"].is_array());
+        assert_eq!(ok + p["failed"].as_u64().unwrap() as usize, 3, "{p}");
+        assert_eq!(p["diagnostic"].as_array().unwrap().len(), ok, "{p}");
+        assert!(p["rmse"].as_f64().is_some_and(|r| r >= 0.0), "{p}");
+    }
     // Sobol' indices from both sources, for both stresses.
     let sources: HashSet<&str> = report["sensitivity"]
         .as_array()
@@ -209,6 +221,22 @@ fn bad_pipeline_settings_are_input_errors() {
         ("[surrogate]\ntest = { n = 1 }\n", "surrogate.test.n"),
         ("[surrogate]\nsize = 3\n", "surrogate.size"),
         ("[sensitivity]\nmodel_n = 1\n", "sensitivity.model_n"),
+        (
+            "[surrogate]\nposterior_check = { samples = 1 }\n",
+            "surrogate.posterior_check.samples",
+        ),
+        (
+            "[surrogate]\nposterior_check = { n = 3 }\n",
+            "surrogate.posterior_check.n",
+        ),
+        (
+            "[model]\nkind = \"rbc-shear\"\nwindow_factor = 0.9\n",
+            "model.window_factor",
+        ),
+        (
+            "[model]\nkind = \"rbc-shear\"\nframes = 1\n",
+            "model.frames",
+        ),
     ] {
         let sub = dir.join(key.replace('.', "-"));
         std::fs::create_dir_all(&sub).unwrap();

@@ -28,7 +28,13 @@ pub(crate) struct DataFitChart<'a> {
     pub data: &'a DataSeries,
     /// Bands and MAP predictions per source.
     pub derived: &'a DerivedResults,
+    /// The model itself run at the MAP: (x, output, computational std), drawn as open diamonds
+    /// with whiskers (empty: not run).
+    pub map_runs: Vec<(f64, f64, f64)>,
 }
+
+/// Colour of the model's runs at the MAP.
+const MAP_RUN_COLOUR: RGBColor = RGBColor(200, 60, 40);
 
 impl Chart for DataFitChart<'_> {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
@@ -44,6 +50,12 @@ impl Chart for DataFitChart<'_> {
                 format!("{}: MAP and 95 % band", prediction.source),
             ));
         }
+        if !self.map_runs.is_empty() {
+            entries.push((
+                LegendMark::Cross(MAP_RUN_COLOUR),
+                "model run at the MAP (± computational std)".to_string(),
+            ));
+        }
         let plot_area = header(area, "Measurements and calibrated model", &entries, 0)?;
 
         let axis = DataAxis::new(&data.x, X_PADDING);
@@ -53,7 +65,8 @@ impl Chart for DataFitChart<'_> {
                 p.points
                     .iter()
                     .flat_map(|q| [q.q025, q.q975, q.map_prediction])
-            }));
+            }))
+            .chain(self.map_runs.iter().flat_map(|r| [r.1 - r.2, r.1 + r.2]));
         let (y_lo, y_hi) = extent(values).unwrap_or((0.0, 1.0));
         let (y_lo, y_hi) = padded(y_lo, y_hi, 0.06);
         let mut chart = ChartBuilder::on(&plot_area)
@@ -112,6 +125,17 @@ impl Chart for DataFitChart<'_> {
         chart.draw_series(
             (0..data.x.len())
                 .map(|i| Circle::new((axis.map(data.x[i]), data.y[i]), 4, DATA_COLOUR.filled())),
+        )?;
+        let run_bars: Vec<(f64, f64, f64)> = self
+            .map_runs
+            .iter()
+            .map(|&(x, y, s)| (axis.map(x), y - s, y + s))
+            .collect();
+        draw_error_bars(&mut chart, &run_bars, MAP_RUN_COLOUR.stroke_width(2), 5)?;
+        chart.draw_series(
+            self.map_runs
+                .iter()
+                .map(|&(x, y, _)| Cross::new((axis.map(x), y), 6, MAP_RUN_COLOUR.stroke_width(2))),
         )?;
         Ok(())
     }

@@ -29,6 +29,13 @@ pub(crate) const DISPLAY_RANGE: (f64, f64) = (-0.25, 1.25);
 /// Size in pixels of the arrowhead that marks a cut bar or interval.
 const CUT_MARK: i32 = 5;
 
+/// Whether an estimate with the confidence interval `low..high` says anything: an interval
+/// wider than the index's whole range [0, 1] does not, and its bar is not drawn (a question
+/// mark stands in its place; the table gives the numbers).
+pub(crate) fn informative(low: f64, high: f64) -> bool {
+    low.is_finite() && high.is_finite() && high - low <= 1.0
+}
+
 /// The y range of a panel whose values span `lo..hi`: at least [0, 1] with a margin, at most
 /// [`DISPLAY_RANGE`].
 pub(crate) fn panel_range(lo: f64, hi: f64) -> (f64, f64) {
@@ -118,13 +125,12 @@ impl<'a> SensitivityChart<'a> {
         let values = panel.results.iter().flat_map(|r| {
             r.indices.iter().flat_map(|i| {
                 [
-                    i.first_order_low,
-                    i.first_order_high,
-                    i.total_low,
-                    i.total_high,
-                    i.first_order,
-                    i.total,
+                    (i.first_order_low, i.first_order_high, i.first_order),
+                    (i.total_low, i.total_high, i.total),
                 ]
+                .into_iter()
+                .filter(|(low, high, _)| informative(*low, *high))
+                .flat_map(|(low, high, value)| [low, high, value])
             })
         });
         let (lo, hi) = extent(values).unwrap_or((0.0, 1.0));
@@ -152,6 +158,7 @@ impl<'a> SensitivityChart<'a> {
         let width = GROUP_WIDTH / bars_per_group as f64;
         let mut whiskers = Vec::new();
         let mut cut: Vec<(f64, f64, bool)> = Vec::new();
+        let mut uninformative: Vec<f64> = Vec::new();
         for (p, parameter) in self.parameters.iter().enumerate() {
             for (s, source) in self.sources.iter().enumerate() {
                 let colour = source_colour(source, s);
@@ -177,6 +184,10 @@ impl<'a> SensitivityChart<'a> {
                 {
                     let slot = k * self.sources.len() + s;
                     let left = p as f64 - GROUP_WIDTH / 2.0 + slot as f64 * width;
+                    if !informative(low, high) {
+                        uninformative.push(left + width / 2.0);
+                        continue;
+                    }
                     let corners = [
                         (left + 0.08 * width, 0.0),
                         (left + 0.92 * width, clip(value)),
@@ -218,6 +229,16 @@ impl<'a> SensitivityChart<'a> {
             BLACK.stroke_width(1),
         )))?;
         draw_error_bars(&mut chart, &whiskers, BLACK.stroke_width(1), 3)?;
+        let mid = 0.5 * (y_lo.max(0.0) + y_hi.min(1.0));
+        chart.draw_series(uninformative.iter().map(|&x| {
+            Text::new(
+                "?",
+                (x, mid),
+                (FONT, AXIS_LABEL_SIZE)
+                    .into_font()
+                    .color(&RGBColor(120, 120, 120)),
+            )
+        }))?;
         cut.dedup_by(|a, b| a.0 == b.0 && a.2 == b.2);
         chart.draw_series(cut.iter().map(|&(x, y, upward)| {
             let tip = if upward { -CUT_MARK } else { CUT_MARK };

@@ -3,9 +3,9 @@
 //! samples from a seeded random generator, one or two sources.
 
 use iuq_report::{
-    Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic, ParameterSummary,
-    PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
-    SensitivityResult, StudyReport,
+    CheckedPoint, Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic,
+    ParameterSummary, PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics,
+    RunsAtPoint, SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -225,6 +225,51 @@ pub fn synthetic_report(
             }
         })
         .collect();
+    let posterior_check = PosteriorCheckReport {
+        source: "GP surrogate".to_string(),
+        samples: 20,
+        diagnostic: Some("EL drift over the window".to_string()),
+        points: stresses
+            .iter()
+            .zip(&y)
+            .map(|(&x, &el)| {
+                let model: Vec<f64> = (0..20)
+                    .map(|_| el + 0.01 * (rng.random::<f64>() - 0.5))
+                    .collect();
+                let surrogate: Vec<f64> = model
+                    .iter()
+                    .map(|m| m + 0.004 * (rng.random::<f64>() - 0.5))
+                    .collect();
+                let diagnostic: Vec<f64> = (0..21)
+                    .map(|_| 0.01 * x / 9.0 * rng.random::<f64>())
+                    .collect();
+                let mut abs: Vec<f64> = diagnostic.iter().map(|d| d.abs()).collect();
+                abs.sort_by(f64::total_cmp);
+                let rmse = (model
+                    .iter()
+                    .zip(&surrogate)
+                    .map(|(m, s)| (m - s).powi(2))
+                    .sum::<f64>()
+                    / 20.0)
+                    .sqrt();
+                CheckedPoint {
+                    x,
+                    map_model: Some((el + 0.002, 0.003)),
+                    map_surrogate: (el, 0.002),
+                    surrogate_std: vec![0.002; 20],
+                    model_std: vec![0.003; 20],
+                    model,
+                    surrogate,
+                    diagnostic_median_abs: Some(abs[10]),
+                    diagnostic_largest_abs: Some(abs[20]),
+                    diagnostic,
+                    failed: 0,
+                    rmse,
+                    within_two_std: 0.95,
+                }
+            })
+            .collect(),
+    };
     StudyReport {
         title: "RBC calibration — healthy cells (synthetic)".to_string(),
         study_name: "rbc-healthy-synthetic".to_string(),
@@ -272,6 +317,7 @@ pub fn synthetic_report(
         convergence: None,
         failure_map: Vec::new(),
         runs_per_point: Vec::new(),
+        posterior_check: Some(posterior_check),
     }
 }
 

@@ -4,9 +4,10 @@
 //! SQLite file, where later pipelines (and fresh clones of a repository that ships the file)
 //! find them.
 //!
-//! The campaign's parameters are the study's calibrated parameters plus `stress` (Pa); its one
-//! output `el` is the run's mean elongation index with the frames' standard deviation as the
-//! computational std. The command is machine-independent (`iuq` names the iuq executable, see
+//! The campaign's parameters are the study's calibrated parameters plus `stress` (Pa); its
+//! outputs are `el`, the run's mean elongation index with the frames' standard deviation as the
+//! computational std, and `el_drift`, the least-squares change of the frames' index over the
+//! window (a diagnostic the report shows per stress). The command is machine-independent (`iuq` names the iuq executable, see
 //! `iuq_campaign::worker::iuq_executable`), so the store's model hash is the same on every
 //! machine. With the local executor the runs are computed in this process
 //! ([`CellModelRuns`]), with the same result as the command's.
@@ -35,13 +36,18 @@ const PARAMETER_FLAGS: [(&str, &str); 5] = [
 ];
 
 /// Keys of the `[model]` section of kind `rbc-shear` passed on to `iuq rbc shear`.
-const SETTING_FLAGS: [(&str, &str); 5] = [
+const SETTING_FLAGS: [(&str, &str); 6] = [
     ("protocol", "--protocol"),
     ("lattice_shear_rate", "--lattice-shear-rate"),
     ("precision", "--precision"),
-    ("past_singularity", "--past-singularity"),
     ("start_strain", "--start-strain"),
+    ("window_factor", "--window-factor"),
+    ("frames", "--frames"),
 ];
+
+/// The campaign's outputs: the quantity of interest, then the elongation's drift over the
+/// measuring window (a diagnostic: how far the shape still moves while it is measured).
+pub const CAMPAIGN_OUTPUTS: [&str; 2] = ["el", "el_drift"];
 
 fn value_text(v: &Value) -> Option<String> {
     match v {
@@ -94,6 +100,10 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
             push(flag, v);
         }
     }
+    // Always named: the store's model hash then says how the runs treated a strain past a
+    // force singularity, whatever the default of the `iuq` that made them.
+    let past_singularity = study.rbc_shear_model()?.settings().past_singularity;
+    push("--past-singularity", past_singularity.name().to_string());
     push("--stress", format!("{{{{ {STRESS} }}}}"));
 
     let mut model = Table::new();
@@ -101,10 +111,17 @@ pub fn campaign_study_text(study: &Study, stresses: &[f64]) -> Result<String> {
     model.insert("command".into(), Value::Array(command));
     model.insert(
         "outputs".into(),
-        Value::Array(vec![Value::String("el".into())]),
+        Value::Array(
+            CAMPAIGN_OUTPUTS
+                .iter()
+                .map(|s| Value::String((*s).into()))
+                .collect(),
+        ),
     );
     let mut keys = Table::new();
-    keys.insert("el".into(), Value::String("/el".into()));
+    for name in CAMPAIGN_OUTPUTS {
+        keys.insert(name.into(), Value::String(format!("/{name}")));
+    }
     let mut output = Table::new();
     output.insert(
         "file".into(),
@@ -134,9 +151,9 @@ pub fn output_name(s: f64) -> String {
 }
 
 /// The native cell model evaluated in this process: a run's inputs are the study's calibrated
-/// parameters, then the stress; its output is the mean elongation index over the measuring
-/// window, with the frames' standard deviation as the computational std — what `iuq rbc shear
-/// --json` prints for the same settings.
+/// parameters, then the stress; its outputs are the mean elongation index over the measuring
+/// window, with the frames' standard deviation as the computational std, and the drift over the
+/// window — what `iuq rbc shear --json` prints for the same settings.
 pub struct CellModelRuns {
     model: RbcShearModel,
     parameters: usize,
@@ -184,7 +201,10 @@ impl CellModelRuns {
         let experiment = self.model.experiment(&cell, stress);
         experiment.validate().map_err(|e| e.to_string())?;
         let result = run_shear(&experiment).map_err(|e| e.to_string())?;
-        Ok((vec![result.el_mean], Some(vec![result.el_std])))
+        Ok((
+            vec![result.el_mean, result.el_drift()],
+            Some(vec![result.el_std, 0.0]),
+        ))
     }
 }
 

@@ -30,6 +30,7 @@ pub mod adaptive;
 mod adaptive_report;
 pub mod cell_model_campaign;
 pub mod model_runs;
+pub mod posterior_check;
 pub mod report_data;
 pub mod run_groups;
 pub mod settings;
@@ -138,6 +139,8 @@ pub struct PipelineOutcome {
     pub posterior: Value,
     /// The adaptive engine's rounds, when `[surrogate] adaptive` is given.
     pub adaptive: Option<AdaptiveOutcome>,
+    /// The model run at the posterior, when `[surrogate] posterior_check` is given.
+    pub posterior_check: Option<posterior_check::PosteriorCheck>,
     /// Wall-clock seconds of each stage, in order.
     pub stage_seconds: Vec<(String, f64)>,
     /// Wall-clock seconds of the whole pipeline.
@@ -459,6 +462,7 @@ fn run_stages(
             q2: Vec::new(),
             posterior: Value::Null,
             adaptive: None,
+            posterior_check: None,
             stage_seconds,
             seconds: started.elapsed().as_secs_f64(),
         });
@@ -568,6 +572,30 @@ fn run_stages(
         None => None,
     };
 
+    // 5b. The model at the surrogate posterior's MAP and samples.
+    let posterior_check = match &settings.posterior_check {
+        Some(check) => {
+            let stage = Instant::now();
+            events.message(format!(
+                "the model at the posterior: the MAP and {} posterior samples, {} runs (results already stored are reused)",
+                check.samples,
+                (check.samples + 1) * group_count
+            ));
+            let checked =
+                posterior_check::check_posterior(&gp_posterior, &surrogate, &model_runs, check)?;
+            write_atomically(
+                &out.join("posterior-check.json"),
+                serde_json::to_string_pretty(&checked)?.as_bytes(),
+            )?;
+            stage_seconds.push((
+                "model at the posterior".into(),
+                stage.elapsed().as_secs_f64(),
+            ));
+            Some(checked)
+        }
+        None => None,
+    };
+
     // 6. Propagation and the report.
     let stage = Instant::now();
     let results = PipelineResults {
@@ -586,6 +614,7 @@ fn run_stages(
             .run_statistics()
             .context("reading the run statistics of the campaign store")?,
         adaptive: adaptive.as_ref(),
+        posterior_check: posterior_check.as_ref(),
         groups: &groups,
         model_runs: &model_runs,
         surrogate: &surrogate,
@@ -601,6 +630,7 @@ fn run_stages(
         q2: gp_checks.iter().map(|c| c.0).collect(),
         posterior: summary,
         adaptive,
+        posterior_check,
         stage_seconds,
         seconds: started.elapsed().as_secs_f64(),
     })

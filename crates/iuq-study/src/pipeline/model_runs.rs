@@ -364,6 +364,11 @@ impl ModelRuns {
         }
     }
 
+    /// The abscissa of data point `j`.
+    pub fn abscissa_of_output(&self, j: usize) -> f64 {
+        self.abscissae[j]
+    }
+
     /// The group's abscissa (per-abscissa shape only).
     pub fn group_abscissa(&self, g: usize) -> Option<f64> {
         match self.shape {
@@ -375,6 +380,28 @@ impl ModelRuns {
     /// Run each `(group, θ)` of `requests` (recorded under `label` when given) and return one
     /// outcome per request, its outputs those of [`ModelRuns::group_outputs`].
     pub fn run(&self, label: Option<&str>, requests: &[(usize, Vec<f64>)]) -> Result<Vec<Outcome>> {
+        let mut outcomes = self.run_with_diagnostics(label, requests)?;
+        for ((g, _), outcome) in requests.iter().zip(&mut outcomes) {
+            if let Ok(e) = outcome {
+                let width = self.group_outputs(*g).len();
+                if e.outputs.len() > width {
+                    e.outputs.truncate(width);
+                    if let Some(s) = &mut e.computational_std {
+                        s.truncate(width);
+                    }
+                }
+            }
+        }
+        Ok(outcomes)
+    }
+
+    /// [`ModelRuns::run`] with every output of the runs: for the cell model the elongation
+    /// index, then its drift over the measuring window.
+    pub fn run_with_diagnostics(
+        &self,
+        label: Option<&str>,
+        requests: &[(usize, Vec<f64>)],
+    ) -> Result<Vec<Outcome>> {
         let points: Vec<Vec<f64>> = requests
             .iter()
             .map(|(g, theta)| {

@@ -11,8 +11,9 @@ use serde_json::{Value, json};
 use iuq_campaign::StatusCounts;
 use iuq_gp::GpBank;
 use iuq_report::{
-    DataSeries, GpDiagnostic, ParameterSummary, PosteriorResult, PropagatedOutput, RunStatistics,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport, write_report,
+    CheckedPoint, DataSeries, GpDiagnostic, ParameterSummary, PosteriorCheckReport,
+    PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage, SensitivityIndex,
+    SensitivityResult, StudyReport, write_report,
 };
 use iuq_sensitivity::SensitivityReport;
 
@@ -21,6 +22,7 @@ use crate::likelihood_section::DataLikelihood;
 use crate::pipeline::adaptive::AdaptiveOutcome;
 use crate::pipeline::adaptive_report;
 use crate::pipeline::model_runs::ModelRuns;
+use crate::pipeline::posterior_check::{CheckedRun, PosteriorCheck};
 use crate::pipeline::run_groups::GroupRuns;
 use crate::pipeline::settings::PipelineSettings;
 use crate::pipeline::surrogate::Surrogate;
@@ -76,6 +78,8 @@ pub struct PipelineResults<'a> {
     pub campaign_runs: (StatusCounts, Vec<String>),
     /// The adaptive engine's rounds, when it ran.
     pub adaptive: Option<&'a AdaptiveOutcome>,
+    /// The model run at the posterior, when it was.
+    pub posterior_check: Option<&'a PosteriorCheck>,
     /// The runs by run group.
     pub groups: &'a [GroupRuns],
     /// The model's campaign (how groups map to data points).
@@ -409,6 +413,9 @@ pub fn write_pipeline_report(
             results.model_runs,
             &data.x,
         ),
+        posterior_check: results
+            .posterior_check
+            .map(|c| posterior_check_report(c, &labels)),
         run_statistics: RunStatistics {
             runs,
             succeeded: counts.succeeded as usize,
@@ -422,6 +429,10 @@ pub fn write_pipeline_report(
         "posteriors": report.posteriors.iter().map(posterior_json).collect::<Vec<_>>(),
         "q2": results.point_runs.iter().zip(results.gp_checks).map(|(r, (q2, loo))| json!({"x": r.x, "q2": finite_or_null(*q2), "loo_q2": finite_or_null(*loo)})).collect::<Vec<_>>(),
         "adaptive": results.adaptive,
+        "posterior_check": results.posterior_check.map(|c| c.points.iter().map(|p| json!({
+            "x": p.x, "rmse": finite_or_null(p.rmse()), "within_two_std": finite_or_null(p.within_two_std()),
+            "failed": p.failures(),
+        })).collect::<Vec<_>>()),
         "sensitivity": sobol_json(results.surrogate_sobol),
         "model_sensitivity": results.model_sobol.map(sobol_json),
     });
@@ -480,6 +491,45 @@ pub fn sobol_json(report: &SensitivityReport) -> Value {
         "failed_evaluations": report.failed_evaluations,
         "failure_handling": report.failure_handling(),
     })
+}
+
+/// The posterior check as the report shows it.
+fn posterior_check_report(check: &PosteriorCheck, labels: &Labels) -> PosteriorCheckReport {
+    let points = check
+        .points
+        .iter()
+        .map(|p| {
+            let ok: Vec<&CheckedRun> = p.samples.iter().filter(|r| r.model.is_some()).collect();
+            let diagnostic: Vec<f64> = p
+                .runs()
+                .filter(|r| r.model.is_some())
+                .filter_map(|r| r.diagnostics.first().copied())
+                .collect();
+            let mut abs: Vec<f64> = diagnostic.iter().map(|v| v.abs()).collect();
+            abs.sort_by(f64::total_cmp);
+            CheckedPoint {
+                x: p.x,
+                map_model: p.map.model.map(|m| (m, p.map.model_std.unwrap_or(0.0))),
+                map_surrogate: (p.map.surrogate, p.map.surrogate_std),
+                model: ok.iter().filter_map(|r| r.model).collect(),
+                surrogate: ok.iter().map(|r| r.surrogate).collect(),
+                surrogate_std: ok.iter().map(|r| r.surrogate_std).collect(),
+                model_std: ok.iter().map(|r| r.model_std.unwrap_or(0.0)).collect(),
+                diagnostic_median_abs: (!abs.is_empty()).then(|| quantile(&abs, 0.5)),
+                diagnostic_largest_abs: abs.last().copied(),
+                diagnostic,
+                failed: p.failures(),
+                rmse: p.rmse(),
+                within_two_std: p.within_two_std(),
+            }
+        })
+        .collect();
+    PosteriorCheckReport {
+        source: "GP surrogate".into(),
+        samples: check.samples.len(),
+        diagnostic: labels.rbc.then(|| "EL drift over the window".to_string()),
+        points,
+    }
 }
 
 #[cfg(test)]

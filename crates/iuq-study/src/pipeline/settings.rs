@@ -8,6 +8,8 @@
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
 //! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.05,
 //!              samples = 2000, max_rounds = 30, candidates = 1000 }
+//! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
+//! posterior_check = { samples = 20, seed = 5 }
 //! [sensitivity]
 //! n = 1024        # Saltelli base points on the surrogate
 //! model_n = 8     # Saltelli base points run on the model itself (0: skip)
@@ -42,6 +44,47 @@ pub struct PipelineSettings {
     pub resamples: usize,
     /// The adaptive refinement, when `[surrogate] adaptive` is given.
     pub adaptive: Option<AdaptiveSettings>,
+    /// The model run at the posterior, when `[surrogate] posterior_check` is given.
+    pub posterior_check: Option<PosteriorCheckSettings>,
+}
+
+/// `[surrogate] posterior_check = { samples, seed }`: the model itself run at the MAP of the
+/// surrogate's posterior and at `samples` of its samples, in every run group, and compared with
+/// the surrogate's prediction there — the surrogate checked where the calibration uses it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PosteriorCheckSettings {
+    /// Posterior samples run besides the MAP (`samples`, default 20).
+    pub samples: usize,
+    /// Seed of their choice among the posterior's samples (`seed`, default 0).
+    pub seed: u64,
+}
+
+/// Read `[surrogate] posterior_check`.
+fn parse_posterior_check(value: &toml::Value, file: &str) -> Result<PosteriorCheckSettings> {
+    let full = "surrogate.posterior_check";
+    let table = value.as_table().ok_or_else(|| {
+        input_error(format!(
+            "{file}: key `{full}`: expected a table such as {{ samples = 20, seed = 5 }}"
+        ))
+    })?;
+    if let Some(k) = table
+        .keys()
+        .find(|k| !["samples", "seed"].contains(&k.as_str()))
+    {
+        return Err(input_error(format!(
+            "{file}: key `{full}.{k}`: unknown key (expected samples, seed)"
+        )));
+    }
+    let samples = integer(table, "samples", full, file, 20)?;
+    if samples < 2 {
+        return Err(input_error(format!(
+            "{file}: key `{full}.samples`: at least 2 posterior samples are needed for an RMSE, got {samples}"
+        )));
+    }
+    Ok(PosteriorCheckSettings {
+        samples: samples as usize,
+        seed: integer(table, "seed", full, file, 0)?,
+    })
 }
 
 /// `[surrogate] adaptive = { ... }`: rounds of new runs placed where the posterior lies.
@@ -191,14 +234,24 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
     let file = study.path.display().to_string();
     let empty = toml::Table::new();
     let surrogate = study.surrogate.as_ref().unwrap_or(&empty);
-    if let Some(k) = surrogate
-        .keys()
-        .find(|k| !["design", "test", "maximin_candidates", "adaptive"].contains(&k.as_str()))
-    {
+    if let Some(k) = surrogate.keys().find(|k| {
+        ![
+            "design",
+            "test",
+            "maximin_candidates",
+            "adaptive",
+            "posterior_check",
+        ]
+        .contains(&k.as_str())
+    }) {
         return Err(input_error(format!(
-            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates, adaptive)"
+            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates, adaptive, posterior_check)"
         )));
     }
+    let posterior_check = surrogate
+        .get("posterior_check")
+        .map(|v| parse_posterior_check(v, &file))
+        .transpose()?;
     let adaptive = surrogate
         .get("adaptive")
         .map(|v| parse_adaptive(v, &file))
@@ -261,5 +314,6 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         confidence,
         resamples,
         adaptive,
+        posterior_check,
     })
 }

@@ -121,6 +121,18 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
                 "adaptive": outcome.adaptive,
                 "q2": outcome.q2,
                 "posterior": outcome.posterior,
+                // Per data point: the model at the posterior against the surrogate.
+                "posterior_check": outcome.posterior_check.as_ref().map(|c| {
+                    c.points
+                        .iter()
+                        .map(|p| json!({
+                            "x": p.x,
+                            "rmse": p.rmse(),
+                            "within_two_std": p.within_two_std(),
+                            "failed": p.failures(),
+                        }))
+                        .collect::<Vec<_>>()
+                }),
                 "stage_seconds": outcome
                     .stage_seconds
                     .iter()

@@ -11,7 +11,8 @@ use serde_json::json;
 use iuq_rbc::benchmark::{LatticeBenchmark, benchmark_lattice, memory_copy_bandwidth};
 use iuq_rbc::lattice::Precision;
 use iuq_rbc::protocol::{
-    DEFAULT_LATTICE_SHEAR_RATE, Protocol, SHEAR_DOMAIN, START_STRAIN, ShearExperiment, run_shear,
+    DEFAULT_LATTICE_SHEAR_RATE, FRAMES, Protocol, SHEAR_DOMAIN, START_STRAIN, ShearExperiment,
+    WINDOW_FACTOR, run_shear,
 };
 use iuq_rbc::shape_output::ShapeFormat;
 use iuq_rbc::stretching::{OPTICAL_TWEEZERS, StretchExperiment, run_stretch};
@@ -78,9 +79,9 @@ impl From<PrecisionArg> for Precision {
 /// What a strain past a singularity of the membrane's force laws means.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PastSingularityArg {
-    /// The mesh broke: the run fails (the spec).
+    /// The run fails (the mesh is taken as broken).
     Fail,
-    /// Carry on with the absolute-value force laws, as HemoCell built with FORCE_LIMIT does.
+    /// Carry on with the absolute-value force laws and the 50 pN cap, as HemoCell does.
     CarryOn,
 }
 
@@ -124,12 +125,19 @@ pub struct ShearArgs {
     /// checks).
     #[arg(long, default_value_t = START_STRAIN, allow_negative_numbers = true)]
     pub start_strain: f64,
+    /// The measuring window ends at this factor × its start step (1.25, the study's window; e.g.
+    /// 4 follows the cell from strain 7.5 to 30).
+    #[arg(long, default_value_t = WINDOW_FACTOR, allow_negative_numbers = true)]
+    pub window_factor: f64,
+    /// Shapes recorded, evenly spaced over the window, both ends included.
+    #[arg(long, default_value_t = FRAMES)]
+    pub frames: usize,
     /// Storage precision of the fluid.
     #[arg(long, value_enum, default_value_t = PrecisionArg::Single)]
     pub precision: PrecisionArg,
-    /// A strain past a singularity of the membrane's force laws: `fail` (a broken mesh, as the
-    /// spec defines it) or `carry-on` (as HemoCell built with FORCE_LIMIT does).
-    #[arg(long, value_enum, default_value_t = PastSingularityArg::Fail)]
+    /// A strain past a singularity of the membrane's force laws: `carry-on` (as HemoCell does:
+    /// absolute-value denominators, forces capped at 50 pN) or `fail` (a broken mesh).
+    #[arg(long, value_enum, default_value_t = PastSingularityArg::CarryOn)]
     pub past_singularity: PastSingularityArg,
     /// Write the membrane at each measuring frame into this directory.
     #[arg(long)]
@@ -195,6 +203,8 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
     let mut experiment =
         ShearExperiment::new(membrane, args.viscosity_ratio, args.stress).with_protocol(protocol);
     experiment.start_strain = args.start_strain;
+    experiment.window_factor = args.window_factor;
+    experiment.frames = args.frames;
     experiment.precision = args.precision.into();
     experiment.past_singularity = args.past_singularity.into();
     experiment.validate().map_err(cli_error)?;
@@ -227,12 +237,18 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
         }
     }
     let el_frames = result.el_frames();
+    let el_drift = result.el_drift();
     let value = json!({
         "el_mean": result.el_mean,
         "el_std": result.el_std,
         // The same as one value with its computational std, the form campaign decoders read.
         "el": { "value": result.el_mean, "std": result.el_std },
         "el_frames": el_frames,
+        // The least-squares change of EL over the window: how far the shape still moves.
+        "el_drift": el_drift,
+        "start_strain": result.setup.t_start as f64 * result.setup.lattice_shear_rate,
+        "end_strain": result.setup.t_max as f64 * result.setup.lattice_shear_rate,
+        "past_singularity": experiment.past_singularity.name(),
         "steps": result.steps,
         "seconds": result.seconds,
         "mlups": result.mlups,
@@ -251,12 +267,13 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
     emit(json, &value, || {
         let frames: Vec<String> = el_frames.iter().map(|v| format!("{v:.4}")).collect();
         let mut text = format!(
-            "EL = {} ± {} at {} Pa ({} protocol)\nframes: {}\n{} steps in {} s ({} MLUPS)",
+            "EL = {} ± {} at {} Pa ({} protocol)\nframes: {} (drift over the window {})\n{} steps in {} s ({} MLUPS)",
             short(result.el_mean),
             short(result.el_std),
             args.stress,
             protocol.name(),
             frames.join(" "),
+            short(el_drift),
             result.steps,
             short(result.seconds),
             short(result.mlups)
@@ -366,9 +383,8 @@ pub struct ValidateArgs {
     /// Also run the optical-tweezers stretching check (kLink = 15, kBend = 80).
     #[arg(long)]
     pub stretch: bool,
-    /// A strain past a force singularity: `fail` (the spec) or `carry-on` (HemoCell's
-    /// FORCE_LIMIT build).
-    #[arg(long, value_enum, default_value_t = PastSingularityArg::Fail)]
+    /// A strain past a force singularity: `carry-on` (as HemoCell) or `fail` (a broken mesh).
+    #[arg(long, value_enum, default_value_t = PastSingularityArg::CarryOn)]
     pub past_singularity: PastSingularityArg,
 }
 
