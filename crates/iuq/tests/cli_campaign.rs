@@ -465,47 +465,64 @@ fn a_coordinator_killed_while_slurm_runs_its_arrays_reattaches_without_resubmitt
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A fake `hq` printing what HyperQueue v0.26.2 prints in JSON output mode (the recorded
+/// shapes of `tests/fixtures/hq` in iuq-campaign): `{"id": N}` from `submit`; from `job info`
+/// the known jobs only (an unknown one is an error on stderr, exit status 0), each task with
+/// `started_at`/`worker` once started, `finished_at` once ended, `error` when failed.
 const FAKE_HQ: &str = r#"#!/bin/sh
 D="$FAKE_SCHED_DIR"; mkdir -p "$D/hq"
 echo "$@" >> "$D/hq.log"
 [ "$1" = "--output-mode=json" ] || { echo "fake hq: JSON output mode only" >&2; exit 2; }
 shift
+now='"2026-11-24T16:04:31.797188603Z"'
 case "$1" in
   submit)
-    shift; array=""
-    while [ $# -gt 0 ]; do case "$1" in --array=*) array="${1#--array=}" ;; --) shift; break ;; esac; shift; done
+    shift; array=""; name="main"
+    while [ $# -gt 0 ]; do case "$1" in --array=*) array="${1#--array=}" ;; --name=*) name="${1#--name=}" ;; --) shift; break ;; esac; shift; done
     n=$(cat "$D/hq_counter" 2>/dev/null || echo 0); n=$((n+1)); echo $n > "$D/hq_counter"
+    echo "$name" > "$D/hq/$n.name"
     first="${array%-*}"; last="${array#*-}"
     i=$first; while [ $i -le $last ]; do echo waiting > "$D/hq/$n.$i"; i=$((i+1)); done
     (
       i=$first
       while [ $i -le $last ]; do
         echo running > "$D/hq/.t" && mv "$D/hq/.t" "$D/hq/$n.$i"
-        if HQ_JOB_ID=$n HQ_TASK_ID=$i "$@" > /dev/null 2>&1; then s=finished; else s=failed; fi
-        echo $s > "$D/hq/.t" && mv "$D/hq/.t" "$D/hq/$n.$i"
+        HQ_JOB_ID=$n HQ_TASK_ID=$i "$@" > /dev/null 2>&1
+        code=$?; if [ $code = 0 ]; then s=finished; else s="failed $code"; fi
+        echo "$s" > "$D/hq/.t" && mv "$D/hq/.t" "$D/hq/$n.$i"
         i=$((i+1))
       done
     ) > /dev/null 2>&1 < /dev/null &
     printf '{\n  "id": %s\n}\n' "$n" ;;
   job)
+    [ "$2" = info ] || { echo "fake hq: unknown command job $2" >&2; exit 2; }
     ids=$(echo "$3" | tr ',' ' ')
     printf '['; sep=''
     for j in $ids; do
-      printf '%s{"info": {"id": %s, "name": "iuq", "task_count": 0, "task_stats": {}}, "tasks": [' "$sep" "$j"; tsep=''
-      for f in "$D"/hq/$j.*; do
-        [ -e "$f" ] || continue
-        t=${f##*.}; s=$(cat "$f")
-        w=''; [ "$s" = waiting ] || w=', "worker": 1'
-        printf '%s{"id": %s, "state": "%s"%s}' "$tsep" "$t" "$s" "$w"; tsep=', '
+      [ -e "$D/hq/$j.name" ] || { echo "ERROR Job $j not found" >&2; continue; }
+      count=0; w=0; r=0; f=0; x=0; tasks=''; tsep=''
+      for file in "$D"/hq/$j.[0-9]*; do
+        t=${file##*.}; set -- $(cat "$file"); s=$1; count=$((count+1))
+        case $s in
+          waiting) w=$((w+1)); extra='' ;;
+          running) r=$((r+1)); extra=", \"started_at\": $now, \"worker\": 1" ;;
+          finished) f=$((f+1)); extra=", \"started_at\": $now, \"worker\": 1, \"finished_at\": $now" ;;
+          failed) x=$((x+1)); extra=", \"started_at\": $now, \"worker\": 1, \"finished_at\": $now, \"error\": \"Program terminated with exit code $2.\"" ;;
+        esac
+        tasks="$tasks$tsep{\"id\": $t, \"state\": \"$s\"$extra}"; tsep=', '
       done
-      printf ']}'; sep=', '
+      printf '%s{"finished_at": null, "info": {"cancel_reason": null, "id": %s, "is_open": false, "name": "%s", "task_count": %s, "task_stats": {"aborted": 0, "canceled": 0, "failed": %s, "finished": %s, "running": %s, "waiting": %s}}, "max_fails": null, "tasks": [%s]}' \
+        "$sep" "$j" "$(cat "$D/hq/$j.name")" "$count" "$x" "$f" "$r" "$w" "$tasks"
+      sep=', '
     done
     printf ']\n' ;;
   *) echo "fake hq: unknown command $1" >&2; exit 2 ;;
 esac
 "#;
 
-fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) {
+/// Run a four-point campaign (one model failure) through the HyperQueue executor using `hq`;
+/// returns the attempts' external ids (`<job>.<task>`).
+fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) -> Vec<String> {
     let points: Vec<(u32, f64)> = vec![(0, 1.0), (0, 2.0), (2, 3.0), (0, 4.0)];
     let executor = format!(
         "kind = \"hyperqueue\"\nhq = \"{}\"\npoll_interval = \"100ms\"",
@@ -542,6 +559,7 @@ fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) {
             .all(|i| i.as_deref().is_some_and(|i| i.contains('.'))),
         "{ids:?}"
     );
+    ids.into_iter().flatten().collect()
 }
 
 #[test]
@@ -551,7 +569,8 @@ fn hyperqueue_executor_with_a_fake_hq_printing_recorded_json() {
     std::fs::create_dir_all(&state).unwrap();
     let hq = dir.join("hq");
     executable(&hq, FAKE_HQ);
-    hyperqueue_campaign(&hq, Some(&state), &dir);
+    let ids = hyperqueue_campaign(&hq, Some(&state), &dir);
+    assert_eq!(ids, ["1.0", "1.1", "1.2", "1.3"]);
     let log = std::fs::read_to_string(state.join("hq.log")).unwrap();
     assert!(
         log.lines().next().unwrap().contains("submit --array=0-3"),
@@ -560,8 +579,18 @@ fn hyperqueue_executor_with_a_fake_hq_printing_recorded_json() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
-/// Against a real HyperQueue: set HQ_BIN to the `hq` binary. The test starts a server and a
-/// worker in a scratch directory and stops them afterwards.
+/// Against a real HyperQueue (run by hand; CI without `hq` skips it):
+///
+/// ```text
+/// git clone https://github.com/It4innovations/hyperqueue && cd hyperqueue && git checkout v0.26.2
+/// cargo build --release -p hyperqueue --no-default-features --features microlp
+/// HQ_BIN=$PWD/target/release/hq cargo test --release -p iuq --test cli_campaign hyperqueue -- --nocapture
+/// ```
+///
+/// (the default features build the HiGHS solver and jemalloc from C/C++ sources, which needs
+/// cmake and a C++ compiler). The test starts its own server (waiting until `hq server info`
+/// answers) and a worker (waiting until it is registered) in a scratch server directory; both
+/// are stopped when the test ends, also when it fails.
 #[test]
 fn hyperqueue_executor_with_a_real_hq_when_hq_bin_is_set() {
     let Ok(hq) = std::env::var("HQ_BIN") else {
@@ -571,43 +600,175 @@ fn hyperqueue_executor_with_a_real_hq_when_hq_bin_is_set() {
         return;
     };
     let dir = scratch("cli-campaign", "real-hq");
-    let server_dir = dir.join("hq-server");
-    let mut server = Command::new(&hq)
-        .args(["server", "start", "--server-dir"])
-        .arg(&server_dir)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("hq server starts");
-    std::thread::sleep(Duration::from_secs(2));
-    let mut worker = Command::new(&hq)
-        .args(["worker", "start", "--server-dir"])
-        .arg(&server_dir)
-        .stdout(Stdio::null())
-        .stderr(Stdio::null())
-        .spawn()
-        .expect("hq worker starts");
-    std::thread::sleep(Duration::from_secs(2));
-    // `hq` finds the server through HQ_SERVER_DIR.
+    let cluster = HqCluster::start(&hq, &dir);
     let wrapper = dir.join("hq-wrapper.sh");
     executable(
         &wrapper,
         &format!(
             "#!/bin/sh\nexec '{hq}' --server-dir '{}' \"$@\"\n",
-            server_dir.display()
+            cluster.server_dir.display()
         ),
     );
-    let result = std::panic::catch_unwind(|| hyperqueue_campaign(&wrapper, None, &dir));
-    let _ = Command::new(&hq)
-        .args(["server", "stop", "--server-dir"])
-        .arg(&server_dir)
-        .status();
-    let _ = worker.kill();
-    let _ = server.kill();
-    let _ = worker.wait();
-    let _ = server.wait();
-    if let Err(e) = result {
-        std::panic::resume_unwind(e);
-    }
+    let ids = hyperqueue_campaign(&wrapper, None, &dir);
+    // One array of four tasks, under the campaign's job name; the ids are HyperQueue's.
+    let jobs = cluster.json(&["job", "list", "--all"]);
+    let jobs = jobs.as_array().expect("`hq job list` prints an array");
+    assert_eq!(jobs.len(), 1, "{jobs:?}");
+    let job = &jobs[0];
+    assert!(
+        job["name"].as_str().unwrap().starts_with("iuq-fake-"),
+        "{job}"
+    );
+    assert_eq!(job["task_count"], 4, "{job}");
+    let id = job["id"].as_u64().unwrap();
+    let expected: Vec<String> = (0..4).map(|t| format!("{id}.{t}")).collect();
+    assert_eq!(ids, expected);
+
+    // A task HyperQueue stops at its time limit (100 ms; the model, mode 8, takes 0.4 s) leaves
+    // no worker result: a timeout. (HyperQueue signals the worker's process group only, so the
+    // model, in a process group of its own, runs on to its end: hence a short model here.)
+    let limited = dir.join("time-limit");
+    std::fs::create_dir_all(&limited).unwrap();
+    let executor = format!(
+        "kind = \"hyperqueue\"\nhq = \"{}\"\npoll_interval = \"100ms\"\nsubmit_args = [\"--time-limit=100ms\"]",
+        wrapper.display()
+    );
+    let path = study(&limited, &[(8, 1.0)], &executor);
+    let o = iuq(&["run", path.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["failed"], 1, "{v}");
+    let v = json_of(&iuq(&["status", path.to_str().unwrap(), "--json"]));
+    let failure = &v["failures"][0];
+    assert_eq!(failure["kind"], "timeout", "{v}");
+    assert!(
+        failure["reason"]
+            .as_str()
+            .unwrap()
+            .contains("reached its time limit"),
+        "{v}"
+    );
+    drop(cluster);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A HyperQueue server and one worker in `<dir>/hq-server`, stopped when dropped (also while a
+/// failing test unwinds).
+struct HqCluster {
+    hq: String,
+    server_dir: PathBuf,
+    server: std::process::Child,
+    worker: Option<std::process::Child>,
+}
+
+impl HqCluster {
+    const STARTUP: Duration = Duration::from_secs(60);
+
+    fn start(hq: &str, dir: &Path) -> Self {
+        let server_dir = dir.join("hq-server");
+        std::fs::create_dir_all(&server_dir).unwrap();
+        let log = |name: &str| std::fs::File::create(dir.join(name)).unwrap();
+        let server = Command::new(hq)
+            .args(["server", "start", "--server-dir"])
+            .arg(&server_dir)
+            .stdin(Stdio::null())
+            .stdout(log("hq-server.log"))
+            .stderr(log("hq-server.err"))
+            .spawn()
+            .unwrap_or_else(|e| panic!("cannot start `{hq} server start`: {e}"));
+        let mut cluster = HqCluster {
+            hq: hq.to_string(),
+            server_dir,
+            server,
+            worker: None,
+        };
+        cluster.wait_for("the server to answer `hq server info`", dir, |c| {
+            c.hq_command(&["server", "info"])
+                .output()
+                .is_ok_and(|o| o.status.success())
+        });
+        cluster.worker = Some(
+            Command::new(hq)
+                .args(["worker", "start", "--server-dir"])
+                .arg(&cluster.server_dir)
+                .stdin(Stdio::null())
+                .stdout(log("hq-worker.log"))
+                .stderr(log("hq-worker.err"))
+                .spawn()
+                .unwrap_or_else(|e| panic!("cannot start `{hq} worker start`: {e}")),
+        );
+        cluster.wait_for("the worker to register", dir, |c| {
+            c.try_json(&["worker", "list"])
+                .and_then(|v| v.as_array().map(Vec::len))
+                .is_some_and(|n| n >= 1)
+        });
+        cluster
+    }
+
+    /// Poll `ready` every 100 ms until it holds; panics (with the server's and worker's logs)
+    /// when the server or the worker exits, or after a minute.
+    fn wait_for(&mut self, what: &str, dir: &Path, ready: impl Fn(&Self) -> bool) {
+        let start = Instant::now();
+        while !ready(self) {
+            let exited = std::iter::once(&mut self.server)
+                .chain(self.worker.as_mut())
+                .find_map(|c| c.try_wait().ok().flatten());
+            if exited.is_some() || start.elapsed() > Self::STARTUP {
+                let logs: Vec<String> = ["hq-server.err", "hq-worker.err"]
+                    .iter()
+                    .map(|f| std::fs::read_to_string(dir.join(f)).unwrap_or_default())
+                    .collect();
+                panic!(
+                    "gave up waiting for {what} (a process exited: {exited:?})\nserver: {}\nworker: {}",
+                    logs[0], logs[1]
+                );
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    }
+
+    fn hq_command(&self, args: &[&str]) -> Command {
+        let mut c = Command::new(&self.hq);
+        c.arg("--server-dir")
+            .arg(&self.server_dir)
+            .args(args)
+            .stdin(Stdio::null());
+        c
+    }
+
+    fn try_json(&self, args: &[&str]) -> Option<Value> {
+        let o = self
+            .hq_command(&["--output-mode=json"])
+            .args(args)
+            .output()
+            .ok()?;
+        if !o.status.success() {
+            return None;
+        }
+        serde_json::from_slice(&o.stdout).ok()
+    }
+
+    fn json(&self, args: &[&str]) -> Value {
+        self.try_json(args)
+            .unwrap_or_else(|| panic!("`hq {}` printed no JSON", args.join(" ")))
+    }
+}
+
+impl Drop for HqCluster {
+    fn drop(&mut self) {
+        // `server stop` also stops the worker (which stops its tasks); then make sure.
+        let _ = self
+            .hq_command(&["server", "stop"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .status();
+        let deadline = Instant::now() + Duration::from_secs(10);
+        for child in std::iter::once(&mut self.server).chain(self.worker.as_mut()) {
+            while Instant::now() < deadline && matches!(child.try_wait(), Ok(None)) {
+                std::thread::sleep(Duration::from_millis(50));
+            }
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
 }
