@@ -70,6 +70,8 @@ pub const START_STRAIN: f64 = 7.5;
 pub const WINDOW_FACTOR: f64 = 1.25;
 /// Shapes recorded in the measuring window.
 pub const FRAMES: usize = 10;
+/// The most shapes one run records.
+pub const MAX_FRAMES: usize = 1000;
 /// Width of the x bins of the contour, in metres (0.5 µm).
 pub const CONTOUR_BIN_WIDTH: f64 = 0.5e-6;
 /// Largest wall speed accepted, in lattice units (keeps the Mach number small).
@@ -214,11 +216,13 @@ impl ShearExperiment {
                 "the window ends at window_factor × its start: must lie in (1, 100]",
             ));
         }
-        if self.frames < 2 {
+        if !(2..=MAX_FRAMES).contains(&self.frames) {
             return Err(RbcError::invalid(
                 "frames",
                 self.frames as f64,
-                "at least 2 frames are needed for a standard deviation",
+                format!(
+                    "from 2 (a standard deviation needs two) to {MAX_FRAMES} frames (each keeps a shape)"
+                ),
             ));
         }
         let setup = self.setup();

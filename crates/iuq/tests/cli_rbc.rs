@@ -78,6 +78,61 @@ fn a_short_shear_run_prints_the_elongation_index_and_writes_shapes() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A longer window with more frames: the window keeps its start, ends at the factor times it,
+/// and the run reports the frames' drift, carrying on past force singularities by default.
+#[test]
+fn a_longer_window_reports_its_strains_and_the_drift_of_the_frames() {
+    let o = iuq(&[
+        "rbc",
+        "shear",
+        "--stress",
+        "4.24",
+        "--start-strain",
+        "0.05",
+        "--window-factor",
+        "3",
+        "--frames",
+        "4",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["past_singularity"], "carry-on");
+    let steps: Vec<u64> = v["frame_steps"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|s| s.as_u64().unwrap())
+        .collect();
+    // t_start = int(0.05 / 3e-4) = 166, t_max = ceil(3 · 166) = 498.
+    assert_eq!(steps, [166, 277, 387, 498]);
+    let rate = v["lattice_shear_rate"].as_f64().unwrap();
+    assert!((v["end_strain"].as_f64().unwrap() - 498.0 * rate).abs() < 1e-12);
+    // The drift is the least-squares line's change over the window.
+    let el: Vec<f64> = v["el_frames"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e.as_f64().unwrap())
+        .collect();
+    let x: Vec<f64> = steps.iter().map(|&s| s as f64).collect();
+    let (mx, my) = (x.iter().sum::<f64>() / 4.0, el.iter().sum::<f64>() / 4.0);
+    let slope = x
+        .iter()
+        .zip(&el)
+        .map(|(a, b)| (a - mx) * (b - my))
+        .sum::<f64>()
+        / x.iter().map(|a| (a - mx).powi(2)).sum::<f64>();
+    let drift = v["el_drift"].as_f64().unwrap();
+    assert!(
+        (drift - slope * 332.0).abs() < 1e-12,
+        "{drift} vs {}",
+        slope * 332.0
+    );
+    // The cell is still being stretched from rest: its elongation grows through the window.
+    assert!(drift > 0.0, "{drift}");
+}
+
 #[test]
 fn bad_values_are_input_errors_naming_the_flag() {
     for (args, flag) in [
@@ -96,6 +151,11 @@ fn bad_values_are_input_errors_naming_the_flag() {
             vec!["--stress", "1", "--lattice-shear-rate", "0.5"],
             "--lattice-shear-rate",
         ),
+        (
+            vec!["--stress", "1", "--window-factor", "1"],
+            "--window-factor",
+        ),
+        (vec!["--stress", "1", "--frames", "1"], "--frames"),
     ] {
         let mut full = vec!["rbc", "shear"];
         full.extend(args.iter().copied());

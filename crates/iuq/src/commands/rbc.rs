@@ -165,6 +165,8 @@ fn cli_error(e: RbcError) -> anyhow::Error {
                 "stress" => "--stress",
                 "lattice_shear_rate" => "--lattice-shear-rate",
                 "start_strain" => "--start-strain",
+                "window_factor" => "--window-factor",
+                "frames" => "--frames",
                 "force" => "--force",
                 "force_scale" => "--force-scale",
                 other => other,
