@@ -21,12 +21,28 @@ holds the rest), so a cell on a rank boundary appears in several files: vertices
 (`Cell Id`, `Vertex Id`) when HemoCell wrote those datasets, else exact duplicate rows are
 dropped (the copies are synchronised, hence bit-identical).
 
+Checks made against the real HemoCell (v2.1, as the IUQ study):
+* the wall layout: oneCellShear up to HemoCell 2.1 shears between walls on the y planes (the
+  study's experiment, and the x-y projection is the shear plane); from 2.2 on (Lees-Edwards
+  commit) its walls lie on the z planes 9.5 um apart, a different, confined experiment in
+  which the cell's disk lies in the flow-vorticity plane. The direction of the velocity
+  gradient is read from HemoCell's fluid output (`Fluid.<iteration>.p.<rank>.h5`, dataset
+  `Velocity`) at the last frame; a gradient along z is refused (exit 1). Without fluid output
+  the check is skipped with a note.
+* a cell HemoCell deleted: with --log (HemoCell's stdout, as run-hemocell.sh keeps it), any
+  "(Delete Cells) WARNING! Particle deleted" line fails the run with that line as the reason,
+  even when frames were written; a frame with fewer vertices than the cell's first output also
+  fails.
+A summary of the frames (iteration, vertices, centroid and extent in um, and the fluid's shear
+rate when available) is written to --summary (default hemocell-frames.json).
+
 Exit status: 0 with --out written; 1 when the run produced no usable frames (no output in the
 window, a deleted cell, non-finite positions: the membrane broke) or `iuq` reported a failure;
 2 for bad arguments. Needs Python 3, numpy and h5py; the `iuq` binary is $IUQ or `iuq` on PATH.
 """
 
 import argparse
+import json
 import os
 import re
 import shutil
@@ -131,6 +147,48 @@ def read_frame(files):
     return positions[np.sort(first)], dx
 
 
+def velocity_gradient(files):
+    """Mean d(u_x)/d(index) along y and along z of HemoCell's fluid output at one iteration,
+    over all ranks (per-file slopes of the plane-averaged u_x, weighted by the planes' sizes;
+    the one-node envelope around each rank's block is left out). Units: velocity per node."""
+    totals = {"y": [0.0, 0.0], "z": [0.0, 0.0]}
+    for _, path in sorted(files):
+        try:
+            with h5py.File(path, "r") as f:
+                if "Velocity" not in f:
+                    continue
+                velocity = np.asarray(f["Velocity"], dtype=float)
+        except OSError as e:
+            raise DecodeError(f"{path}: cannot read as HDF5: {e}") from e
+        if velocity.ndim != 4 or velocity.shape[3] != 3:
+            continue
+        ux = velocity[1:-1, 1:-1, 1:-1, 0]  # (z, y, x), as HemoCell writes for ParaView
+        if min(ux.shape) < 3:
+            continue
+        for axis, name in ((1, "y"), (0, "z")):
+            other = tuple(a for a in range(3) if a != axis)
+            profile = ux.mean(axis=other)
+            slope = np.polyfit(np.arange(len(profile), dtype=float), profile, 1)[0]
+            totals[name][0] += slope * ux.size
+            totals[name][1] += ux.size
+    if totals["y"][1] == 0:
+        return None
+    return {name: total / count for name, (total, count) in totals.items()}
+
+
+def deletion_in_log(log_path):
+    """The first "(Delete Cells)" warning of HemoCell's stdout with the lines after it, or None."""
+    if not log_path or not os.path.isfile(log_path):
+        return None
+    with open(log_path, errors="replace") as f:
+        lines = f.read().splitlines()
+    for k, line in enumerate(lines):
+        if "Particle deleted" in line or "(Delete Cells)" in line:
+            detail = " ".join(l.strip() for l in lines[k:k + 3])
+            return detail[:300]
+    return None
+
+
 def detect_unit(positions):
     return "m" if float(np.max(np.abs(positions))) < 1e-3 else "lattice"
 
@@ -151,6 +209,12 @@ def main(argv=None):
                         help="lattice spacing in metres for lattice-unit positions (default: the files' dx attribute, else 0.5e-6)")
     parser.add_argument("--csv-dir", default="el-frames", help="where the per-frame CSV files go (default: el-frames)")
     parser.add_argument("--out", default="el.json", help="the result file (default: el.json)")
+    parser.add_argument("--log", default=None,
+                        help="HemoCell's stdout: a cell deletion it reports fails the run with its message")
+    parser.add_argument("--summary", default="hemocell-frames.json",
+                        help="per-frame summary written here (default: hemocell-frames.json; '' for none)")
+    parser.add_argument("--layout-check", choices=["auto", "off"], default="auto",
+                        help="refuse HemoCell's z-wall layout, read from its fluid output (default: auto)")
     args = parser.parse_args(argv)
     if args.end < args.start:
         fail(f"--to {args.end} lies before --from {args.start}", 2)
@@ -162,6 +226,9 @@ def main(argv=None):
         fail(f"needs numpy and h5py ({IMPORT_ERROR}); install them with `python3 -m pip install numpy h5py`", 2)
 
     try:
+        deleted = deletion_in_log(args.log)
+        if deleted:
+            raise DecodeError(f"HemoCell deleted the cell ({args.log}: {deleted})")
         found = scan(args.hdf5_dir)
         cell_type = choose_cell_type(found, args.cell_type)
         iterations = sorted(i for t, i in found if t == cell_type)
@@ -174,8 +241,28 @@ def main(argv=None):
                 f"{args.hdf5_dir}; at least 2 are needed (iterations found: "
                 f"{', '.join(map(str, iterations)) or 'none'}; did the run stop early?)"
             )
+        gradient = None
+        fluid = next((t for t in sorted({t for t, _ in found}) if t.lower() == "fluid"), None)
+        if args.layout_check == "auto" and fluid and (fluid, window[-1]) in found:
+            gradient = velocity_gradient(found[(fluid, window[-1])])
+        if gradient is None and args.layout_check == "auto":
+            print("decode-el.py: no fluid velocity output at the last frame: wall layout not checked", file=sys.stderr)
+        elif gradient is not None:
+            if abs(gradient["z"]) > abs(gradient["y"]):
+                raise DecodeError(
+                    "the fluid is sheared along z (du_x/dz per node "
+                    f"{gradient['z']:.3g} vs du_x/dy {gradient['y']:.3g}): this oneCellShear has its walls on the "
+                    "z planes (HemoCell >= 2.2), a different experiment from the IUQ study's (walls on the y "
+                    "planes, HemoCell <= 2.1), where the x-y projection is not the shear plane; build HemoCell "
+                    "v2.1 (scripts/hemocell/build-hemocell.sh)")
+        # The cell's vertex count: its first output (iteration 0 or the earliest written).
+        reference_count = None
+        if iterations:
+            first_positions, _ = read_frame(found[(cell_type, iterations[0])])
+            reference_count = len(first_positions) or None
         os.makedirs(args.csv_dir, exist_ok=True)
         csv_files = []
+        summary = []
         for k, iteration in enumerate(window):
             positions, dx_attribute = read_frame(found[(cell_type, iteration)])
             if len(positions) == 0:
@@ -184,6 +271,10 @@ def main(argv=None):
                 )
             if not np.all(np.isfinite(positions)):
                 raise DecodeError(f"iteration {iteration}: non-finite vertex positions (the membrane broke)")
+            if reference_count and len(positions) < reference_count:
+                raise DecodeError(
+                    f"iteration {iteration}: {len(positions)} of the cell's {reference_count} vertices in the "
+                    "output (HemoCell lost part of the cell)")
             unit = detect_unit(positions) if args.unit == "auto" else args.unit
             if unit == "m":
                 um = positions * 1e6
@@ -198,9 +289,21 @@ def main(argv=None):
                 for x, y, z in um.tolist():
                     f.write(f"{x!r},{y!r},{z!r}\n")
             csv_files.append(path)
+            summary.append({
+                "iteration": iteration,
+                "vertices": len(um),
+                "centroid_um": [float(v) for v in um.mean(axis=0)],
+                "extent_um": [float(v) for v in (um.max(axis=0) - um.min(axis=0))],
+            })
             print(f"decode-el.py: iteration {iteration}: {len(positions)} vertices ({unit}) -> {path}", file=sys.stderr)
     except DecodeError as e:
         fail(str(e))
+    if args.summary:
+        record = {"frames": summary}
+        if gradient is not None:
+            record["fluid_du_x_per_node"] = gradient
+        with open(args.summary, "w") as f:
+            json.dump(record, f, indent=1)
 
     iuq = os.environ.get("IUQ") or shutil.which("iuq")
     if not iuq:

@@ -4,6 +4,7 @@ HemoCell.
 
     write_hemocell_hdf5.py OUT_DIR --frame ITERATION SHAPE.vtk [--frame ITERATION SHAPE.vtk ...]
                            [--ranks 3] [--unit m|lattice] [--cell-type RBC_HO] [--with-ids]
+                           [--fluid y|z] [--drop-vertices ITERATION:N]
 
 Each SHAPE is a legacy ASCII VTK file of `iuq rbc shear --shape-out` (lattice units, HemoCell's
 frame). For every frame this writes OUT_DIR/<iteration, 12 digits>/<type>.<iteration>.p.<rank>.h5
@@ -15,6 +16,13 @@ holds the rest), so a cell across a slab boundary is written by several ranks; r
 vertex write files without datasets. With --split the ranks instead write only their own
 vertices (each vertex exactly once), the other layout a reader must handle. --with-ids adds the
 `Cell Id` and `Vertex Id` datasets (HemoCell's OUTPUT_CELL_ID / OUTPUT_VERTEX_ID).
+
+--fluid y|z also writes HemoCell's fluid output, `Fluid.<iteration>.p.0.h5` with a `Velocity`
+dataset (nz+2, ny+2, nx+2, 3) in m/s (ParaView order, one envelope node around the block, as
+HemoCell v2.1 writes it): a Couette flow u_x = gamma (c - c_mid) along y (HemoCell <= 2.1's
+oneCellShear, walls on the y planes) or z (HemoCell >= 2.2, walls on the z planes).
+--drop-vertices ITERATION:N leaves the last N vertices out of that iteration's frame (a cell
+HemoCell lost part of).
 """
 
 import argparse
@@ -27,6 +35,8 @@ import numpy as np
 DX = 0.5e-6
 DT = 0.5e-7
 DOMAIN_X = 40
+DOMAIN = (40, 40, 20)  # x, y, z nodes
+SHEAR_RATE = 5000.0  # 1/s, for the fluid output
 
 
 def read_vtk(path):
@@ -65,11 +75,19 @@ def main():
     parser.add_argument("--cell-type", default="RBC_HO")
     parser.add_argument("--split", action="store_true")
     parser.add_argument("--with-ids", action="store_true")
+    parser.add_argument("--fluid", choices=["y", "z"], default=None)
+    parser.add_argument("--drop-vertices", default=None, metavar="ITERATION:N")
     args = parser.parse_args()
+    drop = {}
+    if args.drop_vertices:
+        iteration_text, count = args.drop_vertices.split(":")
+        drop[int(iteration_text)] = int(count)
     edges = np.linspace(0.0, DOMAIN_X, args.ranks + 1)
     for iteration_text, shape in args.frame:
         iteration = int(iteration_text)
         points, triangles = read_vtk(shape)
+        if drop.get(iteration):
+            points = points[: len(points) - drop[iteration]]
         folder = os.path.join(args.out_dir, f"{iteration:012d}")
         os.makedirs(folder, exist_ok=True)
         # The slab of each vertex; the last slab is closed on the right.
@@ -97,7 +115,25 @@ def main():
                 if args.with_ids:
                     f.create_dataset("Cell Id", data=np.zeros((len(index), 1)))
                     f.create_dataset("Vertex Id", data=index.reshape(-1, 1).astype(float))
+        if args.fluid:
+            write_fluid(os.path.join(folder, f"Fluid.{iteration:012d}.p.0.h5"), iteration, args.fluid)
     return 0
+
+
+def write_fluid(path, iteration, axis):
+    nx, ny, nz = DOMAIN
+    # Node coordinates with the one-node envelope, in ParaView's (z, y, x) order.
+    z, y, x = np.meshgrid(np.arange(-1, nz + 1), np.arange(-1, ny + 1), np.arange(-1, nx + 1), indexing="ij")
+    coordinate, n = (y, ny) if axis == "y" else (z, nz)
+    velocity = np.zeros(x.shape + (3,), dtype=np.float32)
+    velocity[..., 0] = SHEAR_RATE * DX * (coordinate - (n - 1) / 2.0)
+    with h5py.File(path, "w") as f:
+        f.attrs["dx"] = DX
+        f.attrs["dt"] = DT
+        f.attrs["iteration"] = np.int64(iteration)
+        f.attrs["processorId"] = np.int32(0)
+        f.attrs["subdomainSize"] = np.array([nz + 2, ny + 2, nx + 2], dtype=np.int32)
+        f.create_dataset("Velocity", data=velocity, chunks=True, compression="gzip")
 
 
 if __name__ == "__main__":
