@@ -10,9 +10,48 @@
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
 use std::process::{Child, Command};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::outcome::unix_now;
+
+/// Process group of the command this process supervises now (0: none). Read by the signal
+/// handler of [`forward_termination_signals`].
+static SUPERVISED_GROUP: AtomicU32 = AtomicU32::new(0);
+
+/// The handler of [`forward_termination_signals`]: the signal goes on to the supervised group,
+/// which gets a second to stop before SIGKILL, and then this process dies of it.
+extern "C" fn forward_and_exit(signal: libc::c_int) {
+    let group = SUPERVISED_GROUP.load(Ordering::SeqCst);
+    // SAFETY: kill, nanosleep, signal and raise are async-signal-safe; nothing else is called.
+    unsafe {
+        if group != 0 {
+            libc::kill(-(group as libc::pid_t), signal);
+            let grace = libc::timespec {
+                tv_sec: 1,
+                tv_nsec: 0,
+            };
+            libc::nanosleep(&grace, std::ptr::null_mut());
+            libc::kill(-(group as libc::pid_t), libc::SIGKILL);
+        }
+        libc::signal(signal, libc::SIG_DFL);
+        libc::raise(signal);
+    }
+}
+
+/// Make SIGTERM, SIGINT and SIGHUP stop the supervised command with this process: a scheduler
+/// that stops a worker (HyperQueue's time limit or cancel, Slurm's `scancel`) signals the
+/// worker's process group, and the command runs in a group of its own, so without this it
+/// would run on, orphaned. For processes that supervise one command at a time (`iuq worker`).
+pub fn forward_termination_signals() {
+    let handler = forward_and_exit as extern "C" fn(libc::c_int) as libc::sighandler_t;
+    for signal in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
+        // SAFETY: installs a handler that only calls async-signal-safe functions.
+        unsafe {
+            libc::signal(signal, handler);
+        }
+    }
+}
 
 /// How a supervised process ended.
 #[derive(Debug, Clone, PartialEq)]
@@ -177,6 +216,7 @@ pub fn run_supervised(
     let start = Instant::now();
     let mut child: Child = command.spawn()?;
     let pid = child.id();
+    SUPERVISED_GROUP.store(pid, Ordering::SeqCst);
     on_start(pid);
     let mut pipes = [
         child.stdout.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
@@ -297,6 +337,8 @@ pub fn run_supervised(
     drop(pipes);
     signal_group(pid, libc::SIGKILL);
     drop(waiter);
+    // Before the reap: the group id cannot be reused while the handler may still signal it.
+    let _ = SUPERVISED_GROUP.compare_exchange(pid, 0, Ordering::SeqCst, Ordering::SeqCst);
     let status = child.wait()?;
     if tail.len() > logs.tail_bytes {
         tail.drain(..tail.len() - logs.tail_bytes);

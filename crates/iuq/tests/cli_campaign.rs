@@ -772,3 +772,99 @@ impl Drop for HqCluster {
         }
     }
 }
+
+/// A scheduler stops a worker by signalling it (HyperQueue's time limit or cancel, Slurm's
+/// `scancel`); the model runs in a process group of its own, and `iuq worker` passes the signal
+/// on, so the model stops with the worker instead of running on orphaned.
+#[test]
+fn a_worker_stopped_by_sigterm_stops_its_model() {
+    let dir = scratch("cli-campaign", "worker-sigterm");
+    let path = dir.join("study.toml");
+    let text = r#"name = "long"
+[parameters]
+x = { uniform = [0, 1] }
+[model]
+kind = "command"
+command = ["sh", "-c", "echo $$ > model.pid; exec sleep 60"]
+outputs = ["f"]
+output = { file = "result.json", format = "json" }
+timeout = "5min"
+[design]
+kind = "lhs"
+n = 1
+"#;
+    std::fs::write(&path, text).unwrap();
+    let study = iuq_campaign::CampaignStudy::parse(text, &path).unwrap();
+    let spec = iuq_campaign::worker::write_spec(&dir, &study.model).unwrap();
+    let run_dir = dir.join("runs/000001");
+    std::fs::create_dir_all(&run_dir).unwrap();
+    let manifest = iuq_campaign::worker::ArrayManifest {
+        spec,
+        tasks: vec![iuq_campaign::run_directory::Task {
+            directory: run_dir.clone(),
+            runs: vec![iuq_campaign::run_directory::TaskRun {
+                run_id: 1,
+                attempt: 1,
+                parameters: vec![0.5],
+            }],
+        }],
+    };
+    let manifest_path = dir.join("manifest.json");
+    std::fs::write(&manifest_path, serde_json::to_vec(&manifest).unwrap()).unwrap();
+    let mut worker = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args([
+            "worker",
+            "--manifest",
+            manifest_path.to_str().unwrap(),
+            "--index",
+            "0",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let pid_file = run_dir.join("model.pid");
+    let started = Instant::now();
+    let model_pid = loop {
+        if let Some(pid) = std::fs::read_to_string(&pid_file)
+            .ok()
+            .and_then(|t| t.trim().parse::<u32>().ok())
+        {
+            break pid;
+        }
+        assert!(
+            started.elapsed() < Duration::from_secs(30),
+            "the model did not start"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    // A process that is gone, or a zombie waiting for a reaper, has stopped.
+    let running = |pid: u32| {
+        std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+            s.rsplit(')')
+                .next()
+                .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
+        })
+    };
+    assert!(running(model_pid));
+    let status = Command::new("kill")
+        .args(["-TERM", &worker.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let exit = worker.wait().unwrap();
+    use std::os::unix::process::ExitStatusExt;
+    assert_eq!(
+        exit.signal(),
+        Some(15),
+        "the worker dies of the signal: {exit:?}"
+    );
+    let stopped = Instant::now();
+    while running(model_pid) && stopped.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(
+        !running(model_pid),
+        "the model runs on after its worker stopped"
+    );
+}
