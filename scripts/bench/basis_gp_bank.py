@@ -5,7 +5,7 @@ The problem: a 4-parameter posterior (kLink, kBend, viscosityRatio on the RBC pr
 modelling error sigma_m ~ U(0.001, 0.1)) whose model is a bank of 8 GPs (one per shear stress of a
 synthetic elongation-index curve), each trained on a 500-point maximin LHS; the GP's predictive std
 (with the noise term, scikit-learn's `predict(return_std=True)`) enters the likelihood as the
-computational error (relative convention, spec section 1). N = 10,000 samples, n_burn = 10.
+computational error (relative convention, docs/methods.md §4). N = 10,000 samples, n_burn = 10.
 
 1. `iuq bench basis-gp-bank --out WORK` generates the training data and the synthetic data, fits
    the bank (fit time reported separately), writes WORK/bank.json (the fitted GPs: kernels,
@@ -103,7 +103,7 @@ class SklearnBank:
 
 
 class Likelihood:
-    """ln f(D | θ) of the prediction-error model (spec section 1), vectorised over points."""
+    """ln f(D | θ) of the prediction-error model (docs/methods.md §4), vectorised over points."""
 
     def __init__(self, bank, data):
         self.bank = bank
@@ -135,7 +135,7 @@ class Likelihood:
 
 
 # ---------------------------------------------------------------------------------------------
-# BASIS in NumPy: the algorithm of crates/iuq-basis (spec section 2), vectorised over chains
+# BASIS in NumPy: the algorithm of crates/iuq-basis (docs/methods.md §5), vectorised over chains
 # ---------------------------------------------------------------------------------------------
 
 JITTERS = [1e-12, 1e-11, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6, 1e-5, 1e-4]

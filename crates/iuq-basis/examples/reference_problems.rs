@@ -1,5 +1,5 @@
-//! Measures BASIS on the reference problems of spec §2: mean, sd of ln Z over seeds, stage
-//! counts and the Rosenbrock posterior mean. `cargo run --release -p iuq-basis --example
+//! Measures BASIS on the reference problems of docs/methods.md §7: mean, sd of ln Z over seeds,
+//! stage counts and the Rosenbrock posterior mean. `cargo run --release -p iuq-basis --example
 //! reference_problems -- [N] [burn] [seeds]`.
 
 use iuq_basis::{Basis, BasisSettings, FnLikelihood, Silent};

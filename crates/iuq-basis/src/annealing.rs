@@ -1,5 +1,5 @@
-//! The annealing schedule and the evidence (spec §2 steps 2 and 3; Ching & Chen 2007, eq. 17;
-//! Wu et al. 2017, section 3).
+//! The annealing schedule and the evidence (BASIS steps 2 and 3 in docs/methods.md §5; Ching &
+//! Chen 2007, eq. 17; Wu et al. 2017, section 3).
 //!
 //! Stage k targets f(D|θ)^{p_k}·π(θ), 0 = p_0 < p_1 < … < p_m = 1. Going from p to p + dp, the
 //! population drawn at p is weighted by w_i = f(D|θ_i)^{dp}; the next exponent is the one whose
@@ -71,7 +71,7 @@ pub const BISECTION_RELATIVE_TOLERANCE: f64 = 1e-10;
 /// Largest number of bisection iterations (2^−400 is far below any useful step).
 pub const BISECTION_MAX_ITERATIONS: usize = 400;
 
-/// Solve CV(dp) = γ for dp ∈ (0, 1 − p] by bisection (spec §2 step 2).
+/// Solve CV(dp) = γ for dp ∈ (0, 1 − p] by bisection (BASIS step 2, docs/methods.md §5).
 ///
 /// If CV(1 − p) ≤ γ the step is 1 − p (p' = 1). Otherwise CV is increasing in dp and the
 /// bisection keeps lo with CV(lo) ≤ γ < CV(hi) until (hi − lo) ≤ 1e-10·hi; the step returned is
@@ -109,7 +109,7 @@ pub fn next_step(log_likelihood: &[f64], p: f64, cv_target: f64, max_ll: f64) ->
     }
 }
 
-/// The evidence increment of a step (spec §2 step 3):
+/// The evidence increment of a step (BASIS step 3, docs/methods.md §5):
 /// ln E[f^{dp}] ≈ m + ln Σ_i exp(dp·ll_i − m) − ln N, with m = max_i dp·ll_i over finite ll_i
 /// (failed members contribute 0 to the sum). Exactly 0 for dp = 0.
 pub fn log_evidence_increment(log_likelihood: &[f64], dp: f64, max_ll: f64) -> f64 {

@@ -1,4 +1,5 @@
-//! Per-stage diagnostics of a BASIS run (spec §2 step 8): what each stage did and how well.
+//! Per-stage diagnostics of a BASIS run (BASIS step 8, docs/methods.md §5): what each stage did
+//! and how well.
 
 use std::collections::BTreeMap;
 

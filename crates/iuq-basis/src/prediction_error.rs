@@ -1,4 +1,5 @@
-//! The prediction-error likelihood of a model against data (spec §1; Wu et al. 2017, section 2).
+//! The prediction-error likelihood of a model against data (docs/methods.md §4; Wu et al. 2017,
+//! section 2).
 //!
 //! Data D = {ŷ_j}, j = 1..N_ŷ, and a model q(θ_m) with one output per data point (output j ↔
 //! data point j, by order). The parameters θ = (θ_m, σ_m) are the model's parameters followed by
@@ -135,7 +136,7 @@ impl Observations {
     }
 }
 
-/// Which error terms enter Σ (spec §1).
+/// Which error terms enter Σ (docs/methods.md §4).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct ErrorModel {
     /// Use the measurement errors σ_d,j of the data (default true; ignored when the data has

@@ -1,6 +1,6 @@
-//! The Gaussian random-walk proposal of the MCMC moves (spec §2 step 4; Ching & Chen 2007,
-//! eq. 21): Σ_p = β²·Σ_i w̄_i (θ_i − μ)(θ_i − μ)ᵀ, μ = Σ_i w̄_i θ_i, with the normalised
-//! weights w̄ of the new exponent. Moves are θ' = θ + L·z, z ~ N(0, I), L Lᵀ = Σ_p.
+//! The Gaussian random-walk proposal of the MCMC moves (BASIS step 4, docs/methods.md §5; Ching
+//! & Chen 2007, eq. 21): Σ_p = β²·Σ_i w̄_i (θ_i − μ)(θ_i − μ)ᵀ, μ = Σ_i w̄_i θ_i, with the
+//! normalised weights w̄ of the new exponent. Moves are θ' = θ + L·z, z ~ N(0, I), L Lᵀ = Σ_p.
 //!
 //! Σ_p can be singular (a weight concentrated on a few members, a parameter the likelihood
 //! pins down): the Cholesky factorisation is retried with a jitter ε·(tr Σ_p/d)·I for

@@ -1,4 +1,5 @@
-//! Resampling a weighted population into copy counts n_i with Σ n_i = N (spec §2 step 5).
+//! Resampling a weighted population into copy counts n_i with Σ n_i = N (BASIS step 5,
+//! docs/methods.md §5).
 //!
 //! Both schemes place N sorted points u_1 ≤ … ≤ u_N in [0, 1) and count how many fall in each
 //! member's slice of the cumulative weights, in O(N). Multinomial draws the N points as sorted

@@ -1,5 +1,5 @@
-//! The BASIS sampler (spec §2; Wu et al. 2017, "A Bayesian annealed sequential importance
-//! sampling"; Ching & Chen 2007, TMCMC).
+//! The BASIS sampler (docs/methods.md §5; Wu et al. 2017, "A Bayesian annealed sequential
+//! importance sampling"; Ching & Chen 2007, TMCMC).
 //!
 //! The run is a sequence of stages, each a pure function of the previous [`BasisState`], so it
 //! can be driven step by step ([`Basis::initialise`], [`Basis::advance`]), run to the end with an
@@ -435,9 +435,9 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         })
     }
 
-    /// Run the next stage from `state` (spec §2 steps 2–7). A state whose step would be below
-    /// the minimum (with [`MinStepAction::Stop`]) comes back finished, with no new stage. The
-    /// state is checked first ([`Basis::check_compatible`]).
+    /// Run the next stage from `state` (BASIS steps 2–7, docs/methods.md §5). A state whose step
+    /// would be below the minimum (with [`MinStepAction::Stop`]) comes back finished, with no new
+    /// stage. The state is checked first ([`Basis::check_compatible`]).
     pub fn advance(&self, mut state: BasisState) -> Result<BasisState> {
         if let Some(reason) = &state.stop_reason {
             return Err(BasisError::AlreadyFinished(reason.to_string()));

@@ -1,4 +1,4 @@
-//! Posterior summaries of a final (equally weighted) population (spec §2 step 8 and §6): the
+//! Posterior summaries of a final (equally weighted) population (docs/methods.md §6): the
 //! MAP among the samples, mean, standard deviation, quantiles, and 1-D and 2-D Gaussian KDE
 //! marginals (scipy's `gaussian_kde` conventions, through [`iuq_core::GaussianKde`]).
 

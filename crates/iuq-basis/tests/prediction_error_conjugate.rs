@@ -90,7 +90,8 @@ fn linear_model_with_known_errors_matches_the_closed_form() {
     assert_eq!(likelihood.parameter_count(), 2);
     let (mean, sd, ln_z) = closed_form(&c, 200.0);
 
-    // Spec spread at N = 1000, n_burn = 10: ≈ 0.1 (0.15 allowed); 3σ/√k on the mean of k runs.
+    // Expected single-run spread of ln Z at N = 1000, n_burn = 10 (docs/methods.md §7): ≈ 0.1
+    // (0.15 allowed); 3σ/√k on the mean of k runs.
     // Posterior mean: 3·sd/√(k·N/10) (N_eff ≥ N/10); posterior sd: relative error of a sd from
     // N_eff samples is 1/√(2 N_eff), 3 of them over k runs.
     let (seeds, n) = (6u64, 1000usize);

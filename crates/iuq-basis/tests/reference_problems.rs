@@ -1,9 +1,9 @@
-//! The reference problems of spec §2: the log-evidence averaged over seeds against the exact
-//! value, with tolerances derived from the spec's single-run spread, the Rosenbrock posterior
-//! mean, and the number of stages.
+//! The BASIS reference problems (docs/methods.md §7): the log-evidence averaged over seeds
+//! against the exact value, with tolerances derived from the expected single-run spread, the
+//! Rosenbrock posterior mean, and the number of stages.
 //!
 //! Tolerance rule: the mean of k independent runs with single-run sd σ has standard error σ/√k;
-//! we allow 3σ/√k with σ the upper end of the spread the spec states for the regime (N = 1000,
+//! we allow 3σ/√k with σ the upper end of the expected spread for the regime (N = 1000,
 //! n_burn = 0: 0.15–0.35 → 0.35; n_burn = 10: ≈ 0.1 → 0.15; N = 10 000: ≈ 0.05). The observed
 //! spread of the k runs must also stay below twice the stated one.
 
@@ -124,8 +124,8 @@ fn rosenbrock_posterior_mean_is_1_and_1_5() {
 
 #[test]
 fn stage_counts_are_as_stated() {
-    // Spec: ≈ 5 generations for the Gaussians, ≈ 9 for Rosenbrock. Counted here: the stages
-    // after the prior draws, the final pass at p = 1 included.
+    // Expected (docs/methods.md §7): ≈ 5 generations for the Gaussians, ≈ 9 for Rosenbrock.
+    // Counted here: the stages after the prior draws, the final pass at p = 1 included.
     let expected = [(2, 4), (4, 7), (4, 7), (7, 11)];
     for (problem, (lo, hi)) in reference_problems().iter().zip(expected) {
         for seed in 0..3 {

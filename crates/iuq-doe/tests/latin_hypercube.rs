@@ -123,8 +123,8 @@ fn maximin_and_optimized_designs_fill_space_better() {
     }
 }
 
-/// Spec (iuq-methods.md §4): at n = 500, d = 3, pyDOE's maximin reaches about 0.02 and an ESE
-/// design about 0.066; ours must reach at least 0.06 (it reaches about 0.093 by default).
+/// Reference (docs/methods.md §7): at n = 500, d = 3, pyDOE's maximin reaches about 0.02 and an
+/// ESE design about 0.066; ours must reach at least 0.06 (it reaches about 0.093 by default).
 #[test]
 fn optimized_design_reaches_the_spec_min_distance_at_n500_d3() {
     let maximin = latin_hypercube(500, 3, LhsMethod::maximin(), 0).expect("valid");

@@ -397,7 +397,7 @@ mod tests {
             "{}",
             gp.log_marginal_likelihood()
         );
-        // Looser check of our own optimum against the spec's predictions.
+        // Looser check of our own optimum against scikit-learn's predictions (docs/methods.md §7).
         let pts = vec![
             vec![0.1, 0.2, 0.3],
             vec![0.5, 0.5, 0.5],

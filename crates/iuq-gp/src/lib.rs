@@ -1,4 +1,4 @@
-//! Gaussian-process regression for iuq (methods spec §3): the surrogate that stands in for an
+//! Gaussian-process regression for iuq (docs/methods.md §2): the surrogate that stands in for an
 //! expensive model.
 //!
 //! - [`Kernel`]: k(x, x') = c·exp(−½‖(x − x')/l‖²) + σ²δ(x, x'), ARD or isotropic length

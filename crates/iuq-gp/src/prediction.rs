@@ -291,9 +291,9 @@ mod tests {
     use faer::linalg::triangular_solve::solve_lower_triangular_in_place;
     use faer::{MatMut, MatRef, Par};
 
-    /// scikit-learn's fitted θ on the spec data (standardised y, raw inputs):
-    /// GaussianProcessRegressor(C*RBF([.5]*3) + White(1e-3), alpha=1e-10, normalize_y=True,
-    /// n_restarts_optimizer=10, random_state=0).kernel_.theta.
+    /// scikit-learn's fitted θ on the GP reference data of docs/methods.md §7 (standardised y, raw
+    /// inputs): GaussianProcessRegressor(C*RBF([.5]*3) + White(1e-3), alpha=1e-10,
+    /// normalize_y=True, n_restarts_optimizer=10, random_state=0).kernel_.theta.
     const SKLEARN_THETA: [f64; 5] = [
         3.937781193776065,
         -0.6495394625845659,
@@ -337,7 +337,7 @@ mod tests {
             );
             assert!((sd[i] - std[i]).abs() <= 1e-6 * std[i], "{i}: {}", sd[i]);
         }
-        // The spec's rounded reference values.
+        // scikit-learn's rounded reference values (docs/methods.md §7).
         let spec_mean = [0.779165520919, 0.500913086381, -0.229857992164];
         let spec_std = [0.00918415919, 0.008652872795, 0.010347819603];
         for i in 0..3 {

@@ -3,8 +3,8 @@
 /// φ: the real root of x⁴ = x + 1.
 const PHI: f64 = 1.220_744_084_605_759_6;
 
-/// The spec's reference data: X_i = frac(0.5 + i·α), α = (φ⁻¹, φ⁻², φ⁻³), i = 1..=n;
-/// y_i = sin(2π x_i1) + x_i2² + 0.5 x_i3 + 0.01 sin(37 i).
+/// The GP reference data (docs/methods.md §7): X_i = frac(0.5 + i·α), α = (φ⁻¹, φ⁻², φ⁻³),
+/// i = 1..=n; y_i = sin(2π x_i1) + x_i2² + 0.5 x_i3 + 0.01 sin(37 i).
 pub(crate) fn quasi_random_data(n: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
     let a = [1.0 / PHI, 1.0 / (PHI * PHI), 1.0 / (PHI * PHI * PHI)];
     let mut x = Vec::with_capacity(n);
@@ -25,7 +25,7 @@ pub(crate) fn quasi_random_data(n: usize) -> (Vec<Vec<f64>>, Vec<f64>) {
     (x, y)
 }
 
-/// The spec's 64-point reference data set.
+/// The 64-point GP reference data set (docs/methods.md §7).
 pub(crate) fn spec_data() -> (Vec<Vec<f64>>, Vec<f64>) {
     quasi_random_data(64)
 }

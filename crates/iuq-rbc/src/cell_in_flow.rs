@@ -1,6 +1,6 @@
 //! One cell immersed in the lattice fluid: the time step of the coupled system.
 //!
-//! Each step (spec, "Immersed boundary coupling"):
+//! Each step (docs/cell-model.md, "Immersed-boundary coupling"):
 //! 1. spread the vertex forces (membrane plus any external force) onto the fluid with the
 //!    hat kernel;
 //! 2. collide and stream (Guo forcing, per-node relaxation time);

@@ -1,13 +1,14 @@
-//! The elongation index of a cell shape: the x-binned contour of its projection onto the
-//! flow–vorticity (x–y) plane, a direct least-squares ellipse fit, `EL = (a − b)/(a + b)`.
+//! The elongation index of a cell shape: the x-binned contour of its projection onto the x–y
+//! plane (in HemoCell's frame, where the shear protocol measures, the flow–gradient plane), a
+//! direct least-squares ellipse fit, `EL = (a − b)/(a + b)`.
 //!
 //! The contour follows HemoCell `scripts/measure/EL.py` (`elongation_index`): the vertices are
 //! binned along x and, in each bin, the vertex of largest y and the vertex of smallest y are
-//! kept. The spec sets the bin width to 0.5 µm (EL.py uses 1.5 in its own units). Bins are
-//! `[x_min + k·w, x_min + (k+1)·w)`, so the vertex at `x_min` is kept (EL.py's open lower bound
-//! drops it, a detail of no consequence). The ellipse is the direct least-squares fit of
-//! Fitzgibbon, Pilu & Fisher (1999) in the numerically stable form of Halír & Flusser (1998),
-//! on coordinates centred and scaled to unit root-mean-square radius.
+//! kept. The bin width is 0.5 µm ([`crate::protocol::CONTOUR_BIN_WIDTH`]; EL.py uses 1.5 in
+//! its own units). Bins are `[x_min + k·w, x_min + (k+1)·w)`, so the vertex at `x_min` is kept
+//! (EL.py's open lower bound drops it, a detail of no consequence). The ellipse is the direct
+//! least-squares fit of Fitzgibbon, Pilu & Fisher (1999) in the numerically stable form of
+//! Halír & Flusser (1998), on coordinates centred and scaled to unit root-mean-square radius.
 
 use crate::error::{RbcError, Result};
 

@@ -1,8 +1,7 @@
 //! Interior viscosity: fluid nodes inside the membrane relax with
 //! `τ_in = Λ(τ − ½) + ½` (viscosity Λ times the plasma's), the others with τ.
 //!
-//! Two tests tell inside from outside, as the spec (after HemoCell `helper/interiorViscosity.cpp`)
-//! prescribes:
+//! Two tests tell inside from outside, after HemoCell `helper/interiorViscosity.cpp`:
 //! * [`InteriorViscosity::retag_all`], a full point-in-mesh test by ray parity: for every column
 //!   of nodes (x, y) under the cell, the crossings of the vertical line with the triangles are
 //!   sorted and a node is inside when an odd number of crossings lies below it. The line is
@@ -14,7 +13,7 @@
 //!   edge length L̄ of a vertex takes the side given by its nearest such vertex,
 //!   inside when `(node − x_v)·n_v < 0` with `n_v` the area-weighted vertex normal. Taking the
 //!   nearest vertex (rather than the last one visited) makes the result independent of the
-//!   vertex order; the spec leaves this open.
+//!   vertex order, which HemoCell's description leaves open.
 
 use crate::lattice::{Lattice, LatticeGeometry};
 use crate::mesh::{Mesh, add, cross, dot, sub};

@@ -30,9 +30,9 @@
 //! written back into the node's opposite slot), with
 //! the wall density ρ_w = 1 (the rest density; the correction sums to zero for a tangential wall
 //! velocity, so mass is conserved exactly). Halfway bounce-back reproduces linear (Couette)
-//! profiles exactly, independent of τ; the spec accepts it in place of HemoCell's regularized
-//! velocity walls on the node planes z = 0 and z = 19: with `nz = 19` the walls lie at the same
-//! heights as HemoCell's.
+//! profiles exactly, independent of τ, and stands in for HemoCell's regularized velocity walls on
+//! two node planes: with `nz` equal to HemoCell's gap (39 in the shear box, docs/cell-model.md)
+//! the walls lie at the same heights as HemoCell's.
 //!
 //! # Storage and precision
 //! Populations are stored as deviations from the rest weights, `δ_q = f_q − w_q` (so that their

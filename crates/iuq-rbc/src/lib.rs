@@ -1,12 +1,12 @@
 //! The native single red-blood-cell shear simulator, compatible with HemoCell's one-cell shear
-//! experiment (spec: `specs/rbc-shear-model.md`).
+//! experiment (docs/cell-model.md describes the model, its units, protocols and validation).
 //!
 //! One red blood cell, a 642-vertex biconcave membrane with HemoCell's link, area, volume and
 //! bending forces ([`membrane_forces`]), is immersed through the immersed-boundary method
 //! ([`immersed_boundary`]) in a D3Q19 lattice Boltzmann fluid ([`lattice`]) sheared between
 //! two moving walls; the interior fluid is Λ times more viscous ([`interior`]). The elongation
-//! index of the cell's projection on the flow–vorticity plane ([`ellipse`]), averaged over a
-//! measuring window ([`protocol`]), is the quantity calibrated against ektacytometry
+//! index of the cell's projection on the shear (flow–gradient) plane ([`ellipse`]), averaged
+//! over a measuring window ([`protocol`]), is the quantity calibrated against ektacytometry
 //! ([`ektacytometry`]). [`model::RbcShearModel`] wraps it as an `iuq_core::Model`;
 //! [`stretching`] and [`validation`] hold the checks against HemoCell and optical tweezers;
 //! [`benchmark`] measures the fluid solver against the memory bandwidth.
@@ -14,8 +14,9 @@
 //! Everything here is numerical: no file or terminal I/O ([`shape_output`] returns strings).
 //!
 //! # Validation
-//! The long checks of the spec stay out of the default test suite:
-//! `iuq rbc validate --protocol scaled|reference|both --stretch`, or the ignored tests
+//! The long checks against HemoCell and the optical-tweezers data (docs/cell-model.md) stay out
+//! of the default test suite: `iuq rbc validate --protocol scaled|reference|both --stretch`, or
+//! the ignored tests
 //! `cargo test --release -p iuq-rbc --test shear_experiment -- --ignored`.
 //! No model constant is fitted to the validation numbers.
 //!

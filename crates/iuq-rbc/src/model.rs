@@ -20,7 +20,7 @@ use crate::lattice::Precision;
 use crate::membrane_forces::{MembraneParameters, PastSingularity};
 use crate::protocol::{FRAMES, Protocol, START_STRAIN, ShearExperiment, WINDOW_FACTOR, run_shear};
 
-/// Names of the parameters the model understands, in the spec's spelling.
+/// Names of the parameters the model understands, in HemoCell's spelling.
 pub const PARAMETER_NAMES: [&str; 5] = ["kLink", "kBend", "viscosityRatio", "kArea", "kVolume"];
 
 /// Values of all five parameters (the fixed ones and the defaults of the varied ones).
@@ -33,7 +33,7 @@ pub struct CellParameters {
 }
 
 impl Default for CellParameters {
-    /// The spec's defaults: kLink 15, kBend 80, Λ 5, kArea 5, kVolume 20.
+    /// HemoCell's defaults: kLink 15, kBend 80, Λ 5, kArea 5, kVolume 20.
     fn default() -> Self {
         Self {
             membrane: MembraneParameters::default(),

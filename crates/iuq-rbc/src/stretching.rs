@@ -37,11 +37,10 @@ pub struct TweezersMeasurement {
 }
 
 /// The measurements of the check (Mills et al. 2004). Axial diameters: HemoCell
-/// `examples/stretchCell/validation/reference-axial.dat`, as quoted by the spec. Transverse
-/// diameters: its `reference-transverse.dat`, interpolated linearly at the same forces. The spec
-/// quotes only the axial diameters; the transverse one tells the membrane's in-plane elasticity
-/// apart from the local deformation under the pulled vertices, which only the axial diameter
-/// contains.
+/// `examples/stretchCell/validation/reference-axial.dat`. Transverse diameters: its
+/// `reference-transverse.dat`, interpolated linearly at the same forces. The transverse diameter
+/// tells the membrane's in-plane elasticity apart from the local deformation under the pulled
+/// vertices, which only the axial diameter contains.
 pub const OPTICAL_TWEEZERS: [TweezersMeasurement; 4] = [
     TweezersMeasurement {
         force_pn: 1.8,

@@ -1,4 +1,5 @@
-//! The validation targets of the spec and runners that compare the simulator with them.
+//! The validation targets (HemoCell's published elongation indices and the optical-tweezers
+//! diameters; docs/cell-model.md) and runners that compare the simulator with them.
 //!
 //! These runs take minutes to hours; they sit behind `iuq rbc validate` and `#[ignore]`d tests,
 //! never in the default test suite. No model constant is fitted to these numbers.

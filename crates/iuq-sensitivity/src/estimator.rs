@@ -1,7 +1,7 @@
 //! Point estimators of first-order and total Sobol' indices from a Saltelli design.
 //!
 //! With f_A, f_B the outputs on the base matrices A and B and f_ABi the outputs on A with
-//! column i taken from B (spec section 5):
+//! column i taken from B (docs/methods.md §3):
 //! - first order (Saltelli et al. 2010): S_i = mean(f_B·(f_ABi − f_A)) / V;
 //! - total (Jansen 1999): S_Ti = ½·mean((f_A − f_ABi)²) / V;
 //! - V the population variance (ddof 0) of f over A and B together, as SALib computes it.

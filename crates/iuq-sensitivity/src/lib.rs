@@ -1,4 +1,4 @@
-//! Sobol' sensitivity indices (spec section 5): Saltelli/Jansen estimators on a Saltelli
+//! Sobol' sensitivity indices (docs/methods.md §3): Saltelli/Jansen estimators on a Saltelli
 //! design, bootstrap and replicate-scrambling confidence intervals, several outputs at once,
 //! and explicit accounting of failed runs.
 //!

@@ -1,5 +1,5 @@
 //! The `[likelihood]` section of a study: a direct log-density of the parameters, or data and
-//! the prediction-error model (spec §1).
+//! the prediction-error model (docs/methods.md §4).
 //!
 //! ```toml
 //! [likelihood]

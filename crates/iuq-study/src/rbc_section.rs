@@ -68,7 +68,7 @@ pub fn rbc_shear_model(
                     .and_then(PastSingularity::from_name)
                     .ok_or_else(|| key_error(&full, "expected \"fail\" or \"carry-on\""))?
             }
-            // Quick checks and tests only: the spec's window starts at 7.5 strain units.
+            // Quick checks and tests only: the study's window starts at 7.5 strain units.
             "start_strain" => settings.start_strain = number(&full, value)?,
             "window_factor" => {
                 let v = number(&full, value)?;

@@ -6,7 +6,7 @@ use common::{iuq, json_of, scratch};
 
 use std::path::Path;
 
-/// The spec's GP reference data: X_i = frac(0.5 + i·α), α = (φ⁻¹, φ⁻², φ⁻³),
+/// The GP reference data (docs/methods.md §7): X_i = frac(0.5 + i·α), α = (φ⁻¹, φ⁻², φ⁻³),
 /// y_i = sin(2π x_i1) + x_i2² + 0.5 x_i3 + 0.01 sin(37 i), i = first..first+n−1.
 fn spec_data(first: usize, n: usize) -> Vec<[f64; 4]> {
     let phi = 1.220_744_084_605_759_6_f64;

@@ -3,7 +3,7 @@
 //! surrogate, BASIS on the GP bank and on the cell model through the campaign, and the report.
 //!
 //! The cell-model runs are real (`iuq rbc shear` processes of the campaign executor) but short:
-//! `start_strain = 0.05` ends each run after about 170 lattice steps instead of the spec's 7.5
+//! `start_strain = 0.05` ends each run after about 170 lattice steps instead of the study's 7.5
 //! strain units, so the numbers are not the study's, only the machinery is.
 
 mod common;

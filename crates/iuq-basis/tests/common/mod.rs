@@ -1,4 +1,5 @@
-//! Shared helpers of the integration tests: the reference problems of spec §2 and runners.
+//! Shared helpers of the integration tests: the BASIS reference problems (docs/methods.md §7)
+//! and runners.
 
 #![allow(dead_code)]
 
@@ -44,7 +45,7 @@ pub fn rosenbrock(x: &[f64]) -> f64 {
     -(100.0 * (x[1] - x[0] * x[0]).powi(2) + (x[0] - 1.0).powi(2))
 }
 
-/// The four reference problems of spec §2 with their exact log-evidence.
+/// The four reference problems of docs/methods.md §7 with their exact log-evidence.
 pub fn reference_problems() -> Vec<Problem> {
     vec![
         Problem {

@@ -121,8 +121,8 @@ pub struct ShearArgs {
     /// Lattice shear rate γ̇·dt of the scaled protocol.
     #[arg(long, default_value_t = DEFAULT_LATTICE_SHEAR_RATE, allow_negative_numbers = true)]
     pub lattice_shear_rate: f64,
-    /// Strain at which the measuring window starts (7.5 in the spec; smaller only for quick
-    /// checks).
+    /// Strain at which the measuring window starts (7.5 in the study's protocol; smaller only for
+    /// quick checks).
     #[arg(long, default_value_t = START_STRAIN, allow_negative_numbers = true)]
     pub start_strain: f64,
     /// The measuring window ends at this factor × its start step (1.25, the study's window; e.g.
