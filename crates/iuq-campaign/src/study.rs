@@ -52,7 +52,7 @@ use crate::retry_policy::RetryPolicy;
 use crate::template::Template;
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
-pub const TOP_LEVEL_KEYS: [&str; 10] = [
+pub const TOP_LEVEL_KEYS: [&str; 11] = [
     "name",
     "description",
     "parameters",
@@ -61,6 +61,7 @@ pub const TOP_LEVEL_KEYS: [&str; 10] = [
     "surrogate",
     "sensitivity",
     "sampler",
+    "model_sampler",
     "executor",
     "design",
 ];

@@ -108,8 +108,7 @@ pub struct ForceCoefficients {
 }
 
 impl ForceCoefficients {
-    /// HemoCell's coefficients (`RbcHighOrderModel::calculate_k*` of the version the spec
-    /// describes) for a mesh of `triangles` triangles in the units `units`.
+    /// HemoCell's coefficients (`RbcHighOrderModel::calculate_k*` of HemoCell v2.x) for a mesh of `triangles` triangles in the units `units`.
     pub fn hemocell(p: &MembraneParameters, units: &LatticeUnits, triangles: usize) -> Self {
         let kbt = units.kbt_lu();
         let eq = MESH_EQUILIBRIUM_LENGTH / units.dx;

@@ -7,13 +7,14 @@
 //! with its disk axis along z, i.e. the disk lies in the flow–gradient (shear) plane. The
 //! elongation index is measured on the x–y projection, which is then the shear plane.
 //!
-//! This departs from the spec's wording ("walls on the z planes, disk axis along the gradient,
-//! lying flat in the flow–vorticity plane"), for a measured reason: with the disk axis along
-//! the gradient the cell flips over (Jeffery tumbling) within the measuring window, and the 10
-//! frames at 0.64 Pa span EL = 0.03…0.41 (std 0.145), whereas HemoCell reported a steady
-//! EL = 0.147 with a frame std of ≈ 0.0035. With the axis along the vorticity the cell rolls
-//! and tank-treads steadily and the same code gives EL ≈ 0.146 at 0.64 Pa and ≈ 0.36 / 0.49 at
-//! 2.91 / 6.19 Pa (HemoCell 0.374 / 0.492), with no constant fitted.
+//! This is also where HemoCell's own `oneCellShear` puts the cell (angles 90 0 0, checked
+//! against HemoCell v2.1). The other placement one might read into the study's description —
+//! the disk axis along the gradient, lying flat in the flow–vorticity plane — fails: the cell
+//! flips over (Jeffery tumbling) within the measuring window, and the 10 frames at 0.64 Pa span
+//! EL = 0.03…0.41 (std 0.145), whereas HemoCell reported a steady EL = 0.147 with a frame std of
+//! ≈ 0.0035. With the axis along the vorticity the cell rolls and tank-treads steadily and the
+//! same code gives EL ≈ 0.146 at 0.64 Pa and ≈ 0.36 / 0.49 at 2.91 / 6.19 Pa (HemoCell
+//! 0.374 / 0.492), with no constant fitted.
 //!
 //! Internally the lattice has its walls across z ([`crate::lattice::ZBoundary`]), so the
 //! simulation runs in the frame (flow, vorticity, gradient) = (x, y, z) on a 40×20×39 box; every
@@ -151,7 +152,7 @@ pub struct ShearExperiment {
 }
 
 impl ShearExperiment {
-    /// The spec's experiment at `stress` Pa for the given cell, scaled protocol.
+    /// The study's experiment at `stress` Pa for the given cell, scaled protocol.
     pub fn new(membrane: MembraneParameters, viscosity_ratio: f64, stress: f64) -> Self {
         Self {
             membrane,
