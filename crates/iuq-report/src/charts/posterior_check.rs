@@ -10,7 +10,7 @@ use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
 use crate::model::PosteriorCheckReport;
-use crate::statistics::{extent, padded};
+use crate::statistics::{extent, padded, quantile_sorted};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE};
 
 /// Pixel size of the chart.
@@ -31,19 +31,11 @@ pub(crate) struct PosteriorCheckChart<'a> {
     pub x_label: &'a str,
 }
 
-/// The median of `values` (NaN when empty).
+/// The median of the finite `values` (NaN when there are none).
 fn median(values: &[f64]) -> f64 {
     let mut v: Vec<f64> = values.iter().copied().filter(|x| x.is_finite()).collect();
-    if v.is_empty() {
-        return f64::NAN;
-    }
     v.sort_by(f64::total_cmp);
-    let n = v.len();
-    if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    }
+    quantile_sorted(&v, 0.5)
 }
 
 impl Chart for PosteriorCheckChart<'_> {
