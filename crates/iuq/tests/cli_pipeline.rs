@@ -271,8 +271,10 @@ fn bad_pipeline_settings_are_input_errors() {
 }
 
 /// The README's main job: the healthy-cell study on its shipped campaign store completes without
-/// a single new run of the cell model, and its result says what the study is known for — kLink
-/// is identified, kBend is not, every GP passes its test set.
+/// a single new run of the cell model — the adaptive rounds and the cell model at the posterior
+/// replayed from the store — and its result says what the study is known for: kLink is
+/// identified, kBend is not, and the surrogate agrees with the cell model where the posterior
+/// lies.
 #[test]
 fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
@@ -329,11 +331,9 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     );
 
     let summary = json_of(&output);
-    let q2 = summary["q2"].as_array().unwrap();
-    assert_eq!(q2.len(), 8, "one GP per stress");
-    for q in q2 {
-        assert!(q.as_f64().unwrap() > 0.9, "Q2 {q}");
-    }
+    // The shipped rounds replayed from the store: 192 runs in 6 rounds (max_runs reached).
+    assert_eq!(summary["runs"], 192, "{}", summary["adaptive"]);
+    assert_eq!(summary["rounds"], 6);
     let gp = &summary["posterior"][0];
     assert_eq!(gp["source"], "GP surrogate");
     let std_of = |name: &str| {
@@ -346,12 +346,25 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
             .as_f64()
             .unwrap()
     };
-    // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101. The surrogate is
-    // failure-aware: under the model's default `past_singularity = "fail"` every soft cell breaks at
-    // the high stresses, and the posterior has no mass there (kLink ≈ 85 ± 1, kBend 85 ± 34,
-    // σ_m at its bound: the model misfits what it can still reach).
+    // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101.
     assert!(std_of("kLink") < 0.1 * 83.7, "kLink is identified");
     assert!(std_of("kBend") > 0.3 * 101.0, "kBend is not");
+    // The cell model at the MAP and 20 posterior samples per stress, beside the surrogate: up to
+    // 4.24 Pa the surrogate's error there is below the smallest measurement std (0.002); at 6.19
+    // and 9.04 Pa the cell's own elongation still moves through the measuring window (frame
+    // stds of 0.01–0.03, docs/cell-model-high-stress.md) and the error is of that size.
+    let check = summary["posterior_check"].as_array().unwrap();
+    assert_eq!(check.len(), 8, "one check per stress");
+    for point in check {
+        let rmse = point["rmse"].as_f64().unwrap();
+        let bound = if point["x"].as_f64().unwrap() <= 4.24 {
+            0.002
+        } else {
+            0.05
+        };
+        assert!(rmse < bound, "{point}");
+        assert_eq!(point["failed"], 0, "{point}");
+    }
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let sources: HashSet<&str> = report["report"]["sensitivity"]
@@ -360,6 +373,6 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
         .iter()
         .map(|s| s["source"].as_str().unwrap())
         .collect();
-    assert_eq!(sources, HashSet::from(["model runs", "surrogate"]));
+    assert_eq!(sources, HashSet::from(["surrogate"]));
     assert!(out.join("report.html").is_file());
 }

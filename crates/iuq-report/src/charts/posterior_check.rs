@@ -5,7 +5,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axis::{CategoryAxis, category_label};
+use crate::axis::{CategoryAxis, category_label, linear_tick_label};
 use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
@@ -86,7 +86,7 @@ impl Chart for PosteriorCheckChart<'_> {
             .x_desc(self.x_label)
             .y_desc("model − surrogate mean")
             .x_label_formatter(&|v| category_label(&labels, *v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .y_label_formatter(&|v| linear_tick_label(*v, lo, hi))
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE))
             .bold_line_style(GRID_COLOUR)
