@@ -111,8 +111,20 @@ fn lock_campaign(directory: &Path) -> Result<std::fs::File> {
         .truncate(false)
         .open(&path)
         .map_err(|e| CampaignError::io(&path, e))?;
-    // SAFETY: flock on a descriptor we own.
-    let locked = unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0;
+    // A lock just released can still be held for a moment by a child forked (by any thread of
+    // this process) while it was open and not yet exec'd, which closes it: try for 2 s before
+    // taking it for another coordinator's.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(2);
+    let locked = loop {
+        // SAFETY: flock on a descriptor we own.
+        if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            break true;
+        }
+        if std::time::Instant::now() >= deadline {
+            break false;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
     if !locked {
         let mut holder = String::new();
         let _ = file.read_to_string(&mut holder);

@@ -78,7 +78,8 @@ pub struct OutputDecoder {
     regexes: Vec<Regex>,
 }
 
-/// The decoded outputs of one run, and their stds when the file gave one for every output.
+/// The decoded outputs of one run, and their stds when the file gave one for any output (0 for
+/// the outputs without one).
 pub type Decoded = (Vec<f64>, Option<Vec<f64>>);
 
 impl OutputDecoder {
@@ -177,10 +178,12 @@ impl OutputDecoder {
                     values.push(value);
                     stds.push(std);
                 }
+                // Stds when the run gave one for any output; an output without one (a diagnostic
+                // such as a drift) has no computational uncertainty stated: 0.
                 let std = stds
                     .iter()
-                    .all(Option::is_some)
-                    .then(|| stds.into_iter().flatten().collect());
+                    .any(Option::is_some)
+                    .then(|| stds.into_iter().map(|s| s.unwrap_or(0.0)).collect());
                 Ok((values, std))
             }
             DecoderFormat::CsvColumns { row } => {
@@ -383,6 +386,11 @@ mod tests {
             )
             .unwrap();
         assert_eq!((v, s), (vec![1.0, 2.0], Some(vec![0.1, 0.2])));
+        // A std for one output and none for a diagnostic beside it: the first std is kept.
+        let (v, s) = d
+            .decode_text(r#"{"f": {"value": 1, "std": 0.1}, "nested": [{"g": 0.5}]}"#)
+            .unwrap();
+        assert_eq!((v, s), (vec![1.0, 0.5], Some(vec![0.1, 0.0])));
         let e = d.decode_text("garbage").unwrap_err();
         assert_eq!(e.0, OutcomeKind::BadOutput);
         let e = d.decode_text(r#"{"f": 1}"#).unwrap_err();

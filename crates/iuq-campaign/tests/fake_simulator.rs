@@ -87,7 +87,8 @@ fn every_outcome_is_recorded_with_its_reason_and_failures_reach_the_caller() {
     assert_eq!(outcomes.len(), 8);
     let ok = outcomes[0].as_ref().unwrap();
     assert_eq!(ok.outputs, vec![0.5, 1.0]);
-    assert_eq!(ok.computational_std, None, "only g has a std");
+    // Only g has a std; f, without one, has no computational uncertainty stated: 0.
+    assert_eq!(ok.computational_std, Some(vec![0.0, 0.5]));
     assert_eq!(outcomes[1].as_ref().unwrap().outputs, vec![1.5, 1.0]);
     let reason = |k: usize| outcomes[k].as_ref().unwrap_err().reason.clone();
     assert!(
