@@ -290,7 +290,9 @@ kind = "rbc-shear"
             ("stresses = [-1.0]", "[model]"),
             ("kLink = 20", "model.kLink"),
             ("kVolume = -2", "model.kVolume"),
-            ("frames = 3", "model.frames"),
+            ("frame_count = 3", "model.frame_count"),
+            ("frames = 1", "model.frames"),
+            ("window_factor = 0.5", "model.window_factor"),
             (
                 "protocol = \"reference\"\nlattice_shear_rate = 1e-4",
                 "model.lattice_shear_rate",
