@@ -22,6 +22,7 @@ mod common;
 
 use common::{iuq, json_of, scratch};
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -340,4 +341,291 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
         last.contains("iteration 150: 637 of the cell's 642 vertices"),
         "{last}"
     );
+}
+
+// ------------------------------------------------------------------------------------------
+// The native model against HemoCell's table.
+
+/// How many combined frame standard deviations two window means may lie apart. The study's
+/// likelihood takes a run's frame std as the computational uncertainty of its EL; two
+/// computations of the same EL with uncertainties s_h and s_n differ by a quantity of spread
+/// sqrt(s_h² + s_n²), and 3 of those bound it at 99.7 % for a Gaussian error (about 3 % that one
+/// of 12 points exceeds it by chance). The frames are not independent (EL drifts and oscillates
+/// over the window), so the frame std is a scale, not a standard error; no larger k is used to
+/// absorb the disagreements below, which are listed and explained instead.
+const K: f64 = 3.0;
+
+/// Points where the native model (scaled protocol) and HemoCell v2.1 disagree beyond `K`, each
+/// with the reason found and the largest |difference| accepted before the test calls it a
+/// change (`data/hemocell_vs_native.md`, "Disagreements"):
+/// (kLink, kBend, Λ, stress, largest |native − HemoCell|, reason).
+const KNOWN_DISAGREEMENTS: [(f64, f64, f64, f64, f64, &str); 3] = [
+    (
+        30.0,
+        200.0,
+        5.0,
+        6.19,
+        0.08,
+        "native triangles cross the area singularity (|ΔA/A| > 0.3) from strain ≈ 4 and its EL falls \
+         (0.56 → 0.44); HemoCell's stay pinned at ±0.30 and its EL stays at 0.52–0.53",
+    ),
+    (
+        36.7,
+        367.0,
+        5.9,
+        9.04,
+        0.12,
+        "both meshes pass the area singularity; the native's EL falls from strain ≈ 6.5 (0.61 → 0.45 \
+         scaled, → 0.54 reference), HemoCell's stays at 0.58–0.60",
+    ),
+    (
+        80.0,
+        100.0,
+        10.0,
+        4.24,
+        0.03,
+        "EL oscillates with strain (shape memory of the tank-treading membrane) with a shorter period \
+         in the native model (≈ 4.5 strain units) than in HemoCell: the window catches the native \
+         near a peak and HemoCell near a trough",
+    ),
+];
+
+/// One row of `data/hemocell_vs_native.csv`, by column name.
+struct Row(BTreeMap<String, String>);
+
+impl Row {
+    fn f(&self, column: &str) -> f64 {
+        self.0[column]
+            .parse()
+            .unwrap_or_else(|_| panic!("{column}: {:?}", self.0[column]))
+    }
+    fn frames(&self, column: &str) -> Vec<f64> {
+        self.0[column]
+            .split(';')
+            .map(|v| v.parse().unwrap())
+            .collect()
+    }
+    fn point(&self) -> (f64, f64, f64, f64) {
+        (
+            self.f("kLink"),
+            self.f("kBend"),
+            self.f("viscosityRatio"),
+            self.f("stress"),
+        )
+    }
+    fn known(&self) -> Option<&'static (f64, f64, f64, f64, f64, &'static str)> {
+        let (l, b, r, s) = self.point();
+        KNOWN_DISAGREEMENTS
+            .iter()
+            .find(|k| k.0 == l && k.1 == b && k.2 == r && k.3 == s)
+    }
+}
+
+fn read_table() -> Vec<Row> {
+    let text = std::fs::read_to_string(table_path()).expect("data/hemocell_vs_native.csv");
+    let mut lines = text.lines();
+    let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
+    lines
+        .map(|l| {
+            let values: Vec<&str> = l.split(',').collect();
+            assert_eq!(values.len(), header.len(), "{l}");
+            Row(header
+                .iter()
+                .cloned()
+                .zip(values.into_iter().map(String::from))
+                .collect())
+        })
+        .collect()
+}
+
+fn table_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/hemocell_vs_native.csv")
+}
+
+fn mean_std(v: &[f64]) -> (f64, f64) {
+    let n = v.len() as f64;
+    let m = v.iter().sum::<f64>() / n;
+    (
+        m,
+        (v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / (n - 1.0)).sqrt(),
+    )
+}
+
+/// Least-squares change of evenly spaced frames over the window (slope × (n − 1)).
+fn trend(v: &[f64]) -> f64 {
+    let n = v.len() as f64;
+    let mx = (n - 1.0) / 2.0;
+    let my = v.iter().sum::<f64>() / n;
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for (i, y) in v.iter().enumerate() {
+        sxy += (i as f64 - mx) * (y - my);
+        sxx += (i as f64 - mx).powi(2);
+    }
+    sxy / sxx * (n - 1.0)
+}
+
+/// `|native − HemoCell| ≤ K·sqrt(s_h² + s_n²)` unless the point is a known disagreement, which
+/// must then still disagree beyond K (else the list is stale) and stay below its recorded size.
+/// Returns the lines of a printed table.
+fn check_agreement(
+    row: &Row,
+    native_mean: f64,
+    native_std: f64,
+    failures: &mut Vec<String>,
+) -> String {
+    let (h, sh) = (row.f("hemocell_el_mean"), row.f("hemocell_el_std"));
+    let diff = native_mean - h;
+    let z = diff / (sh * sh + native_std * native_std).sqrt();
+    let (l, b, r, s) = row.point();
+    let label = format!("kLink {l} kBend {b} Λ {r} at {s} Pa");
+    match row.known() {
+        None if z.abs() > K => failures.push(format!(
+            "{label}: native {native_mean:.4} ± {native_std:.4}, HemoCell {h:.4} ± {sh:.4}: |z| = {:.2} > {K}",
+            z.abs()
+        )),
+        Some(k) if z.abs() <= K => failures.push(format!(
+            "{label}: listed as a known disagreement ({}) but now agrees (z = {z:.2}): update KNOWN_DISAGREEMENTS and the provenance",
+            k.5
+        )),
+        Some(k) if diff.abs() > k.4 => failures.push(format!(
+            "{label}: known disagreement grew: |diff| = {:.4} > {} ({})",
+            diff.abs(),
+            k.4,
+            k.5
+        )),
+        _ => {}
+    }
+    format!(
+        "{label:<36} HemoCell {h:.4} ± {sh:.4}  native {native_mean:.4} ± {native_std:.4}  diff {diff:+.4}  z {z:+.2}{}",
+        if row.known().is_some() {
+            "  (known)"
+        } else {
+            ""
+        }
+    )
+}
+
+#[test]
+fn the_comparison_table_is_complete_and_consistent() {
+    let rows = read_table();
+    assert!(rows.len() >= 12, "{} points", rows.len());
+    // The four parameter sets of the brief, each at 4.24, 6.19 and 9.04 Pa.
+    let sets: Vec<(f64, f64, f64)> = {
+        let mut s: Vec<_> = rows
+            .iter()
+            .map(|r| (r.f("kLink"), r.f("kBend"), r.f("viscosityRatio")))
+            .collect();
+        s.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        s.dedup();
+        s
+    };
+    assert!(
+        sets.iter().any(|s| s.0 <= 40.0 && s.0 != 36.7),
+        "a soft cell: {sets:?}"
+    );
+    assert!(
+        sets.contains(&(36.7, 367.0, 5.9)),
+        "the validation cell: {sets:?}"
+    );
+    assert!(sets.iter().any(|s| s.0 >= 120.0), "a stiff cell: {sets:?}");
+    assert!(sets.len() >= 4, "{sets:?}");
+    for set in &sets {
+        for stress in [4.24, 6.19, 9.04] {
+            assert!(
+                rows.iter().any(
+                    |r| (r.f("kLink"), r.f("kBend"), r.f("viscosityRatio")) == *set
+                        && r.f("stress") == stress
+                ),
+                "{set:?} at {stress} Pa missing"
+            );
+        }
+    }
+    let mut failures = Vec::new();
+    for row in &rows {
+        // Every summary column follows from the frames (written with 6 decimals).
+        for (prefix, frames) in [
+            ("hemocell_el", "hemocell_el_frames"),
+            ("native_scaled", "native_scaled_el_frames"),
+            ("native_reference", "native_reference_el_frames"),
+        ] {
+            let v = row.frames(frames);
+            assert_eq!(v.len(), 10, "{frames}");
+            let (m, s) = mean_std(&v);
+            assert!(
+                (m - row.f(&format!("{prefix}_mean"))).abs() < 2e-6,
+                "{prefix}"
+            );
+            assert!(
+                (s - row.f(&format!("{prefix}_std"))).abs() < 2e-6,
+                "{prefix}"
+            );
+            // HemoCell's frames are evenly spaced; the native's to within a step.
+            assert!(
+                (trend(&v) - row.f(&format!("{prefix}_trend"))).abs() < 2e-3,
+                "{prefix}"
+            );
+        }
+        for protocol in ["scaled", "reference"] {
+            let n = row.f(&format!("native_{protocol}_mean"));
+            let d = row.f(&format!("diff_{protocol}"));
+            assert!((d - (n - row.f("hemocell_el_mean"))).abs() < 2e-6);
+            let z = d
+                / (row.f("hemocell_el_std").powi(2)
+                    + row.f(&format!("native_{protocol}_std")).powi(2))
+                .sqrt();
+            assert!((z - row.f(&format!("z_{protocol}"))).abs() < 1e-3 * z.abs().max(1.0));
+        }
+        let line = check_agreement(
+            row,
+            row.f("native_scaled_mean"),
+            row.f("native_scaled_std"),
+            &mut failures,
+        );
+        println!("{line}");
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
+}
+
+/// Reruns the native model (scaled protocol, carry-on past the singularities, as HemoCell) at
+/// the table's 12 points and compares each with HemoCell's columns by the criterion of
+/// [`check_agreement`]. About 15–40 s per point on one core:
+///
+/// ```sh
+/// flock /tmp/iuq-cargo.lock cargo test --release -p iuq --test hemocell_comparison -- --ignored --nocapture
+/// ```
+#[test]
+#[ignore = "runs the native model 12 times (several minutes)"]
+fn native_scaled_model_agrees_with_hemocell() {
+    let mut failures = Vec::new();
+    for row in read_table() {
+        let (l, b, r, s) = row.point();
+        let o = iuq(&[
+            "rbc",
+            "shear",
+            "--json",
+            "--klink",
+            &l.to_string(),
+            "--kbend",
+            &b.to_string(),
+            "--viscosity-ratio",
+            &r.to_string(),
+            "--stress",
+            &s.to_string(),
+            "--protocol",
+            "scaled",
+            "--past-singularity",
+            "carry-on",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v = json_of(&o);
+        let frames: Vec<f64> = v["el_frames"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|e| e.as_f64().unwrap())
+            .collect();
+        let (m, sd) = mean_std(&frames);
+        println!("{}", check_agreement(&row, m, sd, &mut failures));
+    }
+    assert!(failures.is_empty(), "{}", failures.join("\n"));
 }
