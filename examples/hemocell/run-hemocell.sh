@@ -50,7 +50,9 @@ status=${PIPESTATUS[0]}
 set -e
 if [ "$status" -ne 0 ]; then
     deleted=$(grep -m1 -A2 'Particle deleted\|(Delete Cells)' hemocell.log | tr -s ' \t\n' ' ' | sed 's/^ //; s/ $//' | cut -c1-300 || true)
-    reason=$(grep -v 'Force limit active' hemocell.log \
+    # HemoCell's last error-like line, leaving out its start-up force-cap warning and the
+    # backtrace Open MPI's signal handler prints ("[host:pid] *** Process received signal ***").
+    reason=$(grep -v -e 'Force limit active' -e '^\[[^]]*:[0-9]*\] ' hemocell.log \
         | grep -i 'error\|cannot\|exiting\|abort\|segmentation\|terminate\|what()\|not found\|does not exist\|failed' \
         | tail -n1 | tr -s ' \t' ' ' | sed 's/^ //' | cut -c1-300 || true)
     [ -n "$reason" ] || reason=$(grep -v '^[[:space:]]*$' hemocell.log | tail -n1 | tr -s ' \t' ' ' | sed 's/^ //' | cut -c1-300 || true)

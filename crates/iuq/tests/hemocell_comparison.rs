@@ -134,11 +134,15 @@ fn hemocell_s_reason_for_a_non_zero_exit_is_the_run_s_last_stderr_line() {
     assert!(log.contains(NO_INTERIOR_VISCOSITY));
     assert!(String::from_utf8_lossy(&o.stdout).contains(NO_INTERIOR_VISCOSITY));
 
-    // An uncaught exception (a key missing from config.xml): terminate, then SIGABRT.
+    // An uncaught exception (a key missing from config.xml): terminate, Open MPI's signal
+    // handler's backtrace, SIGABRT (what HemoCell v2.1 printed without <tmeas>).
     let fake = fake_onecellshear(
         &dir,
         "echo \"terminate called after throwing an instance of 'std::invalid_argument'\"\n\
-         echo '  what():  XML child tmeas does not exist.'\nkill -ABRT $$",
+         echo '  what():  XML child tmeas does not exist.'\n\
+         echo '[vm:21654] *** Process received signal ***'\n\
+         echo '[vm:21654] Signal: Aborted (6)'\n\
+         echo '[vm:21654] *** End of error message ***'\nkill -ABRT $$",
     );
     let o = run_adapter(&dir, &fake);
     assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
