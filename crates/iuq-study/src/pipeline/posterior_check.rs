@@ -97,6 +97,25 @@ pub struct PosteriorCheck {
     pub points: Vec<PointCheck>,
 }
 
+impl PosteriorCheck {
+    /// Per data point `{x, rmse, within_two_std, failed}` (a non-finite number as `null`), as
+    /// `pipeline.json` and `iuq pipeline --json` give it.
+    pub fn point_summaries(&self) -> serde_json::Value {
+        let finite = |v: f64| v.is_finite().then_some(v);
+        self.points
+            .iter()
+            .map(|p| {
+                serde_json::json!({
+                    "x": p.x,
+                    "rmse": finite(p.rmse()),
+                    "within_two_std": finite(p.within_two_std()),
+                    "failed": p.failures(),
+                })
+            })
+            .collect()
+    }
+}
+
 /// `count` distinct members of the posterior population, chosen with `seed` (the model's
 /// parameters only: `sigma_m`, when sampled, is dropped), the MAP excluded.
 fn chosen_samples(

@@ -429,10 +429,7 @@ pub fn write_pipeline_report(
         "posteriors": report.posteriors.iter().map(posterior_json).collect::<Vec<_>>(),
         "q2": results.point_runs.iter().zip(results.gp_checks).map(|(r, (q2, loo))| json!({"x": r.x, "q2": finite_or_null(*q2), "loo_q2": finite_or_null(*loo)})).collect::<Vec<_>>(),
         "adaptive": results.adaptive,
-        "posterior_check": results.posterior_check.map(|c| c.points.iter().map(|p| json!({
-            "x": p.x, "rmse": finite_or_null(p.rmse()), "within_two_std": finite_or_null(p.within_two_std()),
-            "failed": p.failures(),
-        })).collect::<Vec<_>>()),
+        "posterior_check": results.posterior_check.map(PosteriorCheck::point_summaries),
         "sensitivity": sobol_json(results.surrogate_sobol),
         "model_sensitivity": results.model_sobol.map(sobol_json),
     });

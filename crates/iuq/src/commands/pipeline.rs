@@ -122,17 +122,10 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
                 "q2": outcome.q2,
                 "posterior": outcome.posterior,
                 // Per data point: the model at the posterior against the surrogate.
-                "posterior_check": outcome.posterior_check.as_ref().map(|c| {
-                    c.points
-                        .iter()
-                        .map(|p| json!({
-                            "x": p.x,
-                            "rmse": p.rmse(),
-                            "within_two_std": p.within_two_std(),
-                            "failed": p.failures(),
-                        }))
-                        .collect::<Vec<_>>()
-                }),
+                "posterior_check": outcome
+                    .posterior_check
+                    .as_ref()
+                    .map(|c| c.point_summaries()),
                 "stage_seconds": outcome
                     .stage_seconds
                     .iter()
