@@ -75,8 +75,9 @@ impl ComputationalError {
         Self::ALL.into_iter().find(|c| c.name() == name)
     }
 
-    /// The variance term c_j for model output `q`, its std `s` and datum `y`.
-    fn variance(self, q: f64, s: f64, y: f64) -> std::result::Result<f64, EvaluationFailure> {
+    /// The variance term c_j for model output `q`, its std `s` and datum `y`: (s·y/q)² for
+    /// [`Relative`](Self::Relative), (s·y)², s² or 0 for the others.
+    pub fn variance(self, q: f64, s: f64, y: f64) -> std::result::Result<f64, EvaluationFailure> {
         Ok(match self {
             ComputationalError::Relative => {
                 if s == 0.0 {

@@ -489,6 +489,12 @@ impl Campaign {
         self.store.reset_for_retry(failed, lost)
     }
 
+    /// Decode the outputs of every succeeded run again from its run directory with the study's
+    /// current decoder, replacing what differs (see [`crate::redecode`]).
+    pub fn redecode(&mut self) -> Result<crate::redecode::RedecodeSummary> {
+        crate::redecode::redecode(&mut self.store, &self.study, &self.directory)
+    }
+
     /// The executor's compiled model specification.
     pub fn compiled_spec(&self) -> &CompiledSpec {
         &self.compiled

@@ -19,6 +19,7 @@
 //! | [`executor`] | local, Slurm and HyperQueue executors |
 //! | [`campaign`] | the coordinator: submit, ingest, retry, resume |
 //! | [`campaign_model`] | a campaign as a batch `Model` |
+//! | [`redecode`] | outputs of finished runs decoded again from their run directories |
 //! | [`retry_policy`] | which failures are retried |
 //! | [`outcome`] | outcome kinds and worker reports |
 //! | [`design`] | the points of `iuq run` |
@@ -38,6 +39,7 @@ pub mod executor;
 pub mod export;
 pub mod in_process;
 pub mod outcome;
+pub mod redecode;
 pub mod retry_policy;
 pub mod run_directory;
 pub mod store;
@@ -51,6 +53,7 @@ pub use campaign_model::CampaignModel;
 pub use error::{CampaignError, Result};
 pub use in_process::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};
 pub use outcome::{OutcomeKind, RunResult, TaskReport};
+pub use redecode::RedecodeSummary;
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};
 pub use study::{CampaignStudy, CommandSpec, DesignSpec, ExecutorKind};

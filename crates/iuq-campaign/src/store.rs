@@ -801,6 +801,44 @@ impl CampaignStore {
         Ok(out)
     }
 
+    /// Every succeeded run with the directory of the attempt its outputs came from and the
+    /// stored outputs (value, std), by run id.
+    pub fn succeeded_runs(&self) -> Result<Vec<SucceededRun>> {
+        let mut stmt = self
+            .connection
+            .prepare(
+                "SELECT r.id, a.id, a.directory FROM runs r
+                 JOIN attempts a ON a.run_id = r.id AND a.outcome_kind = 'succeeded'
+                 WHERE r.status = 'succeeded'
+                 AND a.number = (SELECT MAX(b.number) FROM attempts b WHERE b.run_id = r.id AND b.outcome_kind = 'succeeded')
+                 ORDER BY r.id",
+            )
+            .map_err(|e| self.err(e))?;
+        let heads: Vec<(i64, i64, String)> = stmt
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+            .and_then(|rows| rows.collect())
+            .map_err(|e| self.err(e))?;
+        let mut output_stmt = self
+            .connection
+            .prepare_cached("SELECT value, std FROM outputs WHERE run_id = ?1 ORDER BY position")
+            .map_err(|e| self.err(e))?;
+        heads
+            .into_iter()
+            .map(|(run_id, attempt_id, directory)| {
+                let outputs: Vec<(f64, Option<f64>)> = output_stmt
+                    .query_map([run_id], |r| Ok((r.get(0)?, r.get(1)?)))
+                    .and_then(|rows| rows.collect())
+                    .map_err(|e| self.err(e))?;
+                Ok(SucceededRun {
+                    run_id,
+                    attempt_id,
+                    directory: PathBuf::from(directory),
+                    outputs,
+                })
+            })
+            .collect()
+    }
+
     /// Every run with its status, parameters and outputs, by run id.
     pub fn export_rows(&self) -> Result<Vec<ExportRow>> {
         let mut stmt = self
@@ -863,6 +901,19 @@ pub struct StoreWriter<'a> {
     path: &'a Path,
 }
 
+/// A succeeded run as [`CampaignStore::succeeded_runs`] lists it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SucceededRun {
+    /// The run.
+    pub run_id: i64,
+    /// The attempt whose outputs are stored.
+    pub attempt_id: i64,
+    /// That attempt's run directory, as recorded.
+    pub directory: PathBuf,
+    /// The stored outputs, in the study's output order: value and std (`None`: no std stored).
+    pub outputs: Vec<(f64, Option<f64>)>,
+}
+
 /// What the store did with a finished attempt.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Disposition {
@@ -882,6 +933,28 @@ impl StoreWriter<'_> {
             path: self.path.to_path_buf(),
             source,
         }
+    }
+
+    /// Replace the stored outputs of `run_id` (decoded again from `attempt_id`'s directory).
+    pub fn replace_outputs(
+        &self,
+        run_id: i64,
+        attempt_id: i64,
+        output_names: &[String],
+        values: &[f64],
+        std: Option<&[f64]>,
+    ) -> Result<()> {
+        let mut insert = self
+            .tx
+            .prepare_cached("INSERT OR REPLACE INTO outputs(run_id, attempt_id, position, name, value, std) VALUES (?1, ?2, ?3, ?4, ?5, ?6)")
+            .map_err(|e| self.err(e))?;
+        for (k, (name, value)) in output_names.iter().zip(values).enumerate() {
+            let s = std.and_then(|s| s.get(k).copied());
+            insert
+                .execute(params![run_id, attempt_id, k as i64, name, value, s])
+                .map_err(|e| self.err(e))?;
+        }
+        Ok(())
     }
 
     /// Record a new attempt at `run_id` (its number is the run's attempt count + 1) and mark the

@@ -16,8 +16,23 @@ pub fn campaign_error(error: CampaignError) -> StudyError {
     StudyError::from(error)
 }
 
-/// Read and validate a campaign study file.
+/// Read and validate a campaign study file, or a pipeline study file (one whose `[likelihood]`
+/// has `data`): then the campaign of its model runs, as `iuq pipeline` writes it into the store.
 pub fn load_study(path: &Path) -> Result<CampaignStudy> {
+    let is_pipeline_study = std::fs::read_to_string(path)
+        .ok()
+        .and_then(|text| text.parse::<toml::Table>().ok())
+        .and_then(|table| {
+            table
+                .get("likelihood")
+                .and_then(toml::Value::as_table)
+                .map(|likelihood| likelihood.contains_key("data"))
+        })
+        .unwrap_or(false);
+    if is_pipeline_study {
+        let study = crate::study::Study::load(path)?;
+        return crate::pipeline::model_runs::pipeline_campaign_study(&study);
+    }
     CampaignStudy::load(path).map_err(campaign_error)
 }
 

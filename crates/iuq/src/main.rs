@@ -46,6 +46,8 @@ enum Command {
     Status(commands::status::StatusArgs),
     /// Run the failed (--failed) or lost (--lost) runs of a campaign again.
     Retry(commands::retry::RetryArgs),
+    /// Decode the outputs of a campaign's finished runs again from their run directories.
+    Redecode(commands::redecode::RedecodeArgs),
     /// Export a campaign's runs (parameters, outputs, status) as tidy CSV or JSON.
     Export(commands::export::ExportArgs),
     /// Execute one task of a job array (started by the Slurm and HyperQueue executors).
@@ -70,6 +72,7 @@ fn main() {
         Command::Run(args) => commands::run::run(args, cli.json),
         Command::Status(args) => commands::status::run(args, cli.json),
         Command::Retry(args) => commands::retry::run(args, cli.json),
+        Command::Redecode(args) => commands::redecode::run(args, cli.json),
         Command::Export(args) => commands::export::run(args, cli.json),
         Command::Worker(args) => commands::worker::run(args, cli.json),
         Command::Rbc(command) => commands::rbc::run(command, cli.json),

@@ -1,4 +1,5 @@
-//! End-to-end tests of `iuq run`, `iuq status`, `iuq retry`, `iuq export` and `iuq worker`:
+//! End-to-end tests of `iuq run`, `iuq status`, `iuq retry`, `iuq redecode`, `iuq export` and
+//! `iuq worker`:
 //! real processes, a fake simulator driven by its parameters, a coordinator killed with SIGKILL
 //! in the middle of a campaign, and fake `sbatch`/`squeue`/`scontrol` and `hq` programs on PATH
 //! (the HyperQueue one prints the JSON shapes of `tests/fixtures/hq` in iuq-campaign).
@@ -168,6 +169,66 @@ fn run_status_export_and_retry_of_a_misbehaving_simulator() {
     assert_eq!(attempts, 13);
     let v = json_of(&iuq(&["retry", p, "--lost", "--json"]));
     assert_eq!(v["retried"], 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn redecode_reads_the_run_directories_again_and_keeps_what_it_cannot_read() {
+    let dir = scratch("cli-campaign", "redecode");
+    let path = study(&dir, &[(0, 1.5), (0, 2.5), (0, 3.5)], "max_parallel = 1");
+    let p = path.to_str().unwrap();
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["succeeded"], 3);
+    let stored = |run_id: i64| -> (f64, Option<f64>) {
+        store_of(&dir)
+            .connection()
+            .query_row(
+                "SELECT value, std FROM outputs WHERE run_id = ?1",
+                [run_id],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .unwrap()
+    };
+    assert_eq!(stored(1), (1.5, None));
+    // Run 1's output gains a std (the decoder of an older iuq dropped it), run 2's value
+    // differs (the user fixed the output), run 3's directory is gone (a clone without `runs/`).
+    let runs = dir.join("study.campaign/runs");
+    std::fs::write(
+        runs.join("000001/result.json"),
+        r#"{"f": {"value": 1.5, "std": 0.25}}"#,
+    )
+    .unwrap();
+    std::fs::write(runs.join("000002/result.json"), r#"{"f": 7.0}"#).unwrap();
+    std::fs::remove_dir_all(runs.join("000003")).unwrap();
+    let o = iuq(&["redecode", p, "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["runs"], 3);
+    assert_eq!(v["updated"], 2);
+    assert_eq!(v["values_changed"], 1);
+    assert_eq!(v["unchanged"], 0);
+    assert_eq!(v["missing_directory"], 1);
+    assert_eq!(stored(1), (1.5, Some(0.25)));
+    assert_eq!(stored(2).0, 7.0);
+    assert_eq!(stored(3), (3.5, None));
+    // Again: nothing differs. An output that no longer decodes keeps what the store holds.
+    std::fs::write(runs.join("000002/result.json"), "garbage{").unwrap();
+    let v = json_of(&iuq(&["redecode", p, "--json"]));
+    assert_eq!(v["updated"], 0);
+    assert_eq!(v["unchanged"], 1);
+    let undecodable = v["undecodable"].as_array().unwrap();
+    assert_eq!(undecodable.len(), 1);
+    assert_eq!(undecodable[0]["run_id"], 2);
+    assert!(
+        undecodable[0]["reason"]
+            .as_str()
+            .unwrap()
+            .contains("result.json"),
+        "{v}"
+    );
+    assert_eq!(stored(2).0, 7.0);
+    let text = String::from_utf8_lossy(&iuq(&["redecode", p]).stdout).to_string();
+    assert!(text.contains("run 2: not decoded (kept)"), "{text}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -375,4 +375,14 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
         .collect();
     assert_eq!(sources, HashSet::from(["surrogate"]));
     assert!(out.join("report.html").is_file());
+
+    // The campaign commands read a pipeline study's store too.
+    let status = json_of(&iuq(&[
+        "status",
+        dir.join("examples/rbc-healthy.toml").to_str().unwrap(),
+        "--json",
+    ]));
+    assert_eq!(status["study"], "rbc-healthy");
+    assert_eq!(status["counts"]["failed"], 0, "{status}");
+    assert_eq!(status["counts"]["succeeded"], status["total"], "{status}");
 }

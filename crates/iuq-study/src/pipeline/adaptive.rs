@@ -229,6 +229,33 @@ fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f64>) -> f64 
     }
 }
 
+/// Σ_jj at each candidate as the likelihood has it: `data_variance[i][j]` (measurement and
+/// modelling error) plus the computational error whose part more runs cannot remove, the GP's
+/// noise (the scatter of the runs themselves), in the study's convention.
+fn likelihood_variances(
+    data: &DataLikelihood,
+    predictions: &[iuq_gp::Prediction],
+    data_variance: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    data_variance
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            row.iter()
+                .zip(predictions)
+                .zip(&data.observations.values)
+                .map(|((s2, p), y)| {
+                    let computational = data
+                        .computational_error
+                        .variance(p.mean[i], p.noise_variance.sqrt(), *y)
+                        .unwrap_or(0.0);
+                    s2 + computational
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// The inputs of one round's scoring: the candidates θ, s²_ij, their log posterior densities
 /// (ℓ + ln π of the surrogate posterior), and how many posterior samples each stands for.
 struct Candidates {
@@ -344,6 +371,7 @@ pub(super) fn refine(
         for gp in gps {
             predictions.push(gp.predict(&c.theta)?);
         }
+        let likelihood_variance = likelihood_variances(data, &predictions, &c.variance);
         let spread: Vec<f64> = (0..c.theta.len())
             .map(|i| {
                 predictions
@@ -354,7 +382,7 @@ pub(super) fn refine(
                             data.observations.values[j],
                             p.mean[i],
                             p.variance[i],
-                            c.variance[i][j],
+                            likelihood_variance[i][j],
                         )
                     })
                     .sum()
@@ -450,7 +478,7 @@ pub(super) fn refine(
                     .map(|j| LikelihoodTerm {
                         gp: &gps[j],
                         datum: data.observations.values[j],
-                        total_variance: c.variance.iter().map(|v| v[j]).collect(),
+                        total_variance: likelihood_variance.iter().map(|v| v[j]).collect(),
                     })
                     .collect();
                 let p_answer: Vec<f64> = surrogate
@@ -564,4 +592,65 @@ fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {
     let text = serde_json::to_string_pretty(rounds)
         .map_err(|e| StudyError::Failure(format!("cannot write the rounds: {e}")))?;
     write_atomically(&dir.join("rounds.json"), text.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use iuq_basis::prediction_error::{ComputationalError, Observations};
+    use std::path::PathBuf;
+
+    fn data(computational_error: ComputationalError) -> DataLikelihood {
+        DataLikelihood {
+            file: PathBuf::from("data.csv"),
+            x_column: "x".into(),
+            y_column: "y".into(),
+            x: vec![1.0, 2.0],
+            observations: Observations {
+                values: vec![0.5, 0.4],
+                measurement_std: None,
+            },
+            modelling_error: None,
+            measurement_error: true,
+            computational_error,
+            prediction: None,
+        }
+    }
+
+    /// Two data points, two candidates: GP j predicts `mean[i]` with noise variance σ²_j.
+    fn predictions() -> Vec<iuq_gp::Prediction> {
+        vec![
+            iuq_gp::Prediction {
+                mean: vec![0.25, 0.5],
+                variance: vec![1e-6, 1e-6],
+                noise_variance: 0.01,
+            },
+            iuq_gp::Prediction {
+                mean: vec![0.4, 0.8],
+                variance: vec![1e-6, 1e-6],
+                noise_variance: 0.0,
+            },
+        ]
+    }
+
+    #[test]
+    fn the_scored_variance_holds_the_gp_noise_as_the_likelihood_does() {
+        let s2 = vec![vec![1e-4, 2e-4], vec![3e-4, 4e-4]];
+        // Relative (the paper's form): (σ·y/μ)², σ = 0.1 for data point 0 and 0 for point 1.
+        let v = likelihood_variances(&data(ComputationalError::Relative), &predictions(), &s2);
+        let expected = [
+            [1e-4 + (0.1_f64 * 0.5 / 0.25).powi(2), 2e-4],
+            [3e-4 + (0.1_f64 * 0.5 / 0.5).powi(2), 4e-4],
+        ];
+        for (row, want) in v.iter().zip(expected) {
+            for (got, want) in row.iter().zip(want) {
+                assert!((got - want).abs() < 1e-15, "{got} vs {want}");
+            }
+        }
+        // Absolute: σ² whatever the mean; none: the data's variance alone.
+        let v = likelihood_variances(&data(ComputationalError::Absolute), &predictions(), &s2);
+        assert!((v[1][0] - (3e-4 + 0.01)).abs() < 1e-15);
+        let v = likelihood_variances(&data(ComputationalError::None), &predictions(), &s2);
+        assert_eq!(v, s2);
+    }
 }

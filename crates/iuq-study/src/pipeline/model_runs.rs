@@ -176,6 +176,29 @@ fn in_process_model_table(description: Vec<String>, outputs: &[String]) -> Table
     model
 }
 
+/// The campaign study of a pipeline study's model runs, as `iuq pipeline` writes it into the
+/// store, for the campaign commands (`iuq status`, `export`, `retry`, `redecode`): models of
+/// kind `rbc-shear` and `command` (an in-process model's runs are made by the pipeline alone).
+pub fn pipeline_campaign_study(study: &Study) -> Result<CampaignStudy> {
+    let file = study.path.display().to_string();
+    let data = super::study_data(study)?;
+    let text = match &study.model {
+        ModelSection::RbcShear { .. } => campaign_study_text(study, &data.x)?,
+        ModelSection::Command { table, .. } => model_campaign_text(study, table.clone(), &data.x)?,
+        ModelSection::Expression { .. } | ModelSection::UmBridge(_) => {
+            return Err(input_error(format!(
+                "{file}: key `model.kind`: the runs of an in-process model (expression, umbridge) are made and read by `iuq pipeline` alone"
+            )));
+        }
+        ModelSection::Absent => {
+            return Err(input_error(format!(
+                "{file}: section `[model]`: missing; the pipeline runs a model (kind = \"command\", \"expression\", \"umbridge\" or \"rbc-shear\")"
+            )));
+        }
+    };
+    CampaignStudy::parse(&text, &study.path).map_err(campaign_error)
+}
+
 impl ModelRuns {
     /// Open (create or resume) the campaign of `study`'s model at the data `data`, running at
     /// most `max_parallel` runs at once, with campaign progress sent to `progress`.

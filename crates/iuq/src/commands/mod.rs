@@ -8,6 +8,7 @@ pub mod gp;
 pub mod pipeline;
 pub mod rbc;
 pub mod rbc_elongation;
+pub mod redecode;
 pub mod retry;
 pub mod run;
 pub mod serve;
