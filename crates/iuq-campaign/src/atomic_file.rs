@@ -1,8 +1,9 @@
-//! Files that readers see whole or not at all: written to a temporary name in the same folder,
-//! then renamed over the target.
+//! Files that readers see whole or not at all (a worker's status and result, a job's manifest
+//! and script), written with iuq's one atomic writer (`iuq_atomic_file`); errors name the file.
 
-use std::io::Write;
 use std::path::Path;
+
+use iuq_atomic_file::Durability;
 
 use crate::error::{CampaignError, Result};
 
@@ -10,27 +11,11 @@ use crate::error::{CampaignError, Result};
 /// the file and its folder) before the call returns, so it survives a power failure; without,
 /// it survives any crash of the writing process.
 pub fn write_atomically(path: &Path, contents: &[u8], durable: bool) -> Result<()> {
-    let directory = path.parent().unwrap_or_else(|| Path::new("."));
-    let name = path
-        .file_name()
-        .map_or_else(|| "file".into(), |n| n.to_string_lossy().into_owned());
-    let temporary = directory.join(format!(".{name}.tmp-{}", std::process::id()));
-    let result = (|| -> std::io::Result<()> {
-        let mut file = std::fs::File::create(&temporary)?;
-        file.write_all(contents)?;
-        if durable {
-            file.sync_all()?;
-        }
-        std::fs::rename(&temporary, path)?;
-        if durable {
-            if let Ok(dir) = std::fs::File::open(directory) {
-                let _ = dir.sync_all();
-            }
-        }
-        Ok(())
-    })();
-    result.map_err(|e| {
-        let _ = std::fs::remove_file(&temporary);
-        CampaignError::io(path, e)
-    })
+    let durability = if durable {
+        Durability::Durable
+    } else {
+        Durability::Atomic
+    };
+    iuq_atomic_file::write_atomically(path, contents, durability)
+        .map_err(|e| CampaignError::io(path, e))
 }

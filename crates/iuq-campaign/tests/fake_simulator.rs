@@ -8,20 +8,8 @@ use std::path::{Path, PathBuf};
 use iuq_campaign::{Campaign, CampaignModel, CampaignOptions, CampaignStudy};
 use iuq_core::Model;
 
-const FAKE_SIMULATOR: &str = r#"#!/bin/sh
-# usage: sim.sh MODE X — MODE picks the behaviour, X is echoed back as output f = 2 x.
-mode=$1; x=$2
-case $mode in
- 0) echo "{\"f\": $x, \"g\": {\"value\": 1, \"std\": 0.5}}" > result.json ;;
- 1) sleep 0.3; echo "{\"f\": $x, \"g\": {\"value\": 1, \"std\": 0.5}}" > result.json ;;
- 2) echo "solver diverged at step 7" >&2; exit 3 ;;
- 3) kill -SEGV $$ ;;
- 4) trap '' TERM; sleep 30 ;;
- 5) echo "garbage{" > result.json ;;
- 6) echo '{"f": "NaN", "g": 1}' > result.json ;;
- 7) : ;;
-esac
-"#;
+/// The fake simulator (modes 0–9, see the script).
+const FAKE_SIMULATOR: &str = include_str!("fixtures/fake-simulator.sh");
 
 fn scratch(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("iuq-campaign-{}-{name}", std::process::id()));

@@ -1,5 +1,5 @@
 //! Weighted sample statistics: normalised weights, effective sample size, mean, covariance and
-//! quantiles. Weights need not be normalised; they must be finite, non-negative and not all zero.
+//! quantiles (and the unweighted type-7 quantile of sorted values). Weights need not be normalised; they must be finite, non-negative and not all zero.
 
 use crate::error::{CoreError, Result};
 
@@ -11,6 +11,22 @@ pub enum CovarianceNormalisation {
     /// Σ_i w̄_i (x_i − μ)(x_i − μ)ᵀ / (1 − Σ_i w̄_i²) — reliability-weighted unbiased estimate
     /// (`numpy.cov(aweights=w)`, used by `scipy.stats.gaussian_kde`).
     Unbiased,
+}
+
+/// Quantile `p` ∈ [0, 1] of sorted values with linear interpolation between order statistics
+/// (numpy's default, "type 7"); NaN for an empty slice.
+pub fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
+    match sorted.len() {
+        0 => f64::NAN,
+        1 => sorted[0],
+        n => {
+            let position = p.clamp(0.0, 1.0) * (n - 1) as f64;
+            let below = position.floor() as usize;
+            let above = (below + 1).min(n - 1);
+            let fraction = position - below as f64;
+            sorted[below] + fraction * (sorted[above] - sorted[below])
+        }
+    }
 }
 
 /// Weights scaled to sum to one, after checking they are finite, non-negative and not all zero.
@@ -167,6 +183,15 @@ pub fn weighted_quantiles(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quantiles_interpolate_like_numpy() {
+        let values = [1.0, 2.0, 3.0, 4.0];
+        assert_eq!(quantile_sorted(&values, 0.0), 1.0);
+        assert_eq!(quantile_sorted(&values, 1.0), 4.0);
+        assert!((quantile_sorted(&values, 0.5) - 2.5).abs() < 1e-12);
+        assert!((quantile_sorted(&values, 0.25) - 1.75).abs() < 1e-12);
+    }
 
     #[test]
     fn mean_and_covariance_match_numpy() {

@@ -8,7 +8,6 @@ use plotters::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{ReportError, Result};
-use crate::files::temporary_path_with_extension;
 use crate::style::ensure_font;
 
 /// Error type of drawing on a plotters area of back-end `DB`.
@@ -82,18 +81,15 @@ pub(crate) fn render_png(
 ) -> Result<()> {
     ensure_font()?;
     // The bitmap back-end picks the encoder from the extension, so the temporary name keeps it.
-    let temporary = temporary_path_with_extension(path, "png");
+    let temporary = iuq_atomic_file::temporary_path(path, Some("png"));
     let drawn = draw_png(name, width, height, chart, &temporary);
     if let Err(error) = drawn {
         let _ = std::fs::remove_file(&temporary);
         return Err(error);
     }
-    std::fs::rename(&temporary, path).map_err(|source| {
-        let _ = std::fs::remove_file(&temporary);
-        ReportError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
+    iuq_atomic_file::replace(&temporary, path).map_err(|source| ReportError::Io {
+        path: path.to_path_buf(),
+        source,
     })
 }
 

@@ -5,21 +5,7 @@ pub(crate) fn mean(values: &[f64]) -> f64 {
     values.iter().sum::<f64>() / values.len() as f64
 }
 
-/// Quantile `p` ∈ [0, 1] of sorted values with linear interpolation between order statistics
-/// (numpy's default, "type 7"); NaN for an empty slice.
-pub(crate) fn quantile_sorted(sorted: &[f64], p: f64) -> f64 {
-    match sorted.len() {
-        0 => f64::NAN,
-        1 => sorted[0],
-        n => {
-            let position = p.clamp(0.0, 1.0) * (n - 1) as f64;
-            let below = position.floor() as usize;
-            let above = (below + 1).min(n - 1);
-            let fraction = position - below as f64;
-            sorted[below] + fraction * (sorted[above] - sorted[below])
-        }
-    }
-}
+pub(crate) use iuq_core::weighted_statistics::quantile_sorted;
 
 /// Smallest and largest value of an iterator of finite values, or `None` when it is empty.
 pub(crate) fn extent(values: impl IntoIterator<Item = f64>) -> Option<(f64, f64)> {
@@ -46,15 +32,6 @@ pub(crate) fn padded(lo: f64, hi: f64, fraction: f64) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn quantiles_interpolate_like_numpy() {
-        let values = [1.0, 2.0, 3.0, 4.0];
-        assert_eq!(quantile_sorted(&values, 0.0), 1.0);
-        assert_eq!(quantile_sorted(&values, 1.0), 4.0);
-        assert!((quantile_sorted(&values, 0.5) - 2.5).abs() < 1e-12);
-        assert!((quantile_sorted(&values, 0.25) - 1.75).abs() < 1e-12);
-    }
 
     #[test]
     fn padding_never_leaves_an_empty_range() {

@@ -100,7 +100,7 @@ pub fn read_numeric_csv(path: &Path, allow_nan: bool) -> Result<NumericTable> {
 }
 
 /// Write `contents` to `path` atomically: a temporary file in the same directory, renamed over
-/// the target (by [`iuq_campaign::atomic_file::write_atomically`]). A missing directory is an
+/// the target (iuq's one atomic writer, `iuq_atomic_file`). A missing directory is an
 /// input error.
 pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
     let directory = match path.parent() {
@@ -117,12 +117,8 @@ pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
     if path.file_name().is_none() {
         return Err(input_error(format!("{}: not a file path", path.display())));
     }
-    iuq_campaign::atomic_file::write_atomically(path, contents, false).map_err(|e| match e {
-        iuq_campaign::CampaignError::Io { source, .. } => {
-            StudyError::Failure(format!("cannot write {}: {source}", path.display()))
-        }
-        other => StudyError::from(other),
-    })
+    iuq_atomic_file::write_atomically(path, contents, iuq_atomic_file::Durability::Atomic)
+        .map_err(|source| StudyError::Failure(format!("cannot write {}: {source}", path.display())))
 }
 
 /// Format a numeric table as CSV text (shortest round-trip representation of each value).

@@ -14,22 +14,8 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-const FAKE_SIMULATOR: &str = r#"#!/bin/sh
-# usage: sim.sh MODE X — writes result.json with f = X, or misbehaves by MODE.
-mode=$1; x=$2
-case $mode in
- 0) echo "{\"f\": $x}" > result.json ;;
- 1) sleep 0.03; echo "{\"f\": $x}" > result.json ;;
- 2) echo "solver diverged" >&2; exit 1 ;;
- 3) kill -SEGV $$ ;;
- 4) trap '' TERM; sleep 30 ;;
- 5) echo "garbage{" > result.json ;;
- 6) echo '{"f": "NaN"}' > result.json ;;
- 7) : ;;
- 8) sleep 0.4; echo "{\"f\": $x}" > result.json ;;
- 9) if [ "$IUQ_ATTEMPT" = 1 ]; then kill -9 $PPID; sleep 0.2; exit 0; fi; echo "{\"f\": $x}" > result.json ;;
-esac
-"#;
+/// The fake simulator of the campaign tests (modes 0–9, see the script).
+const FAKE_SIMULATOR: &str = include_str!("../../iuq-campaign/tests/fixtures/fake-simulator.sh");
 
 fn iuq(args: &[&str]) -> Output {
     iuq_with_path(args, None)
@@ -426,7 +412,7 @@ fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_
     executable(&bin.join("squeue"), FAKE_SQUEUE);
     executable(&bin.join("scontrol"), FAKE_SCONTROL);
     let mut points: Vec<(u32, f64)> = (0..10).map(|i| (0, i as f64)).collect();
-    points.push((2, 50.0)); // fails: exit status 1
+    points.push((2, 50.0)); // fails: exit status 3
     points.push((9, 60.0)); // kills its worker on the first attempt: lost, then retried
     let path = study(
         &dir,
@@ -473,7 +459,7 @@ fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_
             r.get(0)
         })
         .unwrap();
-    assert!(failed.contains("exited with status 1"), "{failed}");
+    assert!(failed.contains("exited with status 3"), "{failed}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -605,7 +591,7 @@ fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) -> Vec<Strin
         v["failures"][0]["reason"]
             .as_str()
             .unwrap()
-            .contains("exited with status 1")
+            .contains("exited with status 3")
     );
     let ids: Vec<Option<String>> = store_of(dir)
         .connection()

@@ -6,7 +6,7 @@
 
 mod common;
 
-use common::{iuq, json_of, scratch};
+use common::{iuq, json_of, native_frames, scratch, stderr_of};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -44,41 +44,6 @@ fn skip_without_h5py(test: &str) -> bool {
     }
 }
 
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
-
-/// `iuq rbc shear` with its frames written to `dir/shapes`: the JSON result and the shape files
-/// in frame order.
-fn native_run(dir: &Path, format: &str) -> (Value, Vec<PathBuf>) {
-    let shapes = dir.join("shapes");
-    let o = iuq(&[
-        "rbc",
-        "shear",
-        "--stress",
-        "4",
-        "--klink",
-        "30",
-        "--start-strain",
-        "0.3",
-        "--shape-out",
-        shapes.to_str().unwrap(),
-        "--shape-format",
-        format,
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let v = json_of(&o);
-    let files: Vec<PathBuf> = v["shapes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| PathBuf::from(s.as_str().unwrap()))
-        .collect();
-    assert_eq!(files.len(), 10);
-    (v, files)
-}
-
 fn assert_same_el(decoded: &Value, native: &Value) {
     let close = |a: &Value, b: &Value, what: &str| {
         let (a, b) = (a.as_f64().unwrap(), b.as_f64().unwrap());
@@ -103,13 +68,13 @@ fn assert_same_el(decoded: &Value, native: &Value) {
 fn elongation_of_the_shape_files_equals_the_native_measurement() {
     for format in ["vtk", "ply"] {
         let dir = scratch(SUITE, &format!("shapes-{format}"));
-        let (native, files) = native_run(&dir, format);
+        let (native, files) = native_frames(&dir, Some(format));
         let mut args = vec!["--json", "rbc", "elongation"];
         args.extend(files.iter().map(|f| f.to_str().unwrap()));
         let out = dir.join("el.json");
         args.extend(["--out", out.to_str().unwrap()]);
         let o = iuq(&args);
-        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(o.status.success(), "{}", stderr_of(&o));
         let printed = json_of(&o);
         assert_same_el(&printed, &native);
         let written: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
@@ -136,7 +101,7 @@ fn elongation_of_the_shape_files_equals_the_native_measurement() {
             let mut args = vec!["--json", "rbc", "elongation", "--unit", unit];
             args.extend(csvs.iter().map(String::as_str));
             let o = iuq(&args);
-            assert!(o.status.success(), "{}", stderr(&o));
+            assert!(o.status.success(), "{}", stderr_of(&o));
             assert_same_el(&json_of(&o), &native);
         }
     }
@@ -187,7 +152,7 @@ fn write_hemocell_tree(dir: &Path, native: &Value, files: &[PathBuf], extra: &[&
         .arg(&files[0]);
     c.args(extra);
     let o = c.output().unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
     hdf5
 }
 
@@ -209,7 +174,7 @@ fn decoded_hemocell_hdf5_output_equals_the_native_measurement() {
         return;
     }
     let dir = scratch(SUITE, "hdf5");
-    let (native, files) = native_run(&dir, "vtk");
+    let (native, files) = native_frames(&dir, Some("vtk"));
     let steps = native["frame_steps"].as_array().unwrap();
     let (first, last) = (steps[0].as_u64().unwrap(), steps[9].as_u64().unwrap());
     // Metres on three ranks, the cell whole on every rank it touches (HemoCell's own layout);
@@ -229,7 +194,7 @@ fn decoded_hemocell_hdf5_output_equals_the_native_measurement() {
         std::fs::create_dir_all(&case).unwrap();
         let hdf5 = write_hemocell_tree(&case, &native, &files, extra);
         let o = decode(&case, &hdf5, first, last);
-        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        assert!(o.status.success(), "{name}: {}", stderr_of(&o));
         let decoded: Value =
             serde_json::from_str(&std::fs::read_to_string(case.join("el.json")).unwrap()).unwrap();
         assert_same_el(&decoded, &native);
@@ -247,15 +212,19 @@ fn decoded_hemocell_hdf5_output_equals_the_native_measurement() {
     // No output in the window, and no output folder: failures with their reason (exit 1).
     let case = dir.join("whole-cells-m");
     let o = decode(&case, &case.join("tmp/hdf5"), last + 10, last + 20);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     assert!(
-        stderr(&o).contains("0 output iteration(s)"),
+        stderr_of(&o).contains("0 output iteration(s)"),
         "{}",
-        stderr(&o)
+        stderr_of(&o)
     );
     let o = decode(&case, &case.join("nothing"), first, last);
     assert_eq!(o.status.code(), Some(1));
-    assert!(stderr(&o).contains("no such folder"), "{}", stderr(&o));
+    assert!(
+        stderr_of(&o).contains("no such folder"),
+        "{}",
+        stderr_of(&o)
+    );
 }
 
 /// A stand-in for HemoCell's `oneCellShear config.xml`: reads the filled templates, runs
@@ -316,9 +285,9 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
         .env("WRITER", example_dir().join("tests/write_hemocell_hdf5.py"))
         .output()
         .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
     let v = json_of(&o);
-    assert_eq!(v["counts"]["succeeded"], 3, "{v}\n{}", stderr(&o));
+    assert_eq!(v["counts"]["succeeded"], 3, "{v}\n{}", stderr_of(&o));
     // Every run's decoded EL is the fake's native measurement of the same frames.
     let runs = dir.join("hemocell-shear.campaign/runs");
     let mut checked = 0;
@@ -347,7 +316,7 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
         .args(["export", study.to_str().unwrap(), "--json"])
         .output()
         .unwrap();
-    assert!(export.status.success(), "{}", stderr(&export));
+    assert!(export.status.success(), "{}", stderr_of(&export));
 }
 
 #[test]
@@ -366,7 +335,7 @@ fn bad_input_to_elongation_is_named_with_exit_code_2_and_no_ellipse_with_1() {
     }
     let good = write("good.csv", &ellipse);
     let o = iuq(&["--json", "rbc", "elongation", &good, &good]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
     let v = json_of(&o);
     assert!(
         (v["el"]["value"].as_f64().unwrap() - 1.0 / 3.0).abs() < 0.02,
@@ -398,7 +367,7 @@ fn bad_input_to_elongation_is_named_with_exit_code_2_and_no_ellipse_with_1() {
         (&bad_ply, "not supported"),
     ] {
         let o = iuq(&["--json", "rbc", "elongation", &good, file]);
-        assert_eq!(o.status.code(), Some(2), "{file}: {}", stderr(&o));
+        assert_eq!(o.status.code(), Some(2), "{file}: {}", stderr_of(&o));
         let v = json_of(&o);
         assert_eq!(v["error"]["kind"], "bad_input");
         let message = v["error"]["message"].as_str().unwrap();
@@ -424,7 +393,7 @@ fn bad_input_to_elongation_is_named_with_exit_code_2_and_no_ellipse_with_1() {
         "x,y,z\n0,0,0\n1,0,0\n2,0,0\n3,0,0\n4,0,0\n5,0,0\n6,0,0\n",
     );
     let o = iuq(&["--json", "rbc", "elongation", &good, &line]);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let v = json_of(&o);
     assert_eq!(v["error"]["kind"], "failure");
     let message = v["error"]["message"].as_str().unwrap();

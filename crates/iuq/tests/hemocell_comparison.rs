@@ -20,7 +20,7 @@
 
 mod common;
 
-use common::{iuq, json_of, scratch};
+use common::{iuq, json_of, native_frames, scratch, stderr_of};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -32,10 +32,6 @@ const SUITE: &str = "hemocell-comparison";
 
 fn example_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/hemocell")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
 fn h5py_available(test: &str) -> bool {
@@ -105,7 +101,7 @@ fn run_adapter(dir: &Path, simulator: &Path) -> Output {
 }
 
 fn last_stderr_line(o: &Output) -> String {
-    stderr(o).lines().last().unwrap_or("").to_string()
+    stderr_of(o).lines().last().unwrap_or("").to_string()
 }
 
 /// HemoCell v2.1's start-up failure without the interior-viscosity build, as it prints it (on
@@ -124,7 +120,7 @@ fn hemocell_s_reason_for_a_non_zero_exit_is_the_run_s_last_stderr_line() {
         ),
     );
     let o = run_adapter(&dir, &fake);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     assert_eq!(
         last_stderr_line(&o),
         format!("run-hemocell.sh: oneCellShear exited with status 1: {NO_INTERIOR_VISCOSITY}")
@@ -145,7 +141,7 @@ fn hemocell_s_reason_for_a_non_zero_exit_is_the_run_s_last_stderr_line() {
          echo '[vm:21654] *** End of error message ***'\nkill -ABRT $$",
     );
     let o = run_adapter(&dir, &fake);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     assert_eq!(
         last_stderr_line(&o),
         "run-hemocell.sh: oneCellShear was killed by signal 6: what(): XML child tmeas does not exist."
@@ -159,7 +155,7 @@ fn hemocell_s_reason_for_a_non_zero_exit_is_the_run_s_last_stderr_line() {
          echo '\t Position: 3.2, 45.1, 9; vel.: 0, 0, 0; force: 0, 0, 0'\nkill -SEGV $$",
     );
     let o = run_adapter(&dir, &fake);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let last = last_stderr_line(&o);
     assert!(
         last.starts_with("run-hemocell.sh: oneCellShear was killed by signal 11; HemoCell deleted the cell: (HemoCell) (Delete Cells) WARNING! Particle deleted"),
@@ -192,9 +188,9 @@ fn the_campaign_records_hemocell_s_reason() {
         .output()
         .unwrap();
     let v = json_of(&o);
-    assert_eq!(v["counts"]["failed"], 3, "{v}\n{}", stderr(&o));
+    assert_eq!(v["counts"]["failed"], 3, "{v}\n{}", stderr_of(&o));
     let export = iuq(&["export", study.to_str().unwrap(), "--json"]);
-    assert!(export.status.success(), "{}", stderr(&export));
+    assert!(export.status.success(), "{}", stderr_of(&export));
     let runs = json_of(&export);
     let runs = runs.as_array().expect("an array of runs");
     assert_eq!(runs.len(), 3);
@@ -207,33 +203,6 @@ fn the_campaign_records_hemocell_s_reason() {
             "{run}"
         );
     }
-}
-
-/// Ten native frames (a short run) as shape files: the raw material of an HDF5 tree.
-fn shapes(dir: &Path) -> (Value, Vec<PathBuf>) {
-    let shapes = dir.join("shapes");
-    let o = iuq(&[
-        "rbc",
-        "shear",
-        "--stress",
-        "4",
-        "--klink",
-        "30",
-        "--start-strain",
-        "0.3",
-        "--shape-out",
-        shapes.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let v = json_of(&o);
-    let files = v["shapes"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|s| PathBuf::from(s.as_str().unwrap()))
-        .collect();
-    (v, files)
 }
 
 /// Write `files` at iterations 100, 110, … (and iteration 0) under `case/tmp/hdf5` with the
@@ -256,7 +225,7 @@ fn write_and_decode(
     }
     c.args(["--cell-type", "RBC"]).args(extra);
     let o = c.output().unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
     Command::new("python3")
         .arg(example_dir().join("decode-el.py"))
         .arg(&hdf5)
@@ -276,13 +245,13 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
         return;
     }
     let dir = scratch(SUITE, "decoder-checks");
-    let (native, files) = shapes(&dir);
+    let (native, files) = native_frames(&dir, None);
 
     // HemoCell v2.1's layout (walls on the y planes), read from its fluid output: decoded, with
     // the fluid's shear in the summary.
     let case = dir.join("y-walls");
     let o = write_and_decode(&case, &files, &["--fluid", "y"], &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
     let el: Value =
         serde_json::from_str(&std::fs::read_to_string(case.join("el.json")).unwrap()).unwrap();
     assert!(
@@ -302,7 +271,7 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
     // HemoCell >= 2.2 (walls on the z planes): refused, with the reason.
     let case = dir.join("z-walls");
     let o = write_and_decode(&case, &files, &["--fluid", "z"], &[]);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let last = last_stderr_line(&o);
     assert!(last.contains("the fluid is sheared along z"), "{last}");
     assert!(last.contains("HemoCell >= 2.2"), "{last}");
@@ -314,7 +283,7 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
         &["--fluid", "z"],
         &["--layout-check", "off"],
     );
-    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(o.status.success(), "{}", stderr_of(&o));
 
     // A cell HemoCell deleted: its warning in HemoCell's stdout fails the run, frames or not.
     let case = dir.join("deleted");
@@ -327,7 +296,7 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
     )
     .unwrap();
     let o = write_and_decode(&case, &files, &["--fluid", "y"], &["--log", "hemocell.log"]);
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let last = last_stderr_line(&o);
     assert!(last.contains("HemoCell deleted the cell"), "{last}");
     assert!(last.contains("Particle ID:0"), "{last}");
@@ -339,7 +308,7 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
         &["--drop-vertices", "150:5"],
         &[],
     );
-    assert_eq!(o.status.code(), Some(1), "{}", stderr(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let last = last_stderr_line(&o);
     assert!(
         last.contains("iteration 150: 637 of the cell's 642 vertices"),
@@ -620,7 +589,7 @@ fn native_scaled_model_agrees_with_hemocell() {
             "--past-singularity",
             "carry-on",
         ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        assert!(o.status.success(), "{}", stderr_of(&o));
         let v = json_of(&o);
         let frames: Vec<f64> = v["el_frames"]
             .as_array()

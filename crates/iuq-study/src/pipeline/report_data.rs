@@ -29,6 +29,7 @@ use crate::pipeline::surrogate::Surrogate;
 use crate::posterior::SampledPosterior;
 use crate::study::{ModelSection, Study};
 use crate::table_io::write_atomically;
+use iuq_core::weighted_statistics::quantile_sorted;
 
 /// The runs informing one data point: training and test sets (successful runs) and the
 /// failures of its run group.
@@ -139,17 +140,6 @@ impl Labels {
     }
 }
 
-/// The `p` quantile of `sorted` (linear interpolation between order statistics).
-fn quantile(sorted: &[f64], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let h = p * (sorted.len() - 1) as f64;
-    let lo = h.floor() as usize;
-    let hi = (lo + 1).min(sorted.len() - 1);
-    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
-}
-
 /// The model parameters' part of posterior samples (σ_m, when estimated, is the last column).
 fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
     samples.iter().map(|s| s[..d].to_vec()).collect()
@@ -175,9 +165,9 @@ fn posterior_result(
                 map: sampled.summary.map[k],
                 mean: sampled.summary.mean[k],
                 std: sampled.summary.std[k],
-                q05: quantile(&column, 0.05),
-                q50: quantile(&column, 0.5),
-                q95: quantile(&column, 0.95),
+                q05: quantile_sorted(&column, 0.05),
+                q50: quantile_sorted(&column, 0.5),
+                q95: quantile_sorted(&column, 0.95),
             }
         })
         .collect();
@@ -512,7 +502,7 @@ fn posterior_check_report(check: &PosteriorCheck, labels: &Labels) -> PosteriorC
                 surrogate: ok.iter().map(|r| r.surrogate).collect(),
                 surrogate_std: ok.iter().map(|r| r.surrogate_std).collect(),
                 model_std: ok.iter().map(|r| r.model_std.unwrap_or(0.0)).collect(),
-                diagnostic_median_abs: (!abs.is_empty()).then(|| quantile(&abs, 0.5)),
+                diagnostic_median_abs: (!abs.is_empty()).then(|| quantile_sorted(&abs, 0.5)),
                 diagnostic_largest_abs: abs.last().copied(),
                 diagnostic,
                 failed: p.failures(),

@@ -91,3 +91,42 @@ impl Drop for Served {
         let _ = self.child.wait();
     }
 }
+
+/// The stderr of a finished `iuq` as text.
+pub fn stderr_of(output: &Output) -> String {
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// A short native run (`iuq rbc shear` at 4 Pa, kLink 30, from strain 0.3) with its ten frames
+/// written to `dir/shapes` (in `format`, or the default one): the JSON result and the shape
+/// files in frame order — the raw material of the HemoCell-format tests.
+pub fn native_frames(dir: &Path, format: Option<&str>) -> (serde_json::Value, Vec<PathBuf>) {
+    let shapes = dir.join("shapes");
+    let mut args = vec![
+        "rbc",
+        "shear",
+        "--stress",
+        "4",
+        "--klink",
+        "30",
+        "--start-strain",
+        "0.3",
+        "--shape-out",
+        shapes.to_str().expect("a UTF-8 scratch path"),
+    ];
+    if let Some(format) = format {
+        args.extend(["--shape-format", format]);
+    }
+    args.push("--json");
+    let o = iuq(&args);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    let v = json_of(&o);
+    let files: Vec<PathBuf> = v["shapes"]
+        .as_array()
+        .expect("the run lists its shape files")
+        .iter()
+        .map(|s| PathBuf::from(s.as_str().expect("a path")))
+        .collect();
+    assert_eq!(files.len(), 10);
+    (v, files)
+}
