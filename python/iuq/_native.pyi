@@ -1,0 +1,119 @@
+"""Type stubs of the Rust extension ``iuq._native`` (use the documented wrappers in ``iuq``)."""
+
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+Bounds = Optional[Sequence[Tuple[float, float]]]
+
+def lhs(
+    n: int,
+    dim: int,
+    seed: int = 0,
+    method: str = "maximin",
+    candidates: int = 100,
+    bounds: Bounds = None,
+) -> npt.NDArray[np.float64]: ...
+def sobol(
+    n: int, dim: int, seed: int = 0, scramble: bool = True, bounds: Bounds = None
+) -> npt.NDArray[np.float64]: ...
+def saltelli(
+    n: int, dim: int, seed: int = 0, scramble: bool = True, bounds: Bounds = None
+) -> npt.NDArray[np.float64]: ...
+def sobol_indices(
+    function: Optional[Callable[[npt.NDArray[np.float64]], Any]],
+    expressions: Optional[Sequence[Tuple[str, str]]],
+    names: Sequence[str],
+    bounds: Sequence[Tuple[float, float]],
+    outputs: Sequence[str],
+    n: int,
+    seed: int,
+    resamples: int,
+    replicates: Optional[int],
+    confidence: float,
+    on_error: str,
+) -> Dict[str, Any]: ...
+def basis(
+    log_likelihood: Optional[Callable[[npt.NDArray[np.float64]], Any]],
+    formula: Optional[str],
+    data: Optional[Dict[str, Any]],
+    names: Sequence[str],
+    bounds: Sequence[Tuple[float, float]],
+    samples: int,
+    burn: int,
+    max_chain: int,
+    seed: int,
+    cv_target: float,
+    proposal_scale: float,
+    max_stages: int,
+    on_error: str,
+) -> Dict[str, Any]: ...
+
+class GaussianProcess:
+    @staticmethod
+    def fit(
+        x: npt.NDArray[np.float64],
+        y: npt.NDArray[np.float64],
+        restarts: int,
+        seed: int,
+        kernel: str,
+        scale_inputs: bool,
+        standardize_outputs: bool,
+        inputs: List[str],
+        output: str,
+    ) -> GaussianProcess: ...
+    @staticmethod
+    def load(path: str) -> GaussianProcess: ...
+    def save(self, path: str) -> None: ...
+    def predict(
+        self, x: npt.NDArray[np.float64]
+    ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], float]: ...
+    def q2(self, x: npt.NDArray[np.float64], y: npt.NDArray[np.float64]) -> float: ...
+    @property
+    def log_marginal_likelihood(self) -> float: ...
+    @property
+    def loo_q2(self) -> Optional[float]: ...
+    @property
+    def length_scales(self) -> List[float]: ...
+    @property
+    def length_scales_input_units(self) -> List[float]: ...
+    @property
+    def signal_variance(self) -> float: ...
+    @property
+    def noise_variance(self) -> float: ...
+    @property
+    def input_names(self) -> List[str]: ...
+    @property
+    def output_name(self) -> str: ...
+    @property
+    def dimension(self) -> int: ...
+    @property
+    def n_training(self) -> int: ...
+    @property
+    def warnings(self) -> List[str]: ...
+
+class Study:
+    @staticmethod
+    def load(path: str) -> Study: ...
+    @property
+    def name(self) -> str: ...
+    @property
+    def path(self) -> str: ...
+    @property
+    def parameters(self) -> List[str]: ...
+    @property
+    def ranges(self) -> List[Tuple[float, float]]: ...
+    def run(
+        self,
+        out: str,
+        max_parallel: Optional[int],
+        model_posterior: bool,
+        fresh: bool,
+        runs_only: bool,
+        progress: Optional[Callable[[str], Any]],
+    ) -> str: ...
+    def status(self) -> str: ...
+    def export(self, out: Optional[str], format: Optional[str]) -> str: ...

@@ -1,0 +1,255 @@
+//! Gaussian-process surrogates: `iuq gp fit|predict|validate` from Python.
+//!
+//! A fitted GP is saved in the CLI's file format (the envelope of `crates/iuq/src/commands/gp.rs`):
+//! `{"format": "iuq-gp", "version": 1, "inputs": [...], "output": "y", "gp": {...}}`, written
+//! with the same serialiser, so a file saved here and one written by `iuq gp fit` on the same data
+//! are identical, and either side loads the other's.
+
+use std::path::PathBuf;
+
+use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use iuq_gp::{FitOptions, GaussianProcess, Kernel};
+use iuq_study::table_io::write_atomically;
+
+use crate::arrays::{array_rows, array_values, vec_to_array};
+use crate::errors::{bad_input, failure};
+
+/// The CLI's GP file: the GP and the names of its columns (field order as the CLI writes it).
+#[derive(Debug, Serialize, Deserialize)]
+struct GpFile {
+    format: String,
+    version: u32,
+    inputs: Vec<String>,
+    output: String,
+    gp: serde_json::Value,
+}
+
+/// A fitted Gaussian process with the names of its input and output columns.
+#[pyclass(name = "GaussianProcess", module = "iuq._native", frozen)]
+pub struct NativeGaussianProcess {
+    gp: GaussianProcess,
+    inputs: Vec<String>,
+    output: String,
+}
+
+fn kernel_of(name: &str) -> PyResult<Kernel> {
+    match name {
+        "ard" => Ok(Kernel::ard()),
+        "isotropic" => Ok(Kernel::isotropic()),
+        "study-original" | "study_original" => Ok(Kernel::study_original()),
+        other => Err(bad_input(
+            "kernel",
+            format!("`{other}` is not one of ard, isotropic, study-original"),
+        )),
+    }
+}
+
+#[pymethods]
+impl NativeGaussianProcess {
+    /// Fit by maximising the log marginal likelihood (as `iuq gp fit`).
+    #[staticmethod]
+    #[pyo3(signature = (x, y, restarts, seed, kernel, scale_inputs, standardize_outputs, inputs, output))]
+    #[allow(clippy::too_many_arguments)]
+    fn fit(
+        py: Python<'_>,
+        x: PyReadonlyArray2<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+        restarts: usize,
+        seed: u64,
+        kernel: &str,
+        scale_inputs: bool,
+        standardize_outputs: bool,
+        inputs: Vec<String>,
+        output: String,
+    ) -> PyResult<Self> {
+        let x = array_rows(&x);
+        let y = array_values(&y);
+        if x.len() != y.len() {
+            return Err(bad_input(
+                "y",
+                format!("{} values for {} rows of X", y.len(), x.len()),
+            ));
+        }
+        if x.len() < 2 {
+            return Err(bad_input("X", "at least two data rows are needed"));
+        }
+        let dim = x.first().map_or(0, Vec::len);
+        if inputs.len() != dim {
+            return Err(bad_input(
+                "input_names",
+                format!("{} names for {dim} columns of X", inputs.len()),
+            ));
+        }
+        let options = FitOptions {
+            kernel: kernel_of(kernel)?,
+            n_restarts: restarts,
+            seed,
+            scale_inputs,
+            standardize_outputs,
+            ..FitOptions::default()
+        };
+        let gp = py
+            .allow_threads(|| GaussianProcess::fit(&x, &y, &options))
+            .map_err(|e| bad_input("X, y", e))?;
+        Ok(Self { gp, inputs, output })
+    }
+
+    /// Read a GP file of `iuq gp fit` (or of `save`).
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        let text = std::fs::read_to_string(&path)
+            .map_err(|e| bad_input("path", format!("{}: cannot read: {e}", path.display())))?;
+        let file: GpFile = serde_json::from_str(&text)
+            .map_err(|e| bad_input("path", format!("{}: not a GP file: {e}", path.display())))?;
+        if file.format != "iuq-gp" || file.version != 1 {
+            return Err(bad_input(
+                "path",
+                format!(
+                    "{}: format `{}` version {} is not an iuq-gp file of version 1",
+                    path.display(),
+                    file.format,
+                    file.version
+                ),
+            ));
+        }
+        let gp = GaussianProcess::from_json_str(&file.gp.to_string())
+            .map_err(|e| bad_input("path", format!("{}: key `gp`: {e}", path.display())))?;
+        if gp.dimension() != file.inputs.len() {
+            return Err(bad_input(
+                "path",
+                format!(
+                    "{}: {} input names for a GP of dimension {}",
+                    path.display(),
+                    file.inputs.len(),
+                    gp.dimension()
+                ),
+            ));
+        }
+        Ok(Self {
+            gp,
+            inputs: file.inputs,
+            output: file.output,
+        })
+    }
+
+    /// Write the GP file (atomically), byte for byte as `iuq gp fit --out` writes it.
+    fn save(&self, path: PathBuf) -> PyResult<()> {
+        let gp = self
+            .gp
+            .to_json_string()
+            .map_err(|e| failure("serialising the GP", e))?;
+        let file = GpFile {
+            format: "iuq-gp".into(),
+            version: 1,
+            inputs: self.inputs.clone(),
+            output: self.output.clone(),
+            gp: serde_json::from_str(&gp).map_err(|e| failure("serialising the GP", e))?,
+        };
+        let text =
+            serde_json::to_string_pretty(&file).map_err(|e| failure("serialising the GP", e))?;
+        write_atomically(&path, text.as_bytes())
+            .map_err(|e| bad_input("path", format!("{}: {e}", path.display())))
+    }
+
+    /// Mean, latent variance (clamped at 0, as the CLI) and noise variance at the rows of `x`.
+    #[allow(clippy::type_complexity)]
+    fn predict<'py>(
+        &self,
+        py: Python<'py>,
+        x: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<(Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, f64)> {
+        let points = array_rows(&x);
+        let prediction = py
+            .allow_threads(|| self.gp.predict(&points))
+            .map_err(|e| bad_input("X", e))?;
+        let variance = prediction.variance.iter().map(|v| v.max(0.0)).collect();
+        Ok((
+            vec_to_array(py, prediction.mean),
+            vec_to_array(py, variance),
+            prediction.noise_variance,
+        ))
+    }
+
+    /// Predictivity Q2 on a test set (as `iuq gp validate`).
+    fn q2(
+        &self,
+        py: Python<'_>,
+        x: PyReadonlyArray2<'_, f64>,
+        y: PyReadonlyArray1<'_, f64>,
+    ) -> PyResult<f64> {
+        let points = array_rows(&x);
+        let observed = array_values(&y);
+        py.allow_threads(|| self.gp.q2(&points, &observed))
+            .map_err(|e| bad_input("X, y", e))
+    }
+
+    /// The log marginal likelihood at the fitted hyper-parameters (on the GP's working scale:
+    /// unit-cube inputs and standardised outputs unless switched off).
+    #[getter]
+    fn log_marginal_likelihood(&self) -> f64 {
+        self.gp.log_marginal_likelihood()
+    }
+
+    /// Leave-one-out Q2 of the training data (None when undefined).
+    #[getter]
+    fn loo_q2(&self) -> Option<f64> {
+        self.gp.loo_q2()
+    }
+
+    /// Length scales on the working scale.
+    #[getter]
+    fn length_scales(&self) -> Vec<f64> {
+        self.gp.hyperparameters().length_scales.clone()
+    }
+
+    /// Length scales in the units of the inputs.
+    #[getter]
+    fn length_scales_input_units(&self) -> Vec<f64> {
+        self.gp.length_scales_in_input_units()
+    }
+
+    /// Signal variance on the working scale.
+    #[getter]
+    fn signal_variance(&self) -> f64 {
+        self.gp.hyperparameters().signal_variance
+    }
+
+    /// Noise variance on the working scale.
+    #[getter]
+    fn noise_variance(&self) -> f64 {
+        self.gp.hyperparameters().noise_variance
+    }
+
+    /// Names of the input columns.
+    #[getter]
+    fn input_names(&self) -> Vec<String> {
+        self.inputs.clone()
+    }
+
+    /// Name of the output column.
+    #[getter]
+    fn output_name(&self) -> String {
+        self.output.clone()
+    }
+
+    /// Number of inputs.
+    #[getter]
+    fn dimension(&self) -> usize {
+        self.gp.dimension()
+    }
+
+    /// Number of training points.
+    #[getter]
+    fn n_training(&self) -> usize {
+        self.gp.n_training()
+    }
+
+    /// Warnings of the fit (degenerate optimum, poor leave-one-out Q2, …).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.gp.diagnostics().messages()
+    }
+}

@@ -1,0 +1,260 @@
+//! Study files from Python: `iuq pipeline`, `iuq status` and `iuq export` as methods.
+//!
+//! Results are the JSON objects the CLI prints with `--json` (built the same way), handed to
+//! Python as JSON text; the pure-Python `iuq.Study` turns them into objects.
+
+use std::path::PathBuf;
+
+use pyo3::prelude::*;
+use serde_json::{Map, Value, json};
+
+use iuq_campaign::export::{export_csv, export_json, export_rows};
+use iuq_campaign::{CampaignStore, store_path};
+use iuq_study::campaign_runs::{campaign_error, load_study, progress_line};
+use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
+use iuq_study::table_io::write_atomically;
+use iuq_study::{Study, StudyError};
+
+use crate::errors::{bad_input, failure, study_error};
+
+/// A study file, loaded and checked.
+#[pyclass(name = "Study", module = "iuq._native", frozen)]
+pub struct NativeStudy {
+    study: Study,
+}
+
+/// Forwards the pipeline's events to a Python callable as text lines (`None`: quiet).
+struct ProgressObserver {
+    callback: Option<Py<PyAny>>,
+    error: Option<PyErr>,
+}
+
+impl ProgressObserver {
+    fn send(&mut self, line: String) {
+        let Some(callback) = &self.callback else {
+            return;
+        };
+        if self.error.is_some() {
+            return;
+        }
+        Python::with_gil(|py| {
+            if let Err(e) = callback.bind(py).call1((line,)) {
+                self.error = Some(e);
+            }
+        });
+    }
+}
+
+impl PipelineObserver for ProgressObserver {
+    fn event(&mut self, event: &PipelineEvent<'_>) {
+        match event {
+            PipelineEvent::Message(line) => self.send(format!("pipeline: {line}")),
+            PipelineEvent::CampaignProgress { label, progress } => {
+                self.send(format!(
+                    "pipeline: {label}: {}",
+                    progress_line("runs", progress)
+                ));
+            }
+            PipelineEvent::BasisStarted { label } => {
+                self.send(format!("basis: sampling the posterior on the {label}"));
+            }
+            PipelineEvent::BasisStage(state) => {
+                if let Some(d) = state.diagnostics.last() {
+                    self.send(format!(
+                        "basis: stage {}: p = {}, ln Z so far {}, evaluations {}",
+                        d.stage, d.exponent, d.log_evidence, state.evaluations
+                    ));
+                }
+            }
+            PipelineEvent::BasisFinished => {}
+        }
+    }
+}
+
+fn to_json_text(value: &Value) -> PyResult<String> {
+    serde_json::to_string(value).map_err(|e| failure("serialising the result", e))
+}
+
+#[pymethods]
+impl NativeStudy {
+    /// Read and check a study file (as every CLI verb does).
+    #[staticmethod]
+    fn load(path: PathBuf) -> PyResult<Self> {
+        Study::load(&path)
+            .map(|study| Self { study })
+            .map_err(study_error)
+    }
+
+    /// The study's name.
+    #[getter]
+    fn name(&self) -> String {
+        self.study.name.clone()
+    }
+
+    /// The study file.
+    #[getter]
+    fn path(&self) -> PathBuf {
+        self.study.path.clone()
+    }
+
+    /// The parameter names, in file order.
+    #[getter]
+    fn parameters(&self) -> Vec<String> {
+        self.study.space.names()
+    }
+
+    /// The parameters' ranges (prior supports, or plotting ranges for unbounded priors).
+    #[getter]
+    fn ranges(&self) -> Vec<(f64, f64)> {
+        self.study.space.ranges()
+    }
+
+    /// Run the pipeline (`iuq pipeline`); the outcome as the JSON text of `iuq pipeline --json`.
+    #[pyo3(signature = (out, max_parallel, model_posterior, fresh, runs_only, progress))]
+    #[allow(clippy::too_many_arguments)]
+    fn run(
+        &self,
+        py: Python<'_>,
+        out: PathBuf,
+        max_parallel: Option<usize>,
+        model_posterior: bool,
+        fresh: bool,
+        runs_only: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<String> {
+        let options = PipelineOptions {
+            out,
+            max_parallel,
+            model_posterior,
+            fresh,
+            runs_only,
+        };
+        let mut observer = ProgressObserver {
+            callback: progress,
+            error: None,
+        };
+        let result =
+            py.allow_threads(|| iuq_study::pipeline::run(&self.study, &options, &mut observer));
+        if let Some(error) = observer.error.take() {
+            return Err(error);
+        }
+        let outcome = result.map_err(study_error)?;
+        let out = outcome.out.display().to_string();
+        let value = match &outcome.report {
+            None => json!({
+                "study": outcome.study,
+                "runs": outcome.runs,
+                "failed": outcome.failed,
+                "out": out,
+                "report": Value::Null,
+                "seconds": outcome.seconds,
+            }),
+            Some(report) => json!({
+                "study": outcome.study,
+                "out": out,
+                "report": report.display().to_string(),
+                "runs": outcome.runs,
+                "failed": outcome.failed,
+                "converged": outcome.adaptive.as_ref().is_none_or(|a| a.converged),
+                "rounds": outcome.adaptive.as_ref().map_or(0, |a| a.rounds.len()),
+                "adaptive": outcome.adaptive,
+                "q2": outcome.q2,
+                "posterior": outcome.posterior,
+                "posterior_check": outcome.posterior_check.as_ref().map(|c| c.point_summaries()),
+                "stage_seconds": outcome
+                    .stage_seconds
+                    .iter()
+                    .map(|(k, v)| json!({"stage": k, "seconds": v}))
+                    .collect::<Vec<_>>(),
+                "seconds": outcome.seconds,
+            }),
+        };
+        to_json_text(&value)
+    }
+
+    /// Where the study's campaign stands (`iuq status --json`), as JSON text.
+    fn status(&self, py: Python<'_>) -> PyResult<String> {
+        let path = self.study.path.clone();
+        let value = py
+            .allow_threads(|| -> Result<Value, StudyError> {
+                let study = load_study(&path)?;
+                let store_file = store_path(&study);
+                let store = CampaignStore::open_existing(&store_file).map_err(campaign_error)?;
+                let counts = store.counts(None).map_err(campaign_error)?;
+                let attempts = store.attempt_kinds().map_err(campaign_error)?;
+                let failures = store.failures().map_err(campaign_error)?;
+                let names = study.space.names();
+                let failure_values: Vec<Value> = failures
+                    .iter()
+                    .map(|f| {
+                        let parameters: Map<String, Value> = names
+                            .iter()
+                            .cloned()
+                            .zip(f.parameters.iter().map(|v| json!(v)))
+                            .collect();
+                        json!({"run_id": f.run_id, "parameters": parameters, "attempts": f.attempts, "kind": f.kind, "reason": f.reason})
+                    })
+                    .collect();
+                let attempts_map: Map<String, Value> =
+                    attempts.iter().map(|(k, n)| (k.clone(), json!(n))).collect();
+                Ok(json!({
+                    "study": study.name,
+                    "store": store_file.display().to_string(),
+                    "journal_mode": store.journal_mode(),
+                    "counts": counts,
+                    "total": counts.total(),
+                    "attempts": attempts_map,
+                    "failures": failure_values,
+                }))
+            })
+            .map_err(study_error)?;
+        to_json_text(&value)
+    }
+
+    /// Every run of the campaign (`iuq export`): as JSON text of the rows, or, with `out`, written
+    /// to that file as CSV or JSON (`format`), returning the number of rows as JSON text.
+    #[pyo3(signature = (out, format))]
+    fn export(
+        &self,
+        py: Python<'_>,
+        out: Option<PathBuf>,
+        format: Option<String>,
+    ) -> PyResult<String> {
+        let format = match (format.as_deref(), &out) {
+            (Some("csv"), _) => "csv",
+            (Some("json"), _) => "json",
+            (Some(other), _) => {
+                return Err(bad_input(
+                    "format",
+                    format!("`{other}` is not one of csv, json"),
+                ));
+            }
+            (None, Some(p)) if p.extension().is_some_and(|e| e == "json") => "json",
+            (None, Some(_)) => "csv",
+            (None, None) => "json",
+        };
+        let path = self.study.path.clone();
+        py.allow_threads(|| -> Result<String, StudyError> {
+            let study = load_study(&path)?;
+            let store = CampaignStore::open_existing(&store_path(&study)).map_err(campaign_error)?;
+            let rows = export_rows(&store).map_err(campaign_error)?;
+            let parameters = study.space.names();
+            let outputs = study.model.outputs.clone();
+            let table = export_json(&rows, &parameters, &outputs);
+            match &out {
+                None => Ok(table.to_string()),
+                Some(file) => {
+                    let bytes = if format == "csv" {
+                        export_csv(&rows, &parameters, &outputs).map_err(campaign_error)?
+                    } else {
+                        serde_json::to_vec_pretty(&table)
+                            .map_err(|e| StudyError::Failure(e.to_string()))?
+                    };
+                    write_atomically(file, &bytes)?;
+                    Ok(json!({"rows": rows.len(), "out": file.display().to_string(), "format": format}).to_string())
+                }
+            }
+        })
+        .map_err(study_error)
+    }
+}

@@ -1,0 +1,79 @@
+"""iuq.Study: the pipeline (adaptive engine included) against `iuq pipeline`, status, export."""
+
+import shutil
+
+import pytest
+
+import iuq
+from conftest import REPO
+
+
+def copy_cooling(tmp_path, name):
+    target = tmp_path / name
+    shutil.copytree(REPO / "examples" / "cooling", target,
+                    ignore=shutil.ignore_patterns("*.campaign", "*.campaign.previous-*"))
+    return target
+
+
+def without_timings(value):
+    """The value with every wall-clock `seconds` left out (they differ from run to run)."""
+    if isinstance(value, dict):
+        return {k: without_timings(v) for k, v in value.items() if k != "seconds"}
+    if isinstance(value, list):
+        return [without_timings(v) for v in value]
+    return value
+
+
+@pytest.fixture(scope="module")
+def pipeline_run(tmp_path_factory):
+    """The adaptive cooling-curve study run from Python (a command model: cooling_model.py)."""
+    if shutil.which("python3") is None:
+        pytest.skip("the cooling model needs python3")
+    tmp_path = tmp_path_factory.mktemp("py")
+    folder = copy_cooling(tmp_path, "cooling")
+    study = iuq.Study.load(folder / "cooling-curve.toml")
+    lines = []
+    result = study.run(tmp_path / "report", progress=lines.append)
+    return study, result, lines, tmp_path
+
+
+def test_the_pipeline_runs_the_adaptive_engine_and_writes_the_report(pipeline_run):
+    study, result, lines, tmp_path = pipeline_run
+    assert study.name == "cooling-curve" and study.parameters == ["k", "T0"]
+    assert result.report is not None and result.report.is_file()
+    assert result.report.parent == tmp_path / "report"
+    assert result.adaptive is not None and result.rounds == len(result.adaptive["rounds"]) >= 1
+    assert result.runs > 8 and result.failed >= 0
+    assert result.q2.shape == (8,)
+    assert any(line.startswith("pipeline: ") for line in lines)
+    assert "basis" in " ".join(lines)
+
+
+def test_the_outcome_equals_the_cli(pipeline_run, cli, tmp_path):
+    _, result, _, _ = pipeline_run
+    folder = copy_cooling(tmp_path, "cooling")
+    expected = cli("pipeline", folder / "cooling-curve.toml", "--out", tmp_path / "report")
+    for key in ("runs", "failed", "converged", "rounds", "posterior", "adaptive", "q2"):
+        assert without_timings(result.raw[key]) == without_timings(expected[key]), key
+
+
+def test_status_and_export_read_the_campaign(pipeline_run, tmp_path):
+    study, result, _, _ = pipeline_run
+    status = study.status()
+    assert status.total == status.counts["succeeded"] + status.counts["failed"]
+    assert status.total >= result.runs - result.failed
+    rows = study.export()
+    assert len(rows) == status.total
+    assert {"k", "T0"} <= set(rows[0])
+    assert study.export(tmp_path / "runs.csv") == status.total
+    assert (tmp_path / "runs.csv").read_text().count("\n") == status.total + 1
+    assert study.export(tmp_path / "runs.json") == status.total
+
+
+def test_a_bad_study_is_a_value_error_naming_the_file_and_key(tmp_path):
+    path = tmp_path / "bad.toml"
+    path.write_text('name = "bad"\n[parameters]\nk = { uniform = [1, 0] }\n')
+    with pytest.raises(ValueError, match="bad.toml"):
+        iuq.Study.load(path)
+    with pytest.raises(ValueError, match="cannot read"):
+        iuq.Study.load(tmp_path / "missing.toml")
