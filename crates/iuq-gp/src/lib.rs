@@ -32,6 +32,7 @@ mod forward_substitution;
 pub mod gaussian_process;
 pub mod kernel;
 pub mod log_marginal_likelihood;
+pub mod mean_gradient;
 mod multi_start;
 pub mod optimizer;
 pub mod persistence;

@@ -31,7 +31,7 @@ use serde_json::{Value, json};
 
 use iuq_basis::LogLikelihood;
 use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome, ParameterSpace};
-use iuq_gp::{GaussianProcess, GpBank};
+use iuq_gp::GpBank;
 use iuq_study::posterior::build_posterior_with;
 use iuq_study::study::{ModelSection, Study};
 use iuq_umbridge::{Jacobian, ServedModel, Server, ServerOptions};
@@ -122,12 +122,7 @@ fn serve_umbridge(args: &UmbridgeArgs, json_output: bool) -> Result<()> {
     let forward: Option<Arc<dyn Model>> = match &args.surrogate {
         Some(path) => {
             let bank = load_surrogate(path, &study)?;
-            match GpMeanJacobian::new(&bank) {
-                Ok(j) => jacobian = Some(Arc::new(j)),
-                Err(reason) => {
-                    eprintln!("iuq serve: warning: no /Gradient for the surrogate ({reason})")
-                }
-            }
+            jacobian = Some(Arc::new(GpMeanJacobian(bank.clone())));
             values_only = Some(Arc::new(GpBankMeans(bank.clone())));
             Some(Arc::new(bank) as Arc<dyn Model>)
         }
@@ -399,181 +394,20 @@ impl Model for LogPosterior {
     }
 }
 
-/// The exact Jacobian of the posterior means of a GP bank: for one GP with training inputs
-/// x̃ᵢ (scaled), weights α = K⁻¹ỹ, signal variance c and length scales l,
-///
-/// ∂μ/∂x_k = (s_y / r_k) · Σᵢ αᵢ · c·exp(−½ Σ_j (x̃_j − x̃ᵢⱼ)²/l_j²) · (−(x̃_k − x̃ᵢₖ)/l_k²),
-///
-/// with x̃_k = (x_k − a_k)/r_k the input scaling and s_y the output scale. The GP keeps its α
-/// private, so α is recomputed here from what it publishes (hyper-parameters, jitter, scalings,
-/// training data): K = c·R + (σ² + jitter)·I factorised by Cholesky, O(n³/6) once per GP at
-/// start. The reconstruction is checked against the GP's own mean at probe points; a GP that
-/// fails the check is served without a gradient (with a warning).
-struct GpMeanJacobian {
-    terms: Vec<GpTerms>,
-}
-
-struct GpTerms {
-    /// Scaled training inputs, row-major n×d.
-    x: Vec<f64>,
-    alpha: Vec<f64>,
-    inverse_squared_length_scales: Vec<f64>,
-    signal_variance: f64,
-    lower: Vec<f64>,
-    range: Vec<f64>,
-    mean: f64,
-    scale: f64,
-}
-
-/// Solves K·α = b for a symmetric positive definite K (row-major n×n, overwritten by its
-/// Cholesky factor); `None` when K is not positive definite.
-fn cholesky_solve(k: &mut [f64], n: usize, b: &[f64]) -> Option<Vec<f64>> {
-    for j in 0..n {
-        for i in j..n {
-            let (row_i, row_j) = (i * n, j * n);
-            let dot: f64 = (0..j).map(|t| k[row_i + t] * k[row_j + t]).sum();
-            let v = k[row_i + j] - dot;
-            if i == j {
-                if !(v > 0.0 && v.is_finite()) {
-                    return None;
-                }
-                k[row_j + j] = v.sqrt();
-            } else {
-                k[row_i + j] = v / k[row_j + j];
-            }
-        }
-    }
-    // L y = b, then Lᵀ α = y.
-    let mut y = b.to_vec();
-    for i in 0..n {
-        let dot: f64 = (0..i).map(|t| k[i * n + t] * y[t]).sum();
-        y[i] = (y[i] - dot) / k[i * n + i];
-    }
-    for i in (0..n).rev() {
-        let dot: f64 = (i + 1..n).map(|t| k[t * n + i] * y[t]).sum();
-        y[i] = (y[i] - dot) / k[i * n + i];
-    }
-    Some(y)
-}
-
-impl GpTerms {
-    fn new(gp: &GaussianProcess) -> std::result::Result<Self, String> {
-        let d = gp.dimension();
-        let h = gp.hyperparameters();
-        let length_scales: Vec<f64> = match h.length_scales.as_slice() {
-            [l] => vec![*l; d],
-            ls if ls.len() == d => ls.to_vec(),
-            ls => return Err(format!("{} length scales for {d} inputs", ls.len())),
-        };
-        let inverse_squared_length_scales: Vec<f64> =
-            length_scales.iter().map(|l| 1.0 / (l * l)).collect();
-        let scaling = gp.input_scaling();
-        let output = gp.output_scaling();
-        let training = gp.training_inputs();
-        let n = training.len();
-        let x: Vec<f64> = training
-            .iter()
-            .flat_map(|p| (0..d).map(move |k| (p[k] - scaling.lower[k]) / scaling.range[k]))
-            .collect();
-        let c = h.signal_variance;
-        let mut kernel = vec![0.0; n * n];
-        for i in 0..n {
-            for j in 0..=i {
-                let r2: f64 = (0..d)
-                    .map(|k| {
-                        let t = x[i * d + k] - x[j * d + k];
-                        t * t * inverse_squared_length_scales[k]
-                    })
-                    .sum();
-                let v = c * (-0.5 * r2).exp();
-                kernel[i * n + j] = v;
-                kernel[j * n + i] = v;
-            }
-            kernel[i * n + i] += h.noise_variance + gp.jitter();
-        }
-        let standardised: Vec<f64> = gp
-            .training_outputs()
-            .iter()
-            .map(|&y| output.apply(y))
-            .collect();
-        let alpha = cholesky_solve(&mut kernel, n, &standardised)
-            .ok_or("the kernel matrix is not positive definite")?;
-        let terms = Self {
-            x,
-            alpha,
-            inverse_squared_length_scales,
-            signal_variance: c,
-            lower: scaling.lower.clone(),
-            range: scaling.range.clone(),
-            mean: output.mean,
-            scale: output.std,
-        };
-        // Check the reconstruction at midpoints of consecutive training points.
-        let probes: Vec<Vec<f64>> = training
-            .windows(2)
-            .take(16)
-            .map(|w| w[0].iter().zip(&w[1]).map(|(a, b)| 0.5 * (a + b)).collect())
-            .collect();
-        let expected = gp.predict_mean(&probes).map_err(|e| e.to_string())?;
-        for (p, e) in probes.iter().zip(expected) {
-            let (mine, _) = terms.mean_and_gradient(p);
-            if (mine - e).abs() > 1e-6 * (output.std + (e - output.mean).abs()) {
-                return Err(format!(
-                    "the mean recomputed from the GP's hyper-parameters ({mine}) differs from the GP's ({e})"
-                ));
-            }
-        }
-        Ok(terms)
-    }
-
-    /// The posterior mean and its gradient at `p` (original units).
-    fn mean_and_gradient(&self, p: &[f64]) -> (f64, Vec<f64>) {
-        let d = self.lower.len();
-        let xs: Vec<f64> = (0..d)
-            .map(|k| (p[k] - self.lower[k]) / self.range[k])
-            .collect();
-        let mut value = 0.0;
-        let mut gradient = vec![0.0; d];
-        for (row, &a) in self.x.chunks_exact(d).zip(&self.alpha) {
-            let mut r2 = 0.0;
-            for k in 0..d {
-                let t = xs[k] - row[k];
-                r2 += t * t * self.inverse_squared_length_scales[k];
-            }
-            let w = a * self.signal_variance * (-0.5 * r2).exp();
-            value += w;
-            for k in 0..d {
-                gradient[k] -= w * (xs[k] - row[k]) * self.inverse_squared_length_scales[k];
-            }
-        }
-        for k in 0..d {
-            gradient[k] *= self.scale / self.range[k];
-        }
-        (self.mean + self.scale * value, gradient)
-    }
-}
-
-impl GpMeanJacobian {
-    fn new(bank: &GpBank) -> std::result::Result<Self, String> {
-        Ok(Self {
-            terms: bank
-                .gps()
-                .iter()
-                .map(GpTerms::new)
-                .collect::<std::result::Result<_, _>>()?,
-        })
-    }
-}
+/// The exact Jacobian of the posterior means of a GP bank: one row per GP, from
+/// [`iuq_gp::GaussianProcess::mean_and_gradient`] (its own α, O(n·d) per point).
+struct GpMeanJacobian(GpBank);
 
 impl Jacobian for GpMeanJacobian {
     fn jacobian(&self, x: &[f64]) -> std::result::Result<Vec<Vec<f64>>, EvaluationFailure> {
-        if x.iter().any(|v| !v.is_finite()) {
-            return Err(EvaluationFailure::new("non-finite input"));
-        }
-        Ok(self
-            .terms
+        self.0
+            .gps()
             .iter()
-            .map(|t| t.mean_and_gradient(x).1)
-            .collect())
+            .map(|gp| {
+                gp.mean_and_gradient(x)
+                    .map(|(_, gradient)| gradient)
+                    .map_err(|e| EvaluationFailure::new(e.to_string()))
+            })
+            .collect()
     }
 }
