@@ -11,7 +11,8 @@
 //! [`stretching`] and [`validation`] hold the checks against HemoCell and optical tweezers;
 //! [`benchmark`] measures the fluid solver against the memory bandwidth.
 //!
-//! Everything here is numerical: no file or terminal I/O ([`shape_output`] returns strings).
+//! Everything here is numerical: no file or terminal I/O ([`shape_output`] returns strings,
+//! [`shape_input`] reads them).
 //!
 //! # Validation
 //! The long checks against HemoCell and the optical-tweezers data (docs/cell-model.md) stay out
@@ -51,6 +52,7 @@ pub mod membrane_forces;
 pub mod mesh;
 pub mod model;
 pub mod protocol;
+pub mod shape_input;
 pub mod shape_output;
 pub mod stretching;
 pub mod units;
