@@ -36,8 +36,16 @@ pub struct GpBank {
     predictive_std: PredictiveStd,
 }
 
+/// The value of a GP file's `format` field: every GP file of iuq (`iuq gp fit`, the pipeline's
+/// `gp-bank.json`, the Python package's `save`) is a bank, of one output or many.
+pub const BANK_FORMAT: &str = "iuq-gp-bank";
+/// The version of the bank layout written by this crate.
+pub const BANK_FORMAT_VERSION: u32 = 1;
+
 #[derive(Clone, Serialize, Deserialize)]
 struct SavedBank {
+    format: String,
+    version: u32,
     input_names: Vec<String>,
     output_names: Vec<String>,
     predictive_std: PredictiveStd,
@@ -47,6 +55,8 @@ struct SavedBank {
 impl From<GpBank> for SavedBank {
     fn from(b: GpBank) -> Self {
         Self {
+            format: BANK_FORMAT.to_string(),
+            version: BANK_FORMAT_VERSION,
             input_names: b.input_names,
             output_names: b.output_names,
             predictive_std: b.predictive_std,
@@ -58,6 +68,12 @@ impl From<GpBank> for SavedBank {
 impl TryFrom<SavedBank> for GpBank {
     type Error = GpError;
     fn try_from(s: SavedBank) -> Result<Self> {
+        if s.format != BANK_FORMAT || s.version != BANK_FORMAT_VERSION {
+            return Err(GpError::Persistence(format!(
+                "format `{}` version {} is not a GP file (`{BANK_FORMAT}` version {BANK_FORMAT_VERSION})",
+                s.format, s.version
+            )));
+        }
         GpBank::new(s.input_names, s.output_names, s.gps)
             .map(|b| b.with_predictive_std(s.predictive_std))
     }
@@ -360,6 +376,21 @@ mod tests {
         let (b, x, outputs) = bank();
         let json = b.to_json_string().unwrap();
         let back = GpBank::from_json_str(&json).unwrap();
+        // The file names its format; another format or version is refused, naming both.
+        assert!(
+            json.starts_with(r#"{"format":"iuq-gp-bank","version":1,"#),
+            "{}",
+            &json[..60]
+        );
+        for (from, to) in [
+            (r#""format":"iuq-gp-bank""#, r#""format":"iuq-gp""#),
+            (r#""version":1"#, r#""version":2"#),
+        ] {
+            let message = GpBank::from_json_str(&json.replacen(from, to, 1))
+                .unwrap_err()
+                .to_string();
+            assert!(message.contains("is not a GP file"), "{message}");
+        }
         let pts = vec![vec![0.2, 0.3, 0.4], vec![0.7, 0.1, 0.5]];
         assert_eq!(
             b.evaluate_batch(&pts).unwrap(),

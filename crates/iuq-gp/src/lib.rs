@@ -45,7 +45,7 @@ mod test_data;
 pub mod validation;
 mod vector_math;
 
-pub use bank::{GpBank, PredictiveStd};
+pub use bank::{BANK_FORMAT, BANK_FORMAT_VERSION, GpBank, PredictiveStd};
 pub use bounds::Bounds;
 pub use classification::{ClassifierOptions, FailureClassifier};
 pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};

@@ -153,9 +153,10 @@ fn gp_predict(args: &GpPredictBenchArgs, json: bool) -> Result<()> {
     if args.repeats == 0 {
         return Err(input_error("--repeats must be at least 1"));
     }
-    let (file, gp) = crate::commands::gp::load_gp(&args.model)?;
+    let bank = crate::commands::gp::load_gp(&args.model)?;
+    let gp = &bank.gps()[0];
     let table = read_numeric_csv(&args.points, false)?;
-    let x = table.select(&file.inputs, &args.points)?;
+    let x = table.select(bank.input_names(), &args.points)?;
     let mut with_variance = Vec::with_capacity(args.repeats);
     let mut mean_only = Vec::with_capacity(args.repeats);
     for _ in 0..args.repeats {

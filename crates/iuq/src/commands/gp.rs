@@ -1,18 +1,20 @@
 //! `iuq gp fit|predict|validate`: Gaussian-process surrogates from CSV data.
 //!
-//! A fitted GP is saved as JSON in an envelope that records the input and output names, so
-//! that `predict` and `validate` find their columns by name:
-//! `{"format": "iuq-gp", "version": 1, "inputs": [...], "output": "y", "gp": {...}}`.
+//! A fitted GP is saved as iuq's one GP file format, a GP bank of one output
+//! (`{"format": "iuq-gp-bank", "version": 1, "input_names": [...], "output_names": ["y"], ...}`,
+//! `iuq_gp::GpBank`), which records the input and output names, so that `predict` and
+//! `validate` find their columns by name, and `iuq serve --surrogate` takes it as it takes the
+//! pipeline's `gp-bank.json`.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Subcommand};
-use serde::{Deserialize, Serialize};
 use serde_json::json;
 
-use iuq_gp::{FitOptions, GaussianProcess, Kernel};
+use iuq_core::Model;
+use iuq_gp::{FitOptions, GaussianProcess, GpBank, Kernel};
 use iuq_study::table_io::{read_numeric_csv, write_atomically, write_numeric_csv};
 
 use crate::input_error::{BadInput, input_error};
@@ -97,46 +99,20 @@ pub struct ValidateArgs {
     pub data: PathBuf,
 }
 
-/// A GP file: the GP and the names of its columns.
-#[derive(Debug, Serialize, Deserialize)]
-pub struct GpFile {
-    /// Always `iuq-gp`.
-    pub format: String,
-    /// Format version (1).
-    pub version: u32,
-    /// Input column names.
-    pub inputs: Vec<String>,
-    /// Output column name.
-    pub output: String,
-    /// The fitted GP.
-    pub gp: serde_json::Value,
-}
-
-/// Read a GP file; errors name the file.
-pub fn load_gp(path: &Path) -> Result<(GpFile, GaussianProcess)> {
+/// Read a GP file (a GP bank of one output); errors name the file.
+pub fn load_gp(path: &Path) -> Result<GpBank> {
     let text = std::fs::read_to_string(path)
         .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())))?;
-    let file: GpFile =
-        serde_json::from_str(&text).bad_input(|| format!("{}: not a GP file", path.display()))?;
-    if file.format != "iuq-gp" || file.version != 1 {
+    let bank =
+        GpBank::from_json_str(&text).bad_input(|| format!("{}: not a GP file", path.display()))?;
+    if bank.gps().len() != 1 {
         return Err(input_error(format!(
-            "{}: format `{}` version {} is not an iuq-gp file of version 1",
+            "{}: a GP bank of {} outputs; `iuq gp` takes a GP file of one output",
             path.display(),
-            file.format,
-            file.version
+            bank.gps().len()
         )));
     }
-    let gp = GaussianProcess::from_json_str(&file.gp.to_string())
-        .bad_input(|| format!("{}: key `gp`", path.display()))?;
-    if gp.dimension() != file.inputs.len() {
-        return Err(input_error(format!(
-            "{}: {} input names for a GP of dimension {}",
-            path.display(),
-            file.inputs.len(),
-            gp.dimension()
-        )));
-    }
-    Ok((file, gp))
+    Ok(bank)
 }
 
 fn fit(args: &FitArgs, json: bool) -> Result<()> {
@@ -174,14 +150,10 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
     let gp =
         GaussianProcess::fit(&x, &y, &options).bad_input(|| format!("{}", args.data.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let file = GpFile {
-        format: "iuq-gp".into(),
-        version: 1,
-        inputs: args.inputs.clone(),
-        output: args.output.clone(),
-        gp: serde_json::from_str(&gp.to_json_string()?).context("serialising the GP")?,
-    };
-    write_atomically(&args.out, serde_json::to_string_pretty(&file)?.as_bytes())?;
+    let bank = GpBank::new(args.inputs.clone(), vec![args.output.clone()], vec![gp])
+        .bad_input(|| format!("{}", args.data.display()))?;
+    let gp = &bank.gps()[0];
+    write_atomically(&args.out, bank.to_json_string()?.as_bytes())?;
     let h = gp.hyperparameters();
     let warnings = gp.diagnostics().messages();
     let value = json!({
@@ -224,15 +196,16 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
 }
 
 fn predict(args: &PredictArgs, json: bool) -> Result<()> {
-    let (file, gp) = load_gp(&args.model)?;
+    let bank = load_gp(&args.model)?;
+    let gp = &bank.gps()[0];
     let table = read_numeric_csv(&args.points, false)?;
-    let x = table.select(&file.inputs, &args.points)?;
+    let x = table.select(bank.input_names(), &args.points)?;
     let start = Instant::now();
     let prediction = gp
         .predict(&x)
         .bad_input(|| format!("{}", args.points.display()))?;
     let seconds = start.elapsed().as_secs_f64();
-    let mut columns = file.inputs.clone();
+    let mut columns = bank.input_names().to_vec();
     columns.extend([
         "mean".to_string(),
         "std".to_string(),
@@ -267,11 +240,12 @@ fn predict(args: &PredictArgs, json: bool) -> Result<()> {
 }
 
 fn validate(args: &ValidateArgs, json: bool) -> Result<()> {
-    let (file, gp) = load_gp(&args.model)?;
+    let bank = load_gp(&args.model)?;
+    let gp = &bank.gps()[0];
     let table = read_numeric_csv(&args.data, false)?;
-    let x = table.select(&file.inputs, &args.data)?;
+    let x = table.select(bank.input_names(), &args.data)?;
     let y: Vec<f64> = table
-        .select(std::slice::from_ref(&file.output), &args.data)?
+        .select(&bank.output_names()[..1], &args.data)?
         .into_iter()
         .map(|r| r[0])
         .collect();

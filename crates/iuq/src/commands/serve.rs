@@ -246,23 +246,14 @@ fn announce(server: &Server, parallel: usize, json_output: bool) {
     let _ = std::io::stdout().flush();
 }
 
-/// Reads a GP file of `iuq gp fit` or a GP bank JSON whose inputs are the study's parameters.
+/// Reads a GP file (`iuq gp fit`'s, or the pipeline's `gp-bank.json`) whose inputs are the
+/// study's parameters.
 fn load_surrogate(path: &Path, study: &Study) -> Result<GpBank> {
     let shown = path.display();
     let text = std::fs::read_to_string(path)
         .map_err(|e| input_error(format!("--surrogate {shown}: cannot read: {e}")))?;
-    let value: Value =
-        serde_json::from_str(&text).bad_input(|| format!("--surrogate {shown}: not JSON"))?;
-    let bank = if value.get("format").and_then(Value::as_str) == Some("iuq-gp")
-        && value.get("gp").is_some()
-    {
-        let (gp_file, gp) = crate::commands::gp::load_gp(path)?;
-        GpBank::new(gp_file.inputs, vec![gp_file.output], vec![gp])
-            .bad_input(|| format!("--surrogate {shown}"))?
-    } else {
-        GpBank::from_json_str(&text)
-            .bad_input(|| format!("--surrogate {shown}: neither a GP file nor a GP bank"))?
-    };
+    let bank =
+        GpBank::from_json_str(&text).bad_input(|| format!("--surrogate {shown}: not a GP file"))?;
     let names = study.space.names();
     if bank.input_names() != names.as_slice() {
         return Err(input_error(format!(
