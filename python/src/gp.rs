@@ -1,30 +1,37 @@
 //! Gaussian-process surrogates: `iuq gp fit|predict|validate` from Python.
 //!
-//! A fitted GP is saved in the CLI's file format (the envelope of `crates/iuq/src/commands/gp.rs`):
-//! `{"format": "iuq-gp", "version": 1, "inputs": [...], "output": "y", "gp": {...}}`, written
-//! with the same serialiser, so a file saved here and one written by `iuq gp fit` on the same data
-//! are identical, and either side loads the other's.
+//! A fitted GP is saved as the CLI saves it: a GP bank of one output ([`GpBank`], whose
+//! `to_json_string` both sides call), so a file saved here and one written by `iuq gp fit` on the
+//! same data are identical, and either side loads the other's. `load` also reads the former
+//! envelope of `iuq gp fit`,
+//! `{"format": "iuq-gp", "version": 1, "inputs": [...], "output": "y", "gp": {...}}`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use serde::{Deserialize, Serialize};
+use serde::Deserialize;
 
-use iuq_gp::{FitOptions, GaussianProcess, Kernel};
+use iuq_gp::{FitOptions, GaussianProcess, GpBank, Kernel};
 use iuq_study::table_io::write_atomically;
 
 use crate::arrays::{array_rows, array_values, vec_to_array};
 use crate::errors::{bad_input, failure};
 
-/// The CLI's GP file: the GP and the names of its columns (field order as the CLI writes it).
-#[derive(Debug, Serialize, Deserialize)]
-struct GpFile {
-    format: String,
+/// The former GP file of `iuq gp fit` (read only).
+#[derive(Debug, Deserialize)]
+struct LegacyGpFile {
     version: u32,
     inputs: Vec<String>,
     output: String,
     gp: serde_json::Value,
+}
+
+/// The names a GP bank file records.
+#[derive(Debug, Deserialize)]
+struct BankNames {
+    input_names: Vec<String>,
+    output_names: Vec<String>,
 }
 
 /// A fitted Gaussian process with the names of its input and output columns.
@@ -33,6 +40,53 @@ pub struct NativeGaussianProcess {
     gp: GaussianProcess,
     inputs: Vec<String>,
     output: String,
+}
+
+/// Read a GP file: a bank of one output, or the former `iuq-gp` envelope.
+fn read_gp_file(path: &Path) -> PyResult<NativeGaussianProcess> {
+    let file = path.display();
+    let bad = |reason: String| bad_input("path", format!("{file}: {reason}"));
+    let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| bad(format!("not a GP file: {e}")))?;
+    if value.get("format").and_then(|f| f.as_str()) == Some("iuq-gp") {
+        let legacy: LegacyGpFile =
+            serde_json::from_value(value).map_err(|e| bad(format!("not a GP file: {e}")))?;
+        if legacy.version != 1 {
+            return Err(bad(format!(
+                "format `iuq-gp` version {} is not version 1",
+                legacy.version
+            )));
+        }
+        let gp = GaussianProcess::from_json_str(&legacy.gp.to_string())
+            .map_err(|e| bad(format!("key `gp`: {e}")))?;
+        if gp.dimension() != legacy.inputs.len() {
+            return Err(bad(format!(
+                "{} input names for a GP of dimension {}",
+                legacy.inputs.len(),
+                gp.dimension()
+            )));
+        }
+        return Ok(NativeGaussianProcess {
+            gp,
+            inputs: legacy.inputs,
+            output: legacy.output,
+        });
+    }
+    let bank = GpBank::from_json_str(&text).map_err(|e| bad(format!("not a GP file: {e}")))?;
+    let names: BankNames =
+        serde_json::from_value(value).map_err(|e| bad(format!("not a GP file: {e}")))?;
+    match (bank.gps(), names.output_names.as_slice()) {
+        ([gp], [output]) => Ok(NativeGaussianProcess {
+            gp: gp.clone(),
+            inputs: names.input_names,
+            output: output.clone(),
+        }),
+        (gps, _) => Err(bad(format!(
+            "a GP bank of {} outputs; GaussianProcess.load takes a GP file of one output",
+            gps.len()
+        ))),
+    }
 }
 
 fn kernel_of(name: &str) -> PyResult<Kernel> {
@@ -100,56 +154,20 @@ impl NativeGaussianProcess {
     /// Read a GP file of `iuq gp fit` (or of `save`).
     #[staticmethod]
     fn load(path: PathBuf) -> PyResult<Self> {
-        let text = std::fs::read_to_string(&path)
-            .map_err(|e| bad_input("path", format!("{}: cannot read: {e}", path.display())))?;
-        let file: GpFile = serde_json::from_str(&text)
-            .map_err(|e| bad_input("path", format!("{}: not a GP file: {e}", path.display())))?;
-        if file.format != "iuq-gp" || file.version != 1 {
-            return Err(bad_input(
-                "path",
-                format!(
-                    "{}: format `{}` version {} is not an iuq-gp file of version 1",
-                    path.display(),
-                    file.format,
-                    file.version
-                ),
-            ));
-        }
-        let gp = GaussianProcess::from_json_str(&file.gp.to_string())
-            .map_err(|e| bad_input("path", format!("{}: key `gp`: {e}", path.display())))?;
-        if gp.dimension() != file.inputs.len() {
-            return Err(bad_input(
-                "path",
-                format!(
-                    "{}: {} input names for a GP of dimension {}",
-                    path.display(),
-                    file.inputs.len(),
-                    gp.dimension()
-                ),
-            ));
-        }
-        Ok(Self {
-            gp,
-            inputs: file.inputs,
-            output: file.output,
-        })
+        read_gp_file(&path)
     }
 
     /// Write the GP file (atomically), byte for byte as `iuq gp fit --out` writes it.
     fn save(&self, path: PathBuf) -> PyResult<()> {
-        let gp = self
-            .gp
+        let bank = GpBank::new(
+            self.inputs.clone(),
+            vec![self.output.clone()],
+            vec![self.gp.clone()],
+        )
+        .map_err(|e| failure("saving the GP", e))?;
+        let text = bank
             .to_json_string()
             .map_err(|e| failure("serialising the GP", e))?;
-        let file = GpFile {
-            format: "iuq-gp".into(),
-            version: 1,
-            inputs: self.inputs.clone(),
-            output: self.output.clone(),
-            gp: serde_json::from_str(&gp).map_err(|e| failure("serialising the GP", e))?,
-        };
-        let text =
-            serde_json::to_string_pretty(&file).map_err(|e| failure("serialising the GP", e))?;
         write_atomically(&path, text.as_bytes())
             .map_err(|e| bad_input("path", format!("{}: {e}", path.display())))
     }

@@ -50,6 +50,20 @@ def test_fit_save_predict_q2_equal_the_cli(cli, tmp_path):
     assert loaded.log_marginal_likelihood == gp.log_marginal_likelihood
 
 
+def test_the_former_gp_envelope_still_loads(tmp_path):
+    x, y = data()
+    gp = iuq.GaussianProcess.fit(x, y, restarts=2, seed=1, input_names=["a", "b"], output_name="f")
+    gp.save(tmp_path / "bank.json")
+    bank = json.loads((tmp_path / "bank.json").read_text())
+    assert bank["input_names"] == ["a", "b"] and bank["output_names"] == ["f"]
+    legacy = {"format": "iuq-gp", "version": 1, "inputs": ["a", "b"], "output": "f",
+              "gp": bank["gps"][0]}
+    (tmp_path / "legacy.json").write_text(json.dumps(legacy))
+    loaded = iuq.GaussianProcess.load(tmp_path / "legacy.json")
+    assert loaded.input_names == ["a", "b"] and loaded.output_name == "f"
+    assert np.array_equal(loaded.predict(x), gp.predict(x))
+
+
 def test_fit_summary_equals_the_cli_json(cli, tmp_path):
     x, y = data()
     train = tmp_path / "train.csv"
@@ -107,7 +121,37 @@ def test_bad_input_names_the_argument(tmp_path):
         gp.predict([[np.nan, 0.0]])
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"format": "other", "version": 1, "inputs": [], "output": "y", "gp": {}}))
-    with pytest.raises(ValueError, match="^path: .*bad.json: format `other` version 1"):
+    with pytest.raises(ValueError, match="^path: .*bad.json: not a GP file"):
+        iuq.GaussianProcess.load(bad)
+    bad.write_text(json.dumps({"format": "iuq-gp", "version": 2, "inputs": [], "output": "y", "gp": {}}))
+    with pytest.raises(ValueError, match="^path: .*bad.json: format `iuq-gp` version 2"):
         iuq.GaussianProcess.load(bad)
     with pytest.raises(ValueError, match="^path: .*cannot read"):
         iuq.GaussianProcess.load(tmp_path / "missing.json")
+
+
+def test_the_gil_is_released_while_rust_fits():
+    import threading
+    import time
+
+    x = iuq.design.lhs(250, 4, seed=2)
+    y = np.sin(4 * x[:, 0]) + x[:, 1] * x[:, 2] + x[:, 3]
+    window = {}
+
+    def fit():
+        window["start"] = time.perf_counter()
+        iuq.GaussianProcess.fit(x, y, restarts=10, seed=0)
+        window["end"] = time.perf_counter()
+
+    worker = threading.Thread(target=fit)
+    ticks = []
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+        time.sleep(0.001)
+    worker.join()
+    start, end = window["start"], window["end"]
+    assert end - start > 0.2, "the fit is too short to tell"
+    # With the GIL held during the fit the main thread could not tick inside the window.
+    inside = [t for t in ticks if start + 0.05 < t < end - 0.05]
+    assert len(inside) > 10
