@@ -120,7 +120,8 @@ class Study:
         ``model_posterior`` also samples on the model itself; ``fresh`` moves the campaign aside
         and recomputes every run; ``runs_only`` stops after the training and test runs.
         ``progress=True`` prints the pipeline's news on stderr as the CLI does; a callable
-        receives each line. The GIL is released while the pipeline works.
+        receives each line (an exception it raises stops the reporting and is raised when the
+        pipeline returns). The GIL is released while the pipeline works.
         """
         if out is None:
             out = Path(f"{self.path.stem}-report")

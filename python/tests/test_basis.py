@@ -87,6 +87,35 @@ def test_the_data_form_with_a_python_model_matches_least_squares():
     assert result.std == pytest.approx(exact_sd, rel=0.1)
 
 
+def test_the_data_form_equals_the_cli_bit_for_bit(cli, tmp_path):
+    t = [0.0, 1.0, 2.0, 3.0]
+    y = [1.05, 1.42, 2.07, 2.46]
+    err = [0.1, 0.1, 0.2, 0.1]
+    data = tmp_path / "line.csv"
+    data.write_text("t,y,e\n" + "".join(f"{a!r},{b!r},{c!r}\n" for a, b, c in zip(t, y, err)))
+    outputs = ", ".join(f'y{j} = "a + b*{tj!r}"' for j, tj in enumerate(t))
+    study = tmp_path / "line.toml"
+    study.write_text(
+        'name = "line"\n[parameters]\na = { uniform = [0, 2] }\nb = { uniform = [0, 1] }\n'
+        '[likelihood]\ndata = { file = "line.csv", x = "t", y = "y", y_err = "e" }\n'
+        f'[model]\nkind = "expression"\noutputs = {{ {outputs} }}\n'
+    )
+    out = tmp_path / "basis"
+    summary = cli("basis", study, "--samples", 400, "--seed", 6, "--out", out)
+    columns, table = read_csv(out / "samples.csv")
+    assert columns[:3] == ["a", "b", "sigma_m"]
+    times = np.array(t)
+
+    def line(theta):
+        return theta[:, :1] + theta[:, 1:2] * times[None, :]
+
+    ours = iuq.basis(model=line, data=y, data_std=err, bounds={"a": (0, 2), "b": (0, 1)},
+                     samples=400, seed=6)
+    assert ours.names == ["a", "b", "sigma_m"]
+    assert np.array_equal(ours.samples, table[:, :3])
+    assert ours.log_evidence == summary["log_evidence"]
+
+
 def test_the_data_form_samples_the_modelling_error():
     t = np.linspace(0.5, 1.5, 6)
     y = 2.0 * t
