@@ -12,7 +12,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["count", "seed_of", "matrix", "vector", "parameter_box"]
+__all__ = ["count", "seed_of", "matrix", "vector", "parameter_box", "parameter_priors"]
 
 
 def count(name: str, value: Any, minimum: int = 0) -> int:
@@ -127,9 +127,9 @@ def parameter_box(
     return names, ranges
 
 
-def output_count(model: Any, ranges: Sequence[tuple[float, float]], outputs: Any) -> list[str]:
+def output_count(model: Any, centre: Sequence[float], outputs: Any) -> list[str]:
     """Output names of a Python model: ``outputs`` (a count or names), else learnt from one call
-    of the model at the centre of the box (the one extra evaluation is documented)."""
+    of the model at ``centre`` (the one extra evaluation is documented)."""
     if outputs is not None:
         if isinstance(outputs, numbers.Integral) and not isinstance(outputs, bool):
             m = count("outputs", outputs, 1)
@@ -138,8 +138,7 @@ def output_count(model: Any, ranges: Sequence[tuple[float, float]], outputs: Any
         if not names:
             raise ValueError("outputs: at least one output is needed")
         return names
-    centre = np.ascontiguousarray([[0.5 * (lo + hi) for lo, hi in ranges]], dtype=np.float64)
-    result = model(centre)
+    result = model(np.ascontiguousarray([list(centre)], dtype=np.float64))
     if isinstance(result, tuple) and len(result) == 2:
         result = result[0]
     shape = np.shape(result)
@@ -150,3 +149,107 @@ def output_count(model: Any, ranges: Sequence[tuple[float, float]], outputs: Any
     raise ValueError(
         f"model: returned shape {shape} for 1 point; expected (1,) or (1, m) (an (n, d) array in, (n,) or (n, m) out)"
     )
+
+
+#: Prior kinds and their parameters, as in a study file's ``[parameters]`` section.
+PRIOR_KINDS = {"uniform": 2, "normal": 2, "log_normal": 2, "truncated_normal": 4}
+
+#: SALib's ``dists`` with the order of their ``bounds`` entries mapped to ours.
+_SALIB_DISTS = {
+    "unif": lambda b: ("uniform", [b[0], b[1]]),
+    "norm": lambda b: ("normal", [b[0], b[1]]),
+    "lognorm": lambda b: ("log_normal", [b[0], b[1]]),
+    "truncnorm": lambda b: ("truncated_normal", [b[2], b[3], b[0], b[1]]),
+}
+
+
+def _prior_of(argument: str, k: int, item: Any) -> tuple[str, list[float]]:
+    if isinstance(item, Mapping):
+        if len(item) != 1:
+            raise ValueError(f"{argument}: prior {k} must have one key, e.g. {{'normal': [0, 1]}}, got {item!r}")
+        ((kind, values),) = item.items()
+        if kind not in PRIOR_KINDS:
+            raise ValueError(
+                f"{argument}: prior {k}: `{kind}` is not one of {', '.join(PRIOR_KINDS)}"
+            )
+        try:
+            values = [float(v) for v in values]
+        except (TypeError, ValueError):
+            raise ValueError(f"{argument}: prior {k}: {values!r} is not a list of numbers") from None
+        if len(values) != PRIOR_KINDS[kind]:
+            raise ValueError(
+                f"{argument}: prior {k}: {kind} takes {PRIOR_KINDS[kind]} values, got {len(values)}"
+            )
+        return str(kind), values
+    try:
+        lo, hi = (float(v) for v in item)
+    except (TypeError, ValueError):
+        raise ValueError(f"{argument}: range {k} is not a (lo, hi) pair: {item!r}") from None
+    if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+        raise ValueError(f"{argument}: range {k} must have finite lo < hi, got ({lo}, {hi})")
+    return "uniform", [lo, hi]
+
+
+def parameter_priors(
+    bounds: Any, argument: str = "bounds"
+) -> tuple[list[str], list[tuple[str, list[float]]]]:
+    """Names and priors of the parameters of ``iuq.sobol`` and ``iuq.basis``.
+
+    ``bounds`` is a sequence whose items are ``(lo, hi)`` pairs (uniform priors) or one-key
+    prior dicts as in a study file (``{"normal": [mean, std]}``, ``{"log_normal": [mu, sigma]}``,
+    ``{"truncated_normal": [mean, std, lo, hi]}``, ``{"uniform": [lo, hi]}``), with names
+    ``x1``, ``x2``, …; a mapping ``{name: pair or prior}``; or SALib's ``problem`` dict
+    (``dists`` ``unif``, ``norm``, ``lognorm``, ``truncnorm`` with SALib's ``bounds`` layout).
+    """
+    names: list[str] | None = None
+    if isinstance(bounds, Mapping) and "bounds" in bounds:
+        problem = bounds
+        pairs = [list(b) for b in problem["bounds"]]
+        dists = problem.get("dists")
+        if "num_vars" in problem and int(problem["num_vars"]) != len(pairs):
+            raise ValueError(
+                f"{argument}: num_vars = {problem['num_vars']} but {len(pairs)} bounds are given"
+            )
+        if problem.get("names") is not None:
+            names = [str(n) for n in problem["names"]]
+        if dists is None:
+            items: list[Any] = pairs
+        else:
+            dists = list(dists)
+            if len(dists) != len(pairs):
+                raise ValueError(f"{argument}: {len(dists)} dists for {len(pairs)} bounds")
+            items = []
+            for k, (dist, b) in enumerate(zip(dists, pairs)):
+                if dist not in _SALIB_DISTS:
+                    raise ValueError(
+                        f"{argument}: dists[{k}] = {dist!r} is not supported (unif, norm, lognorm, truncnorm)"
+                    )
+                kind, values = _SALIB_DISTS[dist](b)
+                items.append({kind: values})
+    elif isinstance(bounds, Mapping):
+        names = [str(k) for k in bounds.keys()]
+        items = list(bounds.values())
+    elif bounds is None:
+        raise ValueError(f"{argument}: give the parameter ranges, e.g. [(0, 1), (0, 1)]")
+    else:
+        items = list(bounds)
+    if not items:
+        raise ValueError(f"{argument}: at least one parameter is needed")
+    priors = [_prior_of(argument, k, item) for k, item in enumerate(items)]
+    if names is None:
+        names = [f"x{k + 1}" for k in range(len(priors))]
+    if len(names) != len(priors):
+        raise ValueError(f"{argument}: {len(names)} names for {len(priors)} parameters")
+    return names, priors
+
+
+def prior_centre(kind: str, values: Sequence[float]) -> float:
+    """A central value of a prior (for the one probing call of a model)."""
+    if kind == "uniform":
+        return 0.5 * (values[0] + values[1])
+    if kind == "normal":
+        return values[0]
+    if kind == "log_normal":
+        return math.exp(values[0])
+    mean, _, lo, hi = values
+    return min(max(mean, lo), hi)

@@ -9,7 +9,7 @@ from typing import Any, Callable, Dict, List, Optional, Tuple
 import numpy as np
 
 from . import _native
-from ._args import count, parameter_box, real, seed_of, vector
+from ._args import count, parameter_priors, real, seed_of, vector
 
 __all__ = ["basis", "BasisResult"]
 
@@ -76,7 +76,7 @@ def basis(
     measurement_error: bool = True,
     on_error: str = "raise",
 ) -> BasisResult:
-    """Sample the posterior π(θ)·f(D | θ) with BASIS (Wu et al. 2017) over uniform priors.
+    """Sample the posterior π(θ)·f(D | θ) with BASIS (Wu et al. 2017).
 
     Either ``log_likelihood`` — a Python callable taking an (N, d) array of parameter vectors
     and returning ln f(D | θ) of each row, shape (N,), called once per stage; or a formula
@@ -87,13 +87,15 @@ def basis(
     sampled with θ (``None``: left out) and the ``computational_error`` term (``"none"``,
     ``"relative"``, …; ``docs/methods.md`` §4).
 
-    ``bounds``: ``[(lo, hi), ...]``, ``{name: (lo, hi)}`` or SALib's ``problem`` dict.
+    ``bounds`` gives the priors π: ``[(lo, hi), ...]`` (uniform; an item may also be a prior as
+    in a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
+    ``problem`` dict.
     ``samples`` N, ``burn``, ``max_chain``, ``seed``, ``cv_target``, ``proposal_scale`` and
     ``max_stages`` are the ``[sampler]`` settings. Non-finite log-likelihoods are rejections;
     ``on_error="fail"`` makes exceptions of the callable rejections too (counted with their
     reason), ``"raise"`` re-raises them. For a given seed the result equals ``iuq basis``.
     """
-    names, ranges = parameter_box(bounds)
+    names, priors = parameter_priors(bounds)
     if on_error not in ("raise", "fail"):
         raise ValueError(f"on_error: `{on_error}` is not one of raise, fail")
     function = None
@@ -132,7 +134,7 @@ def basis(
         formula,
         data_args,
         names,
-        ranges,
+        priors,
         count("samples", samples, 2),
         count("burn", burn, 0),
         count("max_chain", max_chain, 1),

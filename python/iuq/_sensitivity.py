@@ -8,7 +8,7 @@ from typing import Any, Callable, Dict, List, Mapping, Optional, Union
 import numpy as np
 
 from . import _native
-from ._args import count, output_count, parameter_box, real, seed_of
+from ._args import count, output_count, parameter_priors, prior_centre, real, seed_of
 
 __all__ = ["sobol", "SobolResult"]
 
@@ -67,13 +67,15 @@ def sobol(
     confidence: float = 0.95,
     on_error: str = "raise",
 ) -> SobolResult:
-    """Sobol' indices of ``model`` with independent uniform inputs over ``bounds``.
+    """Sobol' indices of ``model`` with independent inputs distributed as ``bounds`` says.
 
     ``model`` is a Python callable taking an (N, d) array and returning (N,) or (N, m) —
     called once per Saltelli design of ``n`` base points (N = n(d + 2) rows) — or a formula
     (``"sin(x1) + 7*sin(x2)^2"``) or a dict of formulas ``{output: formula}`` evaluated in Rust
-    (a study's ``kind = "expression"``). ``bounds``: ``[(lo, hi), ...]`` (inputs ``x1`` …
-    ``xd``), ``{name: (lo, hi)}`` or SALib's ``problem`` dict.
+    (a study's ``kind = "expression"``). ``bounds``: ``[(lo, hi), ...]`` (uniform inputs
+    ``x1`` … ``xd``; an item may also be a prior as in a study file, ``{"normal": [0, 1]}``),
+    ``{name: (lo, hi) or prior}``, or SALib's ``problem`` dict (``dists`` unif, norm, lognorm,
+    truncnorm). The unit-cube design is mapped through each prior's quantile function.
 
     Estimators: Saltelli (2010) first order and Jansen total order on a scrambled Sobol'
     design; intervals from ``resamples`` bootstrap resamples, or from ``replicates``
@@ -83,7 +85,7 @@ def sobol(
     point; failed points' groups are dropped and counted); ``"raise"`` re-raises them.
     The result for a given ``seed`` equals ``iuq sobol`` on the same study.
     """
-    names, ranges = parameter_box(bounds)
+    names, priors = parameter_priors(bounds)
     n = count("n", n, 2)
     if on_error not in ("raise", "fail"):
         raise ValueError(f"on_error: `{on_error}` is not one of raise, fail")
@@ -108,13 +110,13 @@ def sobol(
     output_names = (
         [name for name, _ in expressions]
         if expressions is not None
-        else output_count(model, ranges, outputs)
+        else output_count(model, [prior_centre(k, v) for k, v in priors], outputs)
     )
     raw = _native.sobol_indices(
         function,
         expressions,
         names,
-        ranges,
+        priors,
         output_names,
         n,
         seed_of(seed),

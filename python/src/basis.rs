@@ -13,7 +13,7 @@ use iuq_core::{ParameterSpace, Prior};
 use crate::arrays::{rows_to_array, vec_to_array};
 use crate::callable::{OnError, PyLikelihood, PyModel};
 use crate::errors::{bad_input, failure};
-use crate::sensitivity::uniform_space;
+use crate::sensitivity::{PriorArgs, prior_space};
 
 /// The likelihood of one `iuq.basis` call.
 enum AnyLikelihood {
@@ -55,7 +55,7 @@ pub struct DataArgs {
 /// Sample the posterior with BASIS; the result (samples, evidence, summaries, stage
 /// diagnostics as JSON) as a dict.
 #[pyfunction]
-#[pyo3(signature = (log_likelihood, formula, data, names, bounds, samples, burn, max_chain, seed, cv_target, proposal_scale, max_stages, on_error))]
+#[pyo3(signature = (log_likelihood, formula, data, names, priors, samples, burn, max_chain, seed, cv_target, proposal_scale, max_stages, on_error))]
 #[allow(clippy::too_many_arguments)]
 pub fn basis<'py>(
     py: Python<'py>,
@@ -63,7 +63,7 @@ pub fn basis<'py>(
     formula: Option<String>,
     data: Option<DataArgs>,
     names: Vec<String>,
-    bounds: Vec<(f64, f64)>,
+    priors: Vec<PriorArgs>,
     samples: usize,
     burn: usize,
     max_chain: usize,
@@ -74,7 +74,7 @@ pub fn basis<'py>(
     on_error: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let on_error = OnError::parse(on_error)?;
-    let model_space = uniform_space(&names, &bounds)?;
+    let model_space = prior_space(&names, &priors)?;
     let (likelihood, space): (AnyLikelihood, ParameterSpace) = match (log_likelihood, formula, data)
     {
         (Some(f), None, None) => (

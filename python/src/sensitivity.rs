@@ -1,5 +1,5 @@
-//! Sobol' indices of a Python model or of formulas (the CLI's `iuq sobol`), over a box of
-//! uniform priors.
+//! Sobol' indices of a Python model or of formulas (the CLI's `iuq sobol`) over the priors of
+//! the inputs.
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -7,25 +7,45 @@ use pyo3::types::PyDict;
 use iuq_core::{ExpressionModel, Model, Parameter, ParameterSpace, Prior};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
 
-use crate::arrays::check_bounds;
 use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure};
 
-/// A space of uniform priors U(lo, hi), one per name (what a study's `[parameters]` section with
-/// `uniform = [lo, hi]` gives).
-pub fn uniform_space(names: &[String], bounds: &[(f64, f64)]) -> PyResult<ParameterSpace> {
-    check_bounds("bounds", bounds, names.len())?;
-    ParameterSpace::new(
-        names
-            .iter()
-            .zip(bounds)
-            .map(|(name, (lo, hi))| Parameter {
-                name: name.clone(),
-                prior: Prior::Uniform(*lo, *hi),
-            })
-            .collect(),
-    )
-    .map_err(|e| bad_input("names", e))
+/// One prior as the Python side passes it: its kind, as in a study file (`uniform`, `normal`,
+/// `log_normal`, `truncated_normal`), and its parameters in the study file's order.
+pub type PriorArgs = (String, Vec<f64>);
+
+/// The parameter space of named priors (what a study's `[parameters]` section gives); bad priors
+/// are `ValueError`s of the argument `bounds` naming the parameter.
+pub fn prior_space(names: &[String], priors: &[PriorArgs]) -> PyResult<ParameterSpace> {
+    if names.len() != priors.len() {
+        return Err(bad_input(
+            "bounds",
+            format!("{} names for {} priors", names.len(), priors.len()),
+        ));
+    }
+    let mut parameters = Vec::with_capacity(names.len());
+    for (name, (kind, p)) in names.iter().zip(priors) {
+        let prior = match (kind.as_str(), p.as_slice()) {
+            ("uniform", [lo, hi]) => Prior::Uniform(*lo, *hi),
+            ("normal", [m, s]) => Prior::Normal(*m, *s),
+            ("log_normal", [m, s]) => Prior::LogNormal(*m, *s),
+            ("truncated_normal", [m, s, lo, hi]) => Prior::TruncatedNormal(*m, *s, *lo, *hi),
+            _ => {
+                return Err(bad_input(
+                    "bounds",
+                    format!(
+                        "parameter `{name}`: `{kind}` with {} values is not a prior (uniform = [lo, hi], normal = [mean, std], log_normal = [mu, sigma], truncated_normal = [mean, std, lo, hi])",
+                        p.len()
+                    ),
+                ));
+            }
+        };
+        parameters.push(Parameter {
+            name: name.clone(),
+            prior,
+        });
+    }
+    ParameterSpace::new(parameters).map_err(|e| bad_input("bounds", e))
 }
 
 /// The model of `iuq.sobol`: a Python callable or formulas.
@@ -87,14 +107,14 @@ impl AnyModel {
 
 /// Sobol' indices: the options and result of `iuq sobol`, as a dict of lists.
 #[pyfunction]
-#[pyo3(signature = (function, expressions, names, bounds, outputs, n, seed, resamples, replicates, confidence, on_error))]
+#[pyo3(signature = (function, expressions, names, priors, outputs, n, seed, resamples, replicates, confidence, on_error))]
 #[allow(clippy::too_many_arguments)]
 pub fn sobol_indices<'py>(
     py: Python<'py>,
     function: Option<Py<PyAny>>,
     expressions: Option<Vec<(String, String)>>,
     names: Vec<String>,
-    bounds: Vec<(f64, f64)>,
+    priors: Vec<PriorArgs>,
     outputs: Vec<String>,
     n: usize,
     seed: u64,
@@ -103,7 +123,7 @@ pub fn sobol_indices<'py>(
     confidence: f64,
     on_error: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let space = uniform_space(&names, &bounds)?;
+    let space = prior_space(&names, &priors)?;
     let model = AnyModel::new(
         function,
         expressions,

@@ -163,3 +163,17 @@ def test_bad_input_is_a_value_error_naming_the_argument(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         iuq.basis(args.pop("log_likelihood"), args.pop("bounds"), **args)
+
+
+def test_a_normal_prior_equals_the_cli(cli, tmp_path):
+    study = tmp_path / "prior.toml"
+    study.write_text(
+        'name = "prior"\n[parameters]\nx1 = { normal = [0.2, 0.3] }\nx2 = { uniform = [-1, 1] }\n'
+        f'[likelihood]\nlog_density = "{FORMULA}"\n'
+    )
+    out = tmp_path / "basis"
+    summary = cli("basis", study, "--samples", 300, "--seed", 1, "--out", out)
+    _, table = read_csv(out / "samples.csv")
+    ours = iuq.basis(log_likelihood, [{"normal": [0.2, 0.3]}, (-1, 1)], samples=300, seed=1)
+    assert np.array_equal(ours.samples, table[:, :2])
+    assert ours.log_evidence == summary["log_evidence"]

@@ -131,7 +131,9 @@ def test_a_result_of_the_wrong_shape_is_a_value_error():
         (dict(on_error="ignore"), "^on_error: `ignore` is not one of"),
         (dict(model="x1 +"), "^model: output `y`"),
         (dict(bounds={"num_vars": 2, "names": ["a", "b"], "bounds": [[0, 1], [0, 1]],
-                      "dists": ["norm", "unif"]}), "^bounds: only uniform"),
+                      "dists": ["triang", "unif"]}), r"^bounds: dists\[0\] = 'triang' is not supported"),
+        (dict(bounds=[{"normal": [0, -1]}, (0, 1)]), "^bounds: .*x1.*scale -1 must be positive"),
+        (dict(bounds=[{"gamma": [1, 1]}, (0, 1)]), "^bounds: prior 0: `gamma` is not one of"),
     ],
 )
 def test_bad_input_is_a_value_error_naming_the_argument(kwargs, match):
@@ -139,3 +141,29 @@ def test_bad_input_is_a_value_error_naming_the_argument(kwargs, match):
     args.update(kwargs)
     with pytest.raises(ValueError, match=match):
         iuq.sobol(args.pop("model"), args.pop("bounds"), **args)
+
+
+def test_priors_other_than_uniform_equal_the_cli(cli, tmp_path):
+    path = tmp_path / "priors.toml"
+    path.write_text(
+        'name = "priors"\n[parameters]\n'
+        'x1 = { normal = [1, 0.5] }\nx2 = { log_normal = [0, 0.3] }\n'
+        'x3 = { truncated_normal = [0, 1, -1, 2] }\n'
+        f'[model]\nkind = "expression"\noutputs = {{ f = "{FORMULA}" }}\n'
+    )
+    expected = cli("sobol", path, "--n", 128, "--seed", 2)["outputs"]["f"]
+    bounds = {"x1": {"normal": [1, 0.5]}, "x2": {"log_normal": [0, 0.3]},
+              "x3": {"truncated_normal": [0, 1, -1, 2]}}
+    ours = iuq.sobol(polynomial, bounds, n=128, seed=2, outputs=["f"])
+    assert list(ours.S1) == [expected["S1"][k] for k in ("x1", "x2", "x3")]
+    assert list(ours.ST) == [expected["ST"][k] for k in ("x1", "x2", "x3")]
+
+
+def test_salib_normal_inputs_give_the_analytic_indices_of_a_linear_model():
+    # y = x1 + 2 x2 with x1 ~ N(0, 1), x2 ~ N(0, 0.5): V = 1 + 1, S1 = ST = (0.5, 0.5)
+    problem = {"num_vars": 2, "names": ["a", "b"], "bounds": [[0, 1], [0, 0.5]],
+               "dists": ["norm", "norm"]}
+    result = iuq.sobol(lambda x: x[:, 0] + 2 * x[:, 1], problem, n=4096, seed=0)
+    assert result.names == ["a", "b"]
+    assert np.all(np.abs(result.S1 - 0.5) <= result.S1_conf)
+    assert np.all(np.abs(result.ST - 0.5) <= result.ST_conf)
