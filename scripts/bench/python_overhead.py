@@ -105,6 +105,13 @@ def overhead(repeats, quick):
               f"{t_py / t_rust:>7.2f} {(t_py - t_rust) / n * 1e9:>11.0f} ns")
     print("   (overhead/eval = (Python − Rust) / evaluations: the batch's copy to numpy, the "
           "call, the check of the result and numpy's own arithmetic)")
+    # What batching saves: the same numpy model called once per point, as a per-point
+    # callback interface would call it.
+    rows = iuq.design.sobol(20000, 3, seed=0, bounds=bounds)
+    t_batch, _ = median_time(lambda: model(rows), repeats)
+    t_points, _ = median_time(lambda: [model(rows[i:i + 1]) for i in range(rows.shape[0])], repeats)
+    print(f"   the model alone on {rows.shape[0]} points: one batch {t_batch / rows.shape[0] * 1e9:.0f} ns/eval, "
+          f"one call per point {t_points / rows.shape[0] * 1e9:.0f} ns/eval")
 
 
 def gp_comparison(repeats, quick):
