@@ -331,9 +331,9 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     );
 
     let summary = json_of(&output);
-    // The shipped rounds replayed from the store: 192 runs in 6 rounds (max_runs reached).
-    assert_eq!(summary["runs"], 192, "{}", summary["adaptive"]);
-    assert_eq!(summary["rounds"], 6);
+    // The shipped rounds replayed from the store: 320 runs in 11 rounds (max_runs reached).
+    assert_eq!(summary["runs"], 320, "{}", summary["adaptive"]);
+    assert_eq!(summary["rounds"], 11);
     let gp = &summary["posterior"][0];
     assert_eq!(gp["source"], "GP surrogate");
     let std_of = |name: &str| {
@@ -349,20 +349,24 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101.
     assert!(std_of("kLink") < 0.1 * 83.7, "kLink is identified");
     assert!(std_of("kBend") > 0.3 * 101.0, "kBend is not");
-    // The cell model at the MAP and 20 posterior samples per stress, beside the surrogate: up to
-    // 4.24 Pa the surrogate's error there is below the smallest measurement std (0.002); at 6.19
-    // and 9.04 Pa the cell's own elongation still moves through the measuring window (frame
-    // stds of 0.01–0.03, docs/cell-model-high-stress.md) and the error is of that size.
+    // The cell model at the MAP and 20 posterior samples per stress, beside the surrogate. Up to
+    // 6.19 Pa the surrogate's error there is below the smallest measurement std (0.002). At
+    // 9.04 Pa the cell's own elongation still moves through the measuring window
+    // (docs/cell-model-high-stress.md): one posterior sample's run ends far from its neighbours'
+    // (EL 0.20 with a frame std of 0.16), so the RMSE says little; what must hold everywhere is
+    // that the surrogate's predictive std, with the run's frame std, covers the runs: a
+    // calibrated Gaussian covers each of the 21 runs with probability 0.95, and 16 or fewer
+    // covered has probability 0.003.
     let check = summary["posterior_check"].as_array().unwrap();
     assert_eq!(check.len(), 8, "one check per stress");
     for point in check {
-        let rmse = point["rmse"].as_f64().unwrap();
-        let bound = if point["x"].as_f64().unwrap() <= 4.24 {
-            0.002
-        } else {
-            0.05
-        };
-        assert!(rmse < bound, "{point}");
+        if point["x"].as_f64().unwrap() <= 6.19 {
+            assert!(point["rmse"].as_f64().unwrap() < 0.002, "{point}");
+        }
+        assert!(
+            point["within_two_std"].as_f64().unwrap() >= 17.0 / 21.0,
+            "{point}"
+        );
         assert_eq!(point["failed"], 0, "{point}");
     }
     let report: serde_json::Value =
