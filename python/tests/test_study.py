@@ -77,3 +77,21 @@ def test_a_bad_study_is_a_value_error_naming_the_file_and_key(tmp_path):
         iuq.Study.load(path)
     with pytest.raises(ValueError, match="cannot read"):
         iuq.Study.load(tmp_path / "missing.toml")
+
+
+def test_an_exception_of_the_progress_callable_is_raised(pipeline_run, tmp_path):
+    study, _, _, _ = pipeline_run
+
+    def progress(line):
+        raise KeyError("progress display closed")
+
+    with pytest.raises(KeyError, match="progress display closed"):
+        study.run(tmp_path / "again", progress=progress)
+
+
+def test_bad_run_options_are_value_errors(pipeline_run, tmp_path):
+    study, _, _, _ = pipeline_run
+    with pytest.raises(ValueError, match="^max_parallel: must be at least 1"):
+        study.run(tmp_path / "x", max_parallel=0)
+    with pytest.raises(ValueError, match="^format: `xml` is not one of csv, json"):
+        study.export(tmp_path / "runs.xml", format="xml")
