@@ -144,6 +144,11 @@ def basis(
         count("max_stages", max_stages, 1),
         on_error,
     )
+    return result_from_raw(raw)
+
+
+def result_from_raw(raw: Dict[str, Any]) -> BasisResult:
+    """The :class:`BasisResult` of the native result dict."""
     return BasisResult(
         names=list(raw["names"]),
         samples=raw["samples"],

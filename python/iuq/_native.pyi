@@ -115,5 +115,21 @@ class Study:
         runs_only: bool,
         progress: Optional[Callable[[str], Any]],
     ) -> str: ...
+    def sobol(
+        self,
+        n: Optional[int],
+        seed: Optional[int],
+        replicates: Optional[int],
+        resamples: Optional[int],
+        confidence: Optional[float],
+    ) -> Dict[str, Any]: ...
+    def basis(
+        self,
+        out: str,
+        samples: Optional[int],
+        burn: Optional[int],
+        max_chain: Optional[int],
+        seed: Optional[int],
+    ) -> Dict[str, Any]: ...
     def status(self) -> str: ...
     def export(self, out: Optional[str], format: Optional[str]) -> str: ...

@@ -125,6 +125,11 @@ def sobol(
         confidence,
         on_error,
     )
+    return result_from_raw(raw)
+
+
+def result_from_raw(raw: Dict[str, Any]) -> SobolResult:
+    """The :class:`SobolResult` of the native result dict."""
     per = raw["outputs"]
     order = raw["output_names"]
 

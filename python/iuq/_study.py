@@ -12,7 +12,11 @@ from typing import Any, Callable, Dict, List, Optional, Union
 import numpy as np
 
 from . import _native
-from ._args import count
+from ._args import count, real, seed_of
+from ._basis import BasisResult
+from ._basis import result_from_raw as _basis_result
+from ._sensitivity import SobolResult
+from ._sensitivity import result_from_raw as _sobol_result
 
 __all__ = ["Study", "PipelineResult", "CampaignStatus"]
 
@@ -163,6 +167,56 @@ class Study:
             seconds=raw["seconds"],
             raw=raw,
         )
+
+    def sobol(
+        self,
+        n: Optional[int] = None,
+        seed: Optional[int] = None,
+        *,
+        replicates: Optional[int] = None,
+        resamples: Optional[int] = None,
+        confidence: Optional[float] = None,
+    ) -> SobolResult:
+        """Sobol' indices of the study's model over its priors (``iuq sobol STUDY``).
+
+        Unset options come from the study's ``[sensitivity]`` section, else the CLI's defaults
+        (n = 1024, seed 0, 100 bootstrap resamples, confidence 0.95). The model is the study's
+        (``expression``, ``rbc-shear`` or ``umbridge``); the result equals ``iuq sobol``'s.
+        """
+        raw = self._native.sobol(
+            None if n is None else count("n", n, 2),
+            None if seed is None else seed_of(seed),
+            None if replicates is None else count("replicates", replicates, 2),
+            None if resamples is None else count("resamples", resamples, 2),
+            None if confidence is None else real("confidence", confidence),
+        )
+        return _sobol_result(raw)
+
+    def basis(
+        self,
+        out: Optional[PathLike] = None,
+        *,
+        samples: Optional[int] = None,
+        burn: Optional[int] = None,
+        max_chain: Optional[int] = None,
+        seed: Optional[int] = None,
+    ) -> BasisResult:
+        """BASIS posterior of the study's ``[likelihood]`` (``iuq basis STUDY --out OUT``).
+
+        Unset settings come from the study's ``[sampler]`` section; every result file
+        (``samples.csv``, ``summary.json``, ``stages.json``, checkpoints, marginals) is written into
+        ``out`` (default ``<study name>-basis``). The result equals ``iuq basis``'s.
+        """
+        if out is None:
+            out = Path(f"{self.name}-basis")
+        raw = self._native.basis(
+            os.fspath(out),
+            None if samples is None else count("samples", samples, 2),
+            None if burn is None else count("burn", burn, 0),
+            None if max_chain is None else count("max_chain", max_chain, 1),
+            None if seed is None else seed_of(seed),
+        )
+        return _basis_result(raw)
 
     def status(self) -> CampaignStatus:
         """Runs per status, attempts per outcome and the failures with their reasons."""

@@ -5,8 +5,8 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use iuq_basis::{
-    Basis, BasisSettings, ComputationalError, ErrorModel, LogDensityLikelihood, LogLikelihood,
-    Observations, PosteriorSummary, PredictionErrorLikelihood, Silent, StopReason,
+    Basis, BasisRun, BasisSettings, ComputationalError, ErrorModel, LogDensityLikelihood,
+    LogLikelihood, Observations, PosteriorSummary, PredictionErrorLikelihood, Silent, StopReason,
 };
 use iuq_core::{ParameterSpace, Prior};
 
@@ -152,6 +152,16 @@ pub fn basis<'py>(
         return Err(error);
     }
     let (run, summary, stages) = result.map_err(|e| failure("basis", e))?;
+    run_dict(py, &run, &summary, stages)
+}
+
+/// A BASIS run and its summary as the dict the Python side reads (`stages` as JSON text).
+pub fn run_dict<'py>(
+    py: Python<'py>,
+    run: &BasisRun,
+    summary: &PosteriorSummary,
+    stages: String,
+) -> PyResult<Bound<'py, PyDict>> {
     let state = &run.state;
     let d = state.parameter_names.len();
     let out = PyDict::new(py);

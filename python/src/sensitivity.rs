@@ -5,7 +5,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use iuq_core::{ExpressionModel, Model, Parameter, ParameterSpace, Prior};
-use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
+use iuq_sensitivity::{IntervalMethod, SensitivityOptions, SensitivityReport, analyse};
 
 use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure};
@@ -171,6 +171,16 @@ pub fn sobol_indices<'py>(
         return Err(error);
     }
     let report = result.map_err(|e| failure("sobol", e))?;
+    report_dict(py, &report, n, confidence)
+}
+
+/// A Sobol' report as the dict the Python side reads (lists per output).
+pub fn report_dict<'py>(
+    py: Python<'py>,
+    report: &SensitivityReport,
+    n: usize,
+    confidence: f64,
+) -> PyResult<Bound<'py, PyDict>> {
     let out = PyDict::new(py);
     out.set_item("inputs", &report.inputs)?;
     let per_output = PyDict::new(py);

@@ -1,4 +1,5 @@
-//! Study files from Python: `iuq pipeline`, `iuq status` and `iuq export` as methods.
+//! Study files from Python: `iuq pipeline`, `iuq sobol`, `iuq basis`, `iuq status` and
+//! `iuq export` as methods.
 //!
 //! Results are the JSON objects the CLI prints with `--json` (built the same way), handed to
 //! Python as JSON text; the pure-Python `iuq.Study` turns them into objects.
@@ -6,12 +7,16 @@
 use std::path::PathBuf;
 
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 use serde_json::{Map, Value, json};
 
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
+use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
 use iuq_study::campaign_runs::{campaign_error, load_study, progress_line};
 use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
+use iuq_study::posterior::{build_posterior, sample_posterior};
+use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
 use iuq_study::{Study, StudyError};
 
@@ -170,6 +175,112 @@ impl NativeStudy {
             }),
         };
         to_json_text(&value)
+    }
+
+    /// Sobol' indices of the study's model over its priors (`iuq sobol STUDY`): the options
+    /// default to the study's `[sensitivity]` section, then to the CLI's defaults.
+    #[pyo3(signature = (n, seed, replicates, resamples, confidence))]
+    fn sobol<'py>(
+        &self,
+        py: Python<'py>,
+        n: Option<usize>,
+        seed: Option<u64>,
+        replicates: Option<usize>,
+        resamples: Option<usize>,
+        confidence: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let section = &self.study.sensitivity;
+        let n = n.or(section.n).unwrap_or(1024);
+        if n < 2 {
+            return Err(bad_input(
+                "n",
+                format!("at least 2 base points are needed, got {n}"),
+            ));
+        }
+        let confidence = confidence.or(section.confidence).unwrap_or(0.95);
+        if !(confidence > 0.0 && confidence < 1.0) {
+            return Err(bad_input(
+                "confidence",
+                format!("{confidence} must lie strictly between 0 and 1"),
+            ));
+        }
+        let interval = match replicates.or(section.replicates) {
+            Some(count) if count < 2 => {
+                return Err(bad_input(
+                    "replicates",
+                    format!("at least 2 are needed, got {count}"),
+                ));
+            }
+            Some(count) => IntervalMethod::Replicates { count },
+            None => {
+                let resamples = resamples.or(section.resamples).unwrap_or(100);
+                if resamples < 2 {
+                    return Err(bad_input(
+                        "resamples",
+                        format!("at least 2 are needed, got {resamples}"),
+                    ));
+                }
+                IntervalMethod::Bootstrap { resamples }
+            }
+        };
+        let options = SensitivityOptions {
+            base_points: n,
+            seed: seed.or(self.study.sensitivity.seed).unwrap_or(0),
+            interval,
+            confidence_level: confidence,
+            ..Default::default()
+        };
+        let study = &self.study;
+        let report = py
+            .allow_threads(|| {
+                let model = study.model()?;
+                analyse(&model, &study.space, &options)
+                    .map_err(|e| StudyError::BadInput(format!("{}: {e}", study.path.display())))
+            })
+            .map_err(study_error)?;
+        crate::sensitivity::report_dict(py, &report, n, confidence)
+    }
+
+    /// BASIS posterior of the study's `[likelihood]` (`iuq basis STUDY --out OUT`): the
+    /// settings default to the study's `[sampler]`; every result file is written into `out`.
+    #[pyo3(signature = (out, samples, burn, max_chain, seed))]
+    fn basis<'py>(
+        &self,
+        py: Python<'py>,
+        out: PathBuf,
+        samples: Option<usize>,
+        burn: Option<usize>,
+        max_chain: Option<usize>,
+        seed: Option<u64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let study = &self.study;
+        let overrides = SamplerOverrides {
+            samples,
+            burn,
+            max_chain,
+            seed,
+        };
+        let (sampled, stages) = py
+            .allow_threads(|| {
+                let posterior = build_posterior(study)?;
+                let settings = parse_sampler(study, &overrides)?;
+                let sampled = sample_posterior(
+                    &study.name,
+                    &study.path,
+                    &posterior,
+                    settings,
+                    &out,
+                    None,
+                    None,
+                    None,
+                    &mut |_| {},
+                )?;
+                let stages = serde_json::to_string(&sampled.run.state.diagnostics)
+                    .map_err(|e| StudyError::Failure(e.to_string()))?;
+                Ok::<_, StudyError>((sampled, stages))
+            })
+            .map_err(study_error)?;
+        crate::basis::run_dict(py, &sampled.run, &sampled.summary, stages)
     }
 
     /// Where the study's campaign stands (`iuq status --json`), as JSON text.

@@ -95,3 +95,25 @@ def test_bad_run_options_are_value_errors(pipeline_run, tmp_path):
         study.run(tmp_path / "x", max_parallel=0)
     with pytest.raises(ValueError, match="^format: `xml` is not one of csv, json"):
         study.export(tmp_path / "runs.xml", format="xml")
+
+
+def test_study_sobol_equals_iuq_sobol(cli):
+    path = REPO / "examples" / "ishigami.toml"
+    expected = cli("sobol", path, "--n", 512, "--seed", 5)["outputs"]
+    ours = iuq.Study.load(path).sobol(n=512, seed=5)
+    for j, output in enumerate(ours.outputs):
+        s1 = ours.S1 if len(ours.outputs) == 1 else ours.S1[j]
+        st = ours.ST if len(ours.outputs) == 1 else ours.ST[j]
+        assert list(s1) == [expected[output]["S1"][k] for k in ours.names]
+        assert list(st) == [expected[output]["ST"][k] for k in ours.names]
+
+
+def test_study_basis_equals_iuq_basis(cli, tmp_path):
+    folder = copy_cooling(tmp_path, "cooling")
+    path = folder / "cooling-exact.toml"
+    summary = cli("basis", path, "--samples", 400, "--seed", 3, "--out", tmp_path / "cli")
+    ours = iuq.Study.load(path).basis(tmp_path / "py", samples=400, seed=3)
+    assert ours.log_evidence == summary["log_evidence"]
+    assert ours.n_stages == summary["stages"]
+    assert list(ours.mean) == [summary["mean"][k] for k in ours.names]
+    assert (tmp_path / "py" / "samples.csv").read_bytes() == (tmp_path / "cli" / "samples.csv").read_bytes()
