@@ -3,11 +3,13 @@
 //! run), one GP per data point, the failure classifier, BASIS, the report.
 //!
 //! The reference is the exact posterior: BASIS on the closed-form curve
-//! (`cooling-exact.toml`, N = 20,000). With N = 10,000 in the pipeline and 20,000 in the
-//! reference, BASIS alone puts the two means about 0.02 posterior stds apart and the stds about
-//! 1.5 % apart (the spread of a mean over an effective sample of several thousand); the
-//! tolerances below (0.1 std, 10 %) leave the rest to the surrogate, whose log-likelihood error
-//! over the posterior the engine's convergence criterion bounds by 0.05 nats.
+//! (`cooling-exact.toml`, N = 20,000). The tolerances come from the spread of the whole
+//! pipeline — which runs the adaptive rounds place, the surrogate they give, BASIS with
+//! N = 10,000 on it — measured over 7 sampler seeds of the expression study below
+//! (2026-11-24): the posterior means fell 0.055 (k) and 0.059 (T0) posterior stds from the exact
+//! ones (root mean square; largest 0.105), the stds 1.5–1.8 % (largest 2.7 %). The tolerances,
+//! 0.18 posterior stds for a mean (three times that spread) and 10 % for a std (over five
+//! times), leave room for it and catch a surrogate that misplaces the posterior.
 
 mod common;
 
@@ -117,7 +119,7 @@ fn assert_close_to_exact(value: &serde_json::Value, exact: &[(String, f64, f64)]
     {
         assert_eq!(name, exact_name);
         assert!(
-            (mean - exact_mean).abs() < 0.1 * exact_std,
+            (mean - exact_mean).abs() < 0.18 * exact_std,
             "{name}: mean {mean} vs exact {exact_mean} ± {exact_std}"
         );
         assert!(
