@@ -8,12 +8,12 @@ use std::path::PathBuf;
 
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use serde_json::{Map, Value, json};
+use serde_json::{Value, json};
 
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
-use iuq_study::campaign_runs::{campaign_error, load_study, progress_line};
+use iuq_study::campaign_runs::{CampaignStatus, campaign_error, load_study, progress_line};
 use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
 use iuq_study::posterior::{build_posterior, sample_posterior};
 use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
@@ -144,36 +144,7 @@ impl NativeStudy {
             return Err(error);
         }
         let outcome = result.map_err(study_error)?;
-        let out = outcome.out.display().to_string();
-        let value = match &outcome.report {
-            None => json!({
-                "study": outcome.study,
-                "runs": outcome.runs,
-                "failed": outcome.failed,
-                "out": out,
-                "report": Value::Null,
-                "seconds": outcome.seconds,
-            }),
-            Some(report) => json!({
-                "study": outcome.study,
-                "out": out,
-                "report": report.display().to_string(),
-                "runs": outcome.runs,
-                "failed": outcome.failed,
-                "converged": outcome.adaptive.as_ref().is_none_or(|a| a.converged),
-                "rounds": outcome.adaptive.as_ref().map_or(0, |a| a.rounds.len()),
-                "adaptive": outcome.adaptive,
-                "q2": outcome.q2,
-                "posterior": outcome.posterior,
-                "posterior_check": outcome.posterior_check.as_ref().map(|c| c.point_summaries()),
-                "stage_seconds": outcome
-                    .stage_seconds
-                    .iter()
-                    .map(|(k, v)| json!({"stage": k, "seconds": v}))
-                    .collect::<Vec<_>>(),
-                "seconds": outcome.seconds,
-            }),
-        };
+        let value = outcome.summary();
         to_json_text(&value)
     }
 
@@ -288,35 +259,7 @@ impl NativeStudy {
         let path = self.study.path.clone();
         let value = py
             .allow_threads(|| -> Result<Value, StudyError> {
-                let study = load_study(&path)?;
-                let store_file = store_path(&study);
-                let store = CampaignStore::open_existing(&store_file).map_err(campaign_error)?;
-                let counts = store.counts(None).map_err(campaign_error)?;
-                let attempts = store.attempt_kinds().map_err(campaign_error)?;
-                let failures = store.failures().map_err(campaign_error)?;
-                let names = study.space.names();
-                let failure_values: Vec<Value> = failures
-                    .iter()
-                    .map(|f| {
-                        let parameters: Map<String, Value> = names
-                            .iter()
-                            .cloned()
-                            .zip(f.parameters.iter().map(|v| json!(v)))
-                            .collect();
-                        json!({"run_id": f.run_id, "parameters": parameters, "attempts": f.attempts, "kind": f.kind, "reason": f.reason})
-                    })
-                    .collect();
-                let attempts_map: Map<String, Value> =
-                    attempts.iter().map(|(k, n)| (k.clone(), json!(n))).collect();
-                Ok(json!({
-                    "study": study.name,
-                    "store": store_file.display().to_string(),
-                    "journal_mode": store.journal_mode(),
-                    "counts": counts,
-                    "total": counts.total(),
-                    "attempts": attempts_map,
-                    "failures": failure_values,
-                }))
+                Ok(CampaignStatus::read(&load_study(&path)?)?.to_json())
             })
             .map_err(study_error)?;
         to_json_text(&value)

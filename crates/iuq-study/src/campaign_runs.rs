@@ -4,9 +4,12 @@
 
 use std::path::Path;
 
+use iuq_campaign::store::{FailedRun, JournalMode};
 use iuq_campaign::{
-    Campaign, CampaignError, CampaignOptions, CampaignStudy, Progress, ResumeSummary,
+    Campaign, CampaignError, CampaignOptions, CampaignStore, CampaignStudy, Progress,
+    ResumeSummary, StatusCounts, store_path,
 };
+use serde_json::{Map, Value, json};
 
 use crate::error::{Result, StudyError, input_error};
 
@@ -95,4 +98,72 @@ pub fn progress_line(name: &str, p: &Progress) -> String {
         seconds(p.elapsed_seconds),
         p.eta_seconds.map_or_else(|| "unknown".into(), seconds)
     )
+}
+
+/// Where a campaign stands: runs per status, attempts per outcome, and the failures with their
+/// reasons — what `iuq status` prints and the Python package's `Study.status` returns.
+#[derive(Debug, Clone)]
+pub struct CampaignStatus {
+    /// The study's name.
+    pub study: String,
+    /// The store file.
+    pub store: std::path::PathBuf,
+    /// The store's journal mode.
+    pub journal_mode: JournalMode,
+    /// Runs per status.
+    pub counts: StatusCounts,
+    /// Attempts per outcome kind (`open` for those without one yet).
+    pub attempts: Vec<(String, u64)>,
+    /// The failed runs, by run id.
+    pub failures: Vec<FailedRun>,
+    /// The names of the runs' parameters, in order.
+    pub parameter_names: Vec<String>,
+}
+
+impl CampaignStatus {
+    /// Read the status of `study`'s campaign from its store (which must exist).
+    pub fn read(study: &CampaignStudy) -> Result<Self> {
+        let path = store_path(study);
+        let store = CampaignStore::open_existing(&path).map_err(campaign_error)?;
+        Ok(Self {
+            study: study.name.clone(),
+            journal_mode: store.journal_mode(),
+            counts: store.counts(None).map_err(campaign_error)?,
+            attempts: store.attempt_kinds().map_err(campaign_error)?,
+            failures: store.failures().map_err(campaign_error)?,
+            parameter_names: study.space.names(),
+            store: path,
+        })
+    }
+
+    /// The status as the JSON object of `iuq status --json`.
+    pub fn to_json(&self) -> Value {
+        let failures: Vec<Value> = self
+            .failures
+            .iter()
+            .map(|f| {
+                let parameters: Map<String, Value> = self
+                    .parameter_names
+                    .iter()
+                    .cloned()
+                    .zip(f.parameters.iter().map(|v| json!(v)))
+                    .collect();
+                json!({"run_id": f.run_id, "parameters": parameters, "attempts": f.attempts, "kind": f.kind, "reason": f.reason})
+            })
+            .collect();
+        let attempts: Map<String, Value> = self
+            .attempts
+            .iter()
+            .map(|(k, n)| (k.clone(), json!(n)))
+            .collect();
+        json!({
+            "study": self.study,
+            "store": self.store.display().to_string(),
+            "journal_mode": self.journal_mode,
+            "counts": self.counts,
+            "total": self.counts.total(),
+            "attempts": attempts,
+            "failures": failures,
+        })
+    }
 }

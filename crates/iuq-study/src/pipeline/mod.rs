@@ -147,6 +147,47 @@ pub struct PipelineOutcome {
     pub seconds: f64,
 }
 
+impl PipelineOutcome {
+    /// The outcome as the JSON object of `iuq pipeline --json` (and the Python package's
+    /// `Study.run`): with a report, the runs, convergence, adaptive rounds, Q2, posterior
+    /// tables, the posterior check per data point and the wall time of each stage; with
+    /// `runs_only`, the runs and where they are.
+    pub fn summary(&self) -> Value {
+        let out = self.out.display().to_string();
+        match &self.report {
+            None => serde_json::json!({
+                "study": self.study,
+                "runs": self.runs,
+                "failed": self.failed,
+                "out": out,
+                "report": Value::Null,
+                "seconds": self.seconds,
+            }),
+            Some(report) => serde_json::json!({
+                "study": self.study,
+                "out": out,
+                "report": report.display().to_string(),
+                "runs": self.runs,
+                "failed": self.failed,
+                // A one-shot design has nothing to converge; an adaptive one says.
+                "converged": self.adaptive.as_ref().is_none_or(|a| a.converged),
+                "rounds": self.adaptive.as_ref().map_or(0, |a| a.rounds.len()),
+                "adaptive": self.adaptive,
+                "q2": self.q2,
+                "posterior": self.posterior,
+                // Per data point: the model at the posterior against the surrogate.
+                "posterior_check": self.posterior_check.as_ref().map(|c| c.point_summaries()),
+                "stage_seconds": self
+                    .stage_seconds
+                    .iter()
+                    .map(|(k, v)| serde_json::json!({"stage": k, "seconds": v}))
+                    .collect::<Vec<_>>(),
+                "seconds": self.seconds,
+            }),
+        }
+    }
+}
+
 /// Run the calibration study `study` end to end with `options`, reporting to `observer`.
 ///
 /// Errors are [`StudyError::BadInput`] for a study, data file or option that cannot be used

@@ -7,7 +7,6 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use serde_json::json;
 
 use iuq_study::Study;
 use iuq_study::campaign_runs::progress_line;
@@ -89,15 +88,9 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
     };
     let outcome = iuq_study::pipeline::run(&study, &options, &mut StderrObserver::default())?;
     let out = &outcome.out;
+    let value = outcome.summary();
     match &outcome.report {
         None => {
-            let value = json!({
-                "study": outcome.study,
-                "runs": outcome.runs,
-                "failed": outcome.failed,
-                "out": out.display().to_string(),
-                "seconds": outcome.seconds,
-            });
             emit(json_output, &value, || {
                 format!(
                     "{} model runs of `{}` done ({} failed); results in {}",
@@ -109,30 +102,6 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
             });
         }
         Some(report) => {
-            let value = json!({
-                "study": outcome.study,
-                "out": out.display().to_string(),
-                "report": report.display().to_string(),
-                "runs": outcome.runs,
-                "failed": outcome.failed,
-                // A one-shot design has nothing to converge; an adaptive one says.
-                "converged": outcome.adaptive.as_ref().is_none_or(|a| a.converged),
-                "rounds": outcome.adaptive.as_ref().map_or(0, |a| a.rounds.len()),
-                "adaptive": outcome.adaptive,
-                "q2": outcome.q2,
-                "posterior": outcome.posterior,
-                // Per data point: the model at the posterior against the surrogate.
-                "posterior_check": outcome
-                    .posterior_check
-                    .as_ref()
-                    .map(|c| c.point_summaries()),
-                "stage_seconds": outcome
-                    .stage_seconds
-                    .iter()
-                    .map(|(k, v)| json!({"stage": k, "seconds": v}))
-                    .collect::<Vec<_>>(),
-                "seconds": outcome.seconds,
-            });
             emit(json_output, &value, || {
                 let adaptive = match &outcome.adaptive {
                     Some(a) => format!(

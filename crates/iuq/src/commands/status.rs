@@ -4,10 +4,8 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use serde_json::{Map, Value, json};
 
-use iuq_campaign::{CampaignStore, store_path};
-use iuq_study::campaign_runs::{campaign_error, load_study};
+use iuq_study::campaign_runs::{CampaignStatus, load_study};
 
 use crate::report_output::{emit, short};
 
@@ -24,33 +22,14 @@ pub struct StatusArgs {
 /// Run `iuq status`.
 pub fn run(args: &StatusArgs, json: bool) -> Result<()> {
     let study = load_study(&args.study)?;
-    let path = store_path(&study);
-    let store = CampaignStore::open_existing(&path).map_err(campaign_error)?;
-    let counts = store.counts(None).map_err(campaign_error)?;
-    let attempts = store.attempt_kinds().map_err(campaign_error)?;
-    let failures = store.failures().map_err(campaign_error)?;
-    let names = study.space.names();
-    let failure_values: Vec<Value> = failures
-        .iter()
-        .map(|f| {
-            let parameters: Map<String, Value> =
-                names.iter().cloned().zip(f.parameters.iter().map(|v| json!(v))).collect();
-            json!({"run_id": f.run_id, "parameters": parameters, "attempts": f.attempts, "kind": f.kind, "reason": f.reason})
-        })
-        .collect();
-    let attempts_map: Map<String, Value> = attempts
-        .iter()
-        .map(|(k, n)| (k.clone(), json!(n)))
-        .collect();
-    let value = json!({
-        "study": study.name,
-        "store": path.display().to_string(),
-        "journal_mode": store.journal_mode(),
-        "counts": counts,
-        "total": counts.total(),
-        "attempts": attempts_map,
-        "failures": failure_values,
-    });
+    let status = CampaignStatus::read(&study)?;
+    let value = status.to_json();
+    let (counts, attempts, failures, names) = (
+        &status.counts,
+        &status.attempts,
+        &status.failures,
+        &status.parameter_names,
+    );
     emit(json, &value, || {
         let mut text = format!(
             "campaign {}: {} runs\n  pending {}  queued {}  running {}  succeeded {}  failed {}  cancelled {}",
