@@ -11,8 +11,6 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 cargo test --workspace --locked
-# The command line the Python tests compare with.
-cargo build --release --locked -p iuq
 
 venv="${IUQ_VENV:-target/python-venv}"
 build_flags=(--no-build-isolation)
@@ -29,4 +27,6 @@ fi
 "$py" -m pip install --quiet "maturin>=1.5,<2" pytest numpy scikit-learn SALib scipy
 # --no-build-isolation (in the venv): build with the maturin just installed.
 "$py" -m pip install --quiet "${build_flags[@]}" --no-deps --force-reinstall ./python
-IUQ_BIN="$PWD/target/release/iuq" IUQ_REQUIRE_CLI=1 "$py" -m pytest python/tests -q ${PYTEST_ARGS:-}
+# The command line the Python tests compare with: the binary `cargo test` built (the test
+# profile is optimised, and its results equal the release build's bit for bit).
+IUQ_BIN="$PWD/target/debug/iuq" IUQ_REQUIRE_CLI=1 "$py" -m pytest python/tests -q ${PYTEST_ARGS:-}

@@ -2,37 +2,19 @@
 //!
 //! A fitted GP is saved as the CLI saves it: a GP bank of one output ([`GpBank`], whose
 //! `to_json_string` both sides call), so a file saved here and one written by `iuq gp fit` on the
-//! same data are identical, and either side loads the other's. `load` also reads the former
-//! envelope of `iuq gp fit`,
-//! `{"format": "iuq-gp", "version": 1, "inputs": [...], "output": "y", "gp": {...}}`.
+//! same data are identical, and either side loads the other's.
 
 use std::path::{Path, PathBuf};
 
 use numpy::{PyArray1, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
-use serde::Deserialize;
 
+use iuq_core::Model;
 use iuq_gp::{FitOptions, GaussianProcess, GpBank, Kernel};
 use iuq_study::table_io::write_atomically;
 
 use crate::arrays::{array_rows, array_values, vec_to_array};
 use crate::errors::{bad_input, failure};
-
-/// The former GP file of `iuq gp fit` (read only).
-#[derive(Debug, Deserialize)]
-struct LegacyGpFile {
-    version: u32,
-    inputs: Vec<String>,
-    output: String,
-    gp: serde_json::Value,
-}
-
-/// The names a GP bank file records.
-#[derive(Debug, Deserialize)]
-struct BankNames {
-    input_names: Vec<String>,
-    output_names: Vec<String>,
-}
 
 /// A fitted Gaussian process with the names of its input and output columns.
 #[pyclass(name = "GaussianProcess", module = "iuq._native", frozen)]
@@ -42,44 +24,16 @@ pub struct NativeGaussianProcess {
     output: String,
 }
 
-/// Read a GP file: a bank of one output, or the former `iuq-gp` envelope.
+/// Read a GP file: a GP bank of one output.
 fn read_gp_file(path: &Path) -> PyResult<NativeGaussianProcess> {
     let file = path.display();
     let bad = |reason: String| bad_input("path", format!("{file}: {reason}"));
     let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
-    let value: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| bad(format!("not a GP file: {e}")))?;
-    if value.get("format").and_then(|f| f.as_str()) == Some("iuq-gp") {
-        let legacy: LegacyGpFile =
-            serde_json::from_value(value).map_err(|e| bad(format!("not a GP file: {e}")))?;
-        if legacy.version != 1 {
-            return Err(bad(format!(
-                "format `iuq-gp` version {} is not version 1",
-                legacy.version
-            )));
-        }
-        let gp = GaussianProcess::from_json_str(&legacy.gp.to_string())
-            .map_err(|e| bad(format!("key `gp`: {e}")))?;
-        if gp.dimension() != legacy.inputs.len() {
-            return Err(bad(format!(
-                "{} input names for a GP of dimension {}",
-                legacy.inputs.len(),
-                gp.dimension()
-            )));
-        }
-        return Ok(NativeGaussianProcess {
-            gp,
-            inputs: legacy.inputs,
-            output: legacy.output,
-        });
-    }
     let bank = GpBank::from_json_str(&text).map_err(|e| bad(format!("not a GP file: {e}")))?;
-    let names: BankNames =
-        serde_json::from_value(value).map_err(|e| bad(format!("not a GP file: {e}")))?;
-    match (bank.gps(), names.output_names.as_slice()) {
+    match (bank.gps(), bank.output_names()) {
         ([gp], [output]) => Ok(NativeGaussianProcess {
             gp: gp.clone(),
-            inputs: names.input_names,
+            inputs: bank.input_names().to_vec(),
             output: output.clone(),
         }),
         (gps, _) => Err(bad(format!(

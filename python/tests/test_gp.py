@@ -50,18 +50,19 @@ def test_fit_save_predict_q2_equal_the_cli(cli, tmp_path):
     assert loaded.log_marginal_likelihood == gp.log_marginal_likelihood
 
 
-def test_the_former_gp_envelope_still_loads(tmp_path):
+def test_the_saved_file_is_a_gp_bank_of_one_output(tmp_path):
     x, y = data()
     gp = iuq.GaussianProcess.fit(x, y, restarts=2, seed=1, input_names=["a", "b"], output_name="f")
     gp.save(tmp_path / "bank.json")
     bank = json.loads((tmp_path / "bank.json").read_text())
+    assert bank["format"] == "iuq-gp-bank" and bank["version"] == 1
     assert bank["input_names"] == ["a", "b"] and bank["output_names"] == ["f"]
-    legacy = {"format": "iuq-gp", "version": 1, "inputs": ["a", "b"], "output": "f",
-              "gp": bank["gps"][0]}
-    (tmp_path / "legacy.json").write_text(json.dumps(legacy))
-    loaded = iuq.GaussianProcess.load(tmp_path / "legacy.json")
-    assert loaded.input_names == ["a", "b"] and loaded.output_name == "f"
-    assert np.array_equal(loaded.predict(x), gp.predict(x))
+    # A bank of two outputs (the pipeline's gp-bank.json) is not one GP.
+    bank["output_names"] = ["f", "g"]
+    bank["gps"] = bank["gps"] * 2
+    (tmp_path / "two.json").write_text(json.dumps(bank))
+    with pytest.raises(ValueError, match="^path: .*two.json: a GP bank of 2 outputs"):
+        iuq.GaussianProcess.load(tmp_path / "two.json")
 
 
 def test_fit_summary_equals_the_cli_json(cli, tmp_path):
@@ -123,8 +124,11 @@ def test_bad_input_names_the_argument(tmp_path):
     bad.write_text(json.dumps({"format": "other", "version": 1, "inputs": [], "output": "y", "gp": {}}))
     with pytest.raises(ValueError, match="^path: .*bad.json: not a GP file"):
         iuq.GaussianProcess.load(bad)
-    bad.write_text(json.dumps({"format": "iuq-gp", "version": 2, "inputs": [], "output": "y", "gp": {}}))
-    with pytest.raises(ValueError, match="^path: .*bad.json: format `iuq-gp` version 2"):
+    gp.save(bad)
+    saved = json.loads(bad.read_text())
+    saved["version"] = 2
+    bad.write_text(json.dumps(saved))
+    with pytest.raises(ValueError, match="^path: .*bad.json: not a GP file: .*format `iuq-gp-bank` version 2 is not"):
         iuq.GaussianProcess.load(bad)
     with pytest.raises(ValueError, match="^path: .*cannot read"):
         iuq.GaussianProcess.load(tmp_path / "missing.json")

@@ -66,16 +66,18 @@ impl From<GpBank> for SavedBank {
 }
 
 impl TryFrom<SavedBank> for GpBank {
-    type Error = GpError;
-    fn try_from(s: SavedBank) -> Result<Self> {
+    /// The reason, which [`GpBank::from_json_str`] wraps once as a persistence error.
+    type Error = String;
+    fn try_from(s: SavedBank) -> std::result::Result<Self, String> {
         if s.format != BANK_FORMAT || s.version != BANK_FORMAT_VERSION {
-            return Err(GpError::Persistence(format!(
+            return Err(format!(
                 "format `{}` version {} is not a GP file (`{BANK_FORMAT}` version {BANK_FORMAT_VERSION})",
                 s.format, s.version
-            )));
+            ));
         }
         GpBank::new(s.input_names, s.output_names, s.gps)
             .map(|b| b.with_predictive_std(s.predictive_std))
+            .map_err(|e| e.to_string())
     }
 }
 

@@ -1,31 +1,15 @@
 //! End-to-end tests of `iuq rbc`: real processes. The shear runs use a short measuring window
 //! (`--start-strain`) so that they take a second or two.
 
+mod common;
+
 use std::path::PathBuf;
-use std::process::{Command, Output};
 
-fn iuq(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_iuq"))
-        .args(args)
-        .output()
-        .expect("the iuq binary runs")
-}
+use common::{iuq, json_of};
 
-fn json_of(output: &Output) -> serde_json::Value {
-    let stdout = String::from_utf8_lossy(&output.stdout);
-    let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(
-        lines.len(),
-        1,
-        "exactly one JSON line expected, got: {stdout}"
-    );
-    serde_json::from_str(lines[0]).expect("valid JSON")
-}
-
+/// A fresh, empty directory for one test.
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("iuq-cli-rbc-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    dir
+    common::scratch("cli-rbc", name)
 }
 
 #[test]
