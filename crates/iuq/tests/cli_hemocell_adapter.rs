@@ -6,7 +6,9 @@
 
 mod common;
 
-use common::{iuq, json_of, native_frames, scratch, stderr_of};
+use common::{
+    hemocell_campaign_in, hemocell_example_dir, iuq, json_of, native_frames, scratch, stderr_of,
+};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -14,10 +16,6 @@ use std::process::{Command, Output};
 use serde_json::Value;
 
 const SUITE: &str = "cli-hemocell";
-
-fn example_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/hemocell")
-}
 
 /// `None` when python3 with numpy and h5py is available, else why not.
 fn h5py_missing() -> Option<String> {
@@ -142,7 +140,7 @@ fn write_hemocell_tree(dir: &Path, native: &Value, files: &[PathBuf], extra: &[&
         .map(|s| s.as_u64().unwrap())
         .collect();
     let mut c = Command::new("python3");
-    c.arg(example_dir().join("tests/write_hemocell_hdf5.py"))
+    c.arg(hemocell_example_dir().join("tests/write_hemocell_hdf5.py"))
         .arg(&hdf5);
     for (step, file) in steps.iter().zip(files) {
         c.arg("--frame").arg(step.to_string()).arg(file);
@@ -158,7 +156,7 @@ fn write_hemocell_tree(dir: &Path, native: &Value, files: &[PathBuf], extra: &[&
 
 fn decode(dir: &Path, hdf5: &Path, from: u64, to: u64) -> Output {
     Command::new("python3")
-        .arg(example_dir().join("decode-el.py"))
+        .arg(hemocell_example_dir().join("decode-el.py"))
         .arg(hdf5)
         .args(["--from", &from.to_string(), "--to", &to.to_string()])
         .args(["--frames", "10", "--out", "el.json"])
@@ -261,20 +259,7 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
         return;
     }
     let dir = scratch(SUITE, "campaign");
-    for f in [
-        "hemocell-shear.toml",
-        "config.xml",
-        "RBC.xml",
-        "RBC.pos",
-        "run-hemocell.sh",
-        "decode-el.py",
-    ] {
-        std::fs::copy(example_dir().join(f), dir.join(f)).unwrap();
-    }
-    let study = dir.join("hemocell-shear.toml");
-    let text = std::fs::read_to_string(&study).unwrap();
-    assert!(text.contains("n = 16"));
-    std::fs::write(&study, text.replace("n = 16", "n = 3")).unwrap();
+    let study = hemocell_campaign_in(&dir, 3);
     let fake = dir.join("oneCellShear");
     std::fs::write(&fake, FAKE_ONECELLSHEAR).unwrap();
     Command::new("chmod").arg("+x").arg(&fake).status().unwrap();
@@ -282,7 +267,10 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
         .args(["run", study.to_str().unwrap(), "--json"])
         .env("HEMOCELL_ONECELLSHEAR", &fake)
         .env("IUQ", env!("CARGO_BIN_EXE_iuq"))
-        .env("WRITER", example_dir().join("tests/write_hemocell_hdf5.py"))
+        .env(
+            "WRITER",
+            hemocell_example_dir().join("tests/write_hemocell_hdf5.py"),
+        )
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", stderr_of(&o));

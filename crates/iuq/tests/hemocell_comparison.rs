@@ -20,7 +20,9 @@
 
 mod common;
 
-use common::{iuq, json_of, native_frames, scratch, stderr_of};
+use common::{
+    hemocell_campaign_in, hemocell_example_dir, iuq, json_of, native_frames, scratch, stderr_of,
+};
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -29,10 +31,6 @@ use std::process::{Command, Output};
 use serde_json::Value;
 
 const SUITE: &str = "hemocell-comparison";
-
-fn example_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/hemocell")
-}
 
 fn h5py_available(test: &str) -> bool {
     match Command::new("python3")
@@ -61,7 +59,7 @@ fn h5py_available(test: &str) -> bool {
 fn run_folder(name: &str) -> PathBuf {
     let dir = scratch(SUITE, name);
     let fill = |file: &str, pairs: &[(&str, &str)]| {
-        let mut text = std::fs::read_to_string(example_dir().join(file)).unwrap();
+        let mut text = std::fs::read_to_string(hemocell_example_dir().join(file)).unwrap();
         for (k, v) in pairs {
             text = text.replace(&format!("{{{{ {k} }}}}"), v);
         }
@@ -91,7 +89,7 @@ fn fake_onecellshear(dir: &Path, body: &str) -> PathBuf {
 }
 
 fn run_adapter(dir: &Path, simulator: &Path) -> Output {
-    Command::new(example_dir().join("run-hemocell.sh"))
+    Command::new(hemocell_example_dir().join("run-hemocell.sh"))
         .args(["100", "200"])
         .current_dir(dir)
         .env("HEMOCELL_ONECELLSHEAR", simulator)
@@ -167,19 +165,7 @@ fn hemocell_s_reason_for_a_non_zero_exit_is_the_run_s_last_stderr_line() {
 #[test]
 fn the_campaign_records_hemocell_s_reason() {
     let dir = scratch(SUITE, "campaign-reason");
-    for f in [
-        "hemocell-shear.toml",
-        "config.xml",
-        "RBC.xml",
-        "RBC.pos",
-        "run-hemocell.sh",
-        "decode-el.py",
-    ] {
-        std::fs::copy(example_dir().join(f), dir.join(f)).unwrap();
-    }
-    let study = dir.join("hemocell-shear.toml");
-    let text = std::fs::read_to_string(&study).unwrap();
-    std::fs::write(&study, text.replace("n = 16", "n = 3")).unwrap();
+    let study = hemocell_campaign_in(&dir, 3);
     let fake = fake_onecellshear(&dir, &format!("echo '{NO_INTERIOR_VISCOSITY}'\nexit 1"));
     let o = Command::new(env!("CARGO_BIN_EXE_iuq"))
         .args(["run", study.to_str().unwrap(), "--json"])
@@ -216,7 +202,7 @@ fn write_and_decode(
     std::fs::create_dir_all(case).unwrap();
     let hdf5 = case.join("tmp/hdf5");
     let mut c = Command::new("python3");
-    c.arg(example_dir().join("tests/write_hemocell_hdf5.py"))
+    c.arg(hemocell_example_dir().join("tests/write_hemocell_hdf5.py"))
         .arg(&hdf5)
         .args(["--frame", "0"])
         .arg(&files[0]);
@@ -227,7 +213,7 @@ fn write_and_decode(
     let o = c.output().unwrap();
     assert!(o.status.success(), "{}", stderr_of(&o));
     Command::new("python3")
-        .arg(example_dir().join("decode-el.py"))
+        .arg(hemocell_example_dir().join("decode-el.py"))
         .arg(&hdf5)
         .args([
             "--from", "100", "--to", "190", "--frames", "10", "--out", "el.json",

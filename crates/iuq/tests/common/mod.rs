@@ -130,3 +130,33 @@ pub fn native_frames(dir: &Path, format: Option<&str>) -> (serde_json::Value, Ve
     assert_eq!(files.len(), 10);
     (v, files)
 }
+
+/// `examples/hemocell`, the HemoCell adapter.
+pub fn hemocell_example_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/hemocell")
+}
+
+/// The HemoCell adapter's campaign study and files copied into `dir`, its design cut to `n`
+/// points; returns the study file.
+pub fn hemocell_campaign_in(dir: &Path, n: usize) -> PathBuf {
+    for f in [
+        "hemocell-shear.toml",
+        "config.xml",
+        "RBC.xml",
+        "RBC.pos",
+        "run-hemocell.sh",
+        "decode-el.py",
+    ] {
+        std::fs::copy(hemocell_example_dir().join(f), dir.join(f))
+            .expect("the adapter's files copy into a scratch directory");
+    }
+    let study = dir.join("hemocell-shear.toml");
+    let text = std::fs::read_to_string(&study).expect("the study reads back");
+    assert!(
+        text.contains("n = 16"),
+        "the adapter's design has 16 points"
+    );
+    std::fs::write(&study, text.replace("n = 16", &format!("n = {n}")))
+        .expect("the study is written");
+    study
+}
