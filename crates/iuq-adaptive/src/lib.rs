@@ -11,15 +11,16 @@
 //!    squared relative density and the probability that the model answers there);
 //! 2. pick a batch greedily, conditioning the GPs on every pick before the next one
 //!    ("kriging believer"), so that a batch spreads out instead of piling up ([`batch`]);
-//! 3. stop when the posterior has stopped moving and the surrogate's uncertainty of the
-//!    log-likelihood over the posterior is small ([`convergence`]), and report how much
+//! 3. stop when the posterior has stopped moving and the surrogate's uncertainty could not move
+//!    it either ([`convergence`], [`moment_error`]), and report how much
 //!    posterior mass lies far from every run ([`extrapolation`]).
 //!
 //! | module | what |
 //! |---|---|
 //! | [`acquisition`] | the log-likelihood variance Var_f[ln N(y | f, s²)] of a GP prediction |
 //! | [`batch`] | greedy batch selection with kriging-believer variance updates |
-//! | [`convergence`] | the stopping rule: posterior shift and surrogate log-likelihood spread |
+//! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
+//! | [`moment_error`] | the first-order error of the posterior moments under the GPs' error |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
 //! | [`error`] | the crate's error type [`AdaptiveError`] |
 //!
@@ -32,11 +33,14 @@ pub mod batch;
 pub mod convergence;
 pub mod error;
 pub mod extrapolation;
+pub mod moment_error;
 
 pub use acquisition::{likelihood_weights, log_likelihood_variance};
 pub use batch::{LikelihoodTerm, Selection, select_batch};
 pub use convergence::{
-    ConvergenceCriterion, PosteriorMoments, RoundAssessment, surrogate_log_likelihood_std,
+    ConvergenceCriterion, NOISE_MULTIPLE, PosteriorMoments, RoundAssessment,
+    surrogate_log_likelihood_std,
 };
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
+pub use moment_error::{MomentError, MomentTerm, linearised_moment_error, sampled_moment_error};

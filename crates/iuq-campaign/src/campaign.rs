@@ -362,6 +362,29 @@ impl Campaign {
         report_every: Duration,
         observer: &mut dyn FnMut(&Progress),
     ) -> Result<StatusCounts> {
+        self.run_among(None, report_every, observer)
+    }
+
+    /// Run the pending runs among `run_ids` (and wait for any reattached from an earlier
+    /// coordinator) until they are final; other pending runs of the store stay pending. A
+    /// pipeline asks for the runs of its current design this way, so that the runs of a design it
+    /// abandoned (an earlier posterior's check, stopped half-way) do not run before them.
+    pub fn run_only(
+        &mut self,
+        run_ids: &[i64],
+        report_every: Duration,
+        observer: &mut dyn FnMut(&Progress),
+    ) -> Result<StatusCounts> {
+        let among: std::collections::HashSet<i64> = run_ids.iter().copied().collect();
+        self.run_among(Some(&among), report_every, observer)
+    }
+
+    fn run_among(
+        &mut self,
+        among: Option<&std::collections::HashSet<i64>>,
+        report_every: Duration,
+        observer: &mut dyn FnMut(&Progress),
+    ) -> Result<StatusCounts> {
         let start = *self.session_start.get_or_insert_with(Instant::now);
         let runs_per_task = match self.study.model.kind {
             CommandKind::Command => 1,
@@ -380,7 +403,7 @@ impl Campaign {
                 .saturating_sub(self.executor.in_flight());
             let pending = if free > 0 {
                 self.store
-                    .pending_runs(free.saturating_mul(runs_per_task).min(100_000))?
+                    .pending_runs_among(among, free.saturating_mul(runs_per_task).min(100_000))?
             } else {
                 Vec::new()
             };
@@ -435,7 +458,7 @@ impl Campaign {
                 observer(&self.progress(start)?);
             }
             if self.executor.in_flight() == 0 && !submitted_any {
-                if self.store.pending_runs(1)?.is_empty() {
+                if self.store.pending_runs_among(among, 1)?.is_empty() {
                     if !external.is_empty() {
                         let ext = std::mem::take(&mut external);
                         self.store.write(|w| {

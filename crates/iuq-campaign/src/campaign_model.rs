@@ -123,7 +123,7 @@ impl CampaignModel {
             None => &mut noop,
         };
         campaign
-            .run(self.report_every, observer)
+            .run_only(&run_ids, self.report_every, observer)
             .map_err(unavailable)?;
         let stored = campaign.store().outcomes(&run_ids).map_err(unavailable)?;
         Ok(stored

@@ -593,6 +593,27 @@ impl CampaignStore {
 
     /// Runs that are pending, oldest first, at most `limit`.
     pub fn pending_runs(&self, limit: usize) -> Result<Vec<PendingRun>> {
+        self.pending_runs_among(None, limit)
+    }
+
+    /// Runs that are pending and, when `among` is given, in it; oldest first, at most `limit`.
+    pub fn pending_runs_among(
+        &self,
+        among: Option<&std::collections::HashSet<i64>>,
+        limit: usize,
+    ) -> Result<Vec<PendingRun>> {
+        let Some(among) = among else {
+            return self.all_pending_runs(limit);
+        };
+        Ok(self
+            .all_pending_runs(usize::MAX)?
+            .into_iter()
+            .filter(|r| among.contains(&r.run_id))
+            .take(limit)
+            .collect())
+    }
+
+    fn all_pending_runs(&self, limit: usize) -> Result<Vec<PendingRun>> {
         let mut stmt = self
             .connection
             .prepare_cached("SELECT id, parameters, attempts FROM runs WHERE status = 'pending' ORDER BY id LIMIT ?1")

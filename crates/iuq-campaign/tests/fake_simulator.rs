@@ -189,6 +189,30 @@ fn identical_vectors_are_not_run_twice_across_batches_and_sessions() {
 }
 
 #[test]
+fn a_batch_runs_only_its_own_runs_and_leaves_an_abandoned_design_pending() {
+    let dir = scratch("only");
+    let path = write_study(&dir, "");
+    // A design recorded by an earlier coordinator that stopped before running it.
+    let mut campaign = open(&path);
+    campaign
+        .add_points("abandoned", &[vec![0.0, 7.0], vec![0.0, 8.0]])
+        .unwrap();
+    let model = CampaignModel::new(campaign);
+    let outcomes = model.evaluate_batch(&[vec![0.0, 1.0]]).unwrap();
+    assert_eq!(outcomes[0].as_ref().unwrap().outputs[0], 1.0);
+    let campaign = model.into_campaign().unwrap();
+    let counts = campaign.store().counts(None).unwrap();
+    assert_eq!((counts.succeeded, counts.pending), (1, 2));
+    // Asked for later, an abandoned run runs then.
+    let model = CampaignModel::new(campaign);
+    let later = model.evaluate_batch(&[vec![0.0, 8.0]]).unwrap();
+    assert_eq!(later[0].as_ref().unwrap().outputs[0], 8.0);
+    let counts = model.into_campaign().unwrap().store().counts(None).unwrap();
+    assert_eq!((counts.succeeded, counts.pending), (2, 1));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn batch_command_reads_a_csv_of_vectors_and_writes_a_csv_of_outputs() {
     let dir = scratch("batch");
     let script = r#"#!/bin/sh

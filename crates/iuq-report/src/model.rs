@@ -121,9 +121,17 @@ pub struct ConvergenceRound {
     pub mean: Vec<f64>,
     /// Posterior std per parameter.
     pub std: Vec<f64>,
-    /// Largest shift of a mean or std since the previous round, in posterior stds (`None` in
-    /// the first round).
+    /// Largest shift of a mean or std since the previous round beyond the sampler's noise, in
+    /// posterior stds (`None` in the first round).
     pub shift: Option<f64>,
+    /// The sampler's noise on the shift (twice the Monte Carlo error of the difference), in
+    /// posterior stds (`None` in the first round or where unknown).
+    #[serde(default)]
+    pub shift_noise: Option<f64>,
+    /// How far the surrogate's error could move a posterior mean or std, in posterior stds
+    /// (`None` where not computed).
+    #[serde(default)]
+    pub surrogate_error: Option<f64>,
     /// The surrogate's std of the log-likelihood averaged over the posterior (nats).
     pub log_likelihood_std: f64,
     /// Share of the posterior farther than one length scale from every training run.

@@ -417,7 +417,8 @@ pub(crate) fn stage_times(report: &StudyReport, derived: &DerivedResults) -> Tab
     }
 }
 
-/// The adaptive engine's rounds: runs, shift, the surrogate's log-likelihood std, the
+/// The adaptive engine's rounds: runs, shift, sampler noise, surrogate error, the surrogate's
+/// log-likelihood std, the
 /// extrapolated share, then the posterior mean and std of each parameter (one column group per
 /// parameter).
 pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
@@ -427,6 +428,8 @@ pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
         "runs",
         "new runs",
         "shift (posterior stds)",
+        "sampler noise (posterior stds)",
+        "surrogate error (posterior stds)",
         "log-likelihood std (nats)",
         "extrapolated share",
     ]
@@ -448,6 +451,14 @@ pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
                 Cell::count(round.new_runs, at("new_runs")),
                 match round.shift {
                     Some(shift) => Cell::number(shift, at("shift")),
+                    None => Cell::Empty,
+                },
+                match round.shift_noise {
+                    Some(noise) => Cell::number(noise, at("shift_noise")),
+                    None => Cell::Empty,
+                },
+                match round.surrogate_error {
+                    Some(error) => Cell::number(error, at("surrogate_error")),
                     None => Cell::Empty,
                 },
                 Cell::number(round.log_likelihood_std, at("log_likelihood_std")),

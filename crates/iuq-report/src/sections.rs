@@ -428,7 +428,7 @@ fn convergence_section(convergence: &Convergence, figures_dir: &Path) -> Result<
             FigureSpec {
                 name: "convergence",
                 title: "Convergence of the adaptive design",
-                caption: "Posterior mean (line) and ± 1 std band of each parameter, and the surrogate's std of the log-likelihood averaged over the posterior (logarithmic axis), against the model runs the round's posterior was computed from, one marker per round (their spacing: the runs each round added).".to_string(),
+                caption: "Posterior mean (line) and ± 1 std band of each parameter, and, on a logarithmic axis, the surrogate's std of the log-likelihood averaged over the posterior (nats) and how far the surrogate's error could move a posterior mean or std (posterior stds; the stopping rule's measure), against the model runs the round's posterior was computed from, one marker per round (their spacing: the runs each round added).".to_string(),
                 size: chart.size(),
                 tables: &["adaptive_rounds"],
             },

@@ -142,6 +142,12 @@ fn validate_convergence(convergence: &Convergence) -> Result<()> {
         if let Some(shift) = round.shift {
             non_negative(&format!("{f}.shift"), shift)?;
         }
+        if let Some(noise) = round.shift_noise {
+            non_negative(&format!("{f}.shift_noise"), noise)?;
+        }
+        if let Some(error) = round.surrogate_error {
+            non_negative(&format!("{f}.surrogate_error"), error)?;
+        }
         non_negative(&format!("{f}.log_likelihood_std"), round.log_likelihood_std)?;
         probability(
             &format!("{f}.extrapolation_share"),

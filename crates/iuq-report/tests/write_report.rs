@@ -445,12 +445,17 @@ fn adaptive_results_get_their_sections_figures_and_tables() {
     let mut lines = rounds.lines();
     assert_eq!(
         lines.next().unwrap(),
-        "round,runs,new runs,shift (posterior stds),log-likelihood std (nats),extrapolated share,\
+        "round,runs,new runs,shift (posterior stds),sampler noise (posterior stds),\
+         surrogate error (posterior stds),log-likelihood std (nats),extrapolated share,\
          kLink mean,kLink std,kBend mean,kBend std,sigma_m mean,sigma_m std"
     );
     assert_eq!(lines.count(), 3);
     let first = report.convergence.as_ref().unwrap().rounds[0].clone();
-    assert!(rounds.contains(&format!("\n1,40,12,,{},", first.log_likelihood_std)));
+    assert!(rounds.contains(&format!(
+        "\n1,40,12,,,{},{},",
+        first.surrogate_error.unwrap(),
+        first.log_likelihood_std
+    )));
 
     let (document, _) = read_document(&dir);
     assert!(document.report == report, "report.json does not round-trip");

@@ -225,9 +225,12 @@ fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() 
         (0.305 - 0.003..0.305 + 0.002).contains(&p99),
         "99th percentile {p99}"
     );
-    // Few runs where the model fails: the engine fails only while it locates the boundary (every
-    // failed adaptive run lies within 2 exact posterior stds of it), never deep in the region
-    // that gives no answer (two thirds of the prior), and most of its runs succeed.
+    // Few runs where the model fails: the engine fails only while it locates the boundary, never
+    // deep in the region that gives no answer (two thirds of the prior), and most of its runs
+    // succeed. A boundary run goes to a posterior sample on which the classifier is unsure within
+    // BOUNDARY_REACH = 3 posterior stds of a failed run (docs/adaptive-engine.md), so a failed
+    // run may lie up to 3 posterior stds beyond the boundary (seen: 2.07, a boundary run of
+    // round 4 with the round's posterior pooled from four replicate samplers).
     let runs = adaptive_runs(&out);
     let failed: Vec<f64> = runs.iter().filter(|r| r.2).map(|r| r.1[0]).collect();
     assert!(
@@ -238,7 +241,7 @@ fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() 
     );
     for k in &failed {
         assert!(
-            *k < 0.305 + 2.0 * 0.0069,
+            *k < 0.305 + 3.0 * 0.0069,
             "a failed adaptive run at k = {k}"
         );
     }

@@ -1,6 +1,6 @@
 //! The adaptive design's convergence: one panel per parameter with the posterior mean and its
 //! ± 1 std band against the number of model runs, and a last panel with the surrogate's
-//! log-likelihood std per round. The spacing of the rounds along the x axis shows the runs each
+//! log-likelihood std and its error on the posterior moments per round. The spacing of the rounds along the x axis shows the runs each
 //! round added.
 
 use plotters::coord::Shift;
@@ -12,7 +12,7 @@ use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
 use crate::model::{Convergence, ConvergenceRound};
 use crate::statistics::{extent, padded};
-use crate::style::{DATA_COLOUR, FONT, GRID_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
+use crate::style::{DATA_COLOUR, FONT, GRID_COLOUR, MODEL_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
 
 /// Height of the title and legend strip.
 const HEADER: u32 = 74;
@@ -23,7 +23,7 @@ const PANEL_HEIGHT: u32 = 270;
 /// Opacity of the ± 1 std band.
 const BAND_OPACITY: f64 = 0.22;
 /// Title of the last panel.
-const LIKELIHOOD_TITLE: &str = "surrogate log-likelihood std (nats)";
+const LIKELIHOOD_TITLE: &str = "surrogate uncertainty (log scale)";
 
 /// One panel's chart: model runs against a value.
 type Panel<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
@@ -149,13 +149,19 @@ impl ConvergenceChart<'_> {
         Ok(())
     }
 
-    /// The surrogate's log-likelihood std per round, on a logarithmic axis (it falls by orders
-    /// of magnitude as the surrogate learns the posterior region).
+    /// The surrogate's log-likelihood std (nats) and its error on the posterior moments
+    /// (posterior stds) per round, on a logarithmic axis (they fall by orders of magnitude as
+    /// the surrogate learns the posterior region).
     fn draw_likelihood<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
         let rounds = &self.convergence.rounds;
         let log = |u: f64| u.max(1e-6).log10();
-        let (lo, hi) =
-            extent(rounds.iter().map(|r| log(r.log_likelihood_std))).unwrap_or((-1.0, 0.0));
+        let (lo, hi) = extent(
+            rounds
+                .iter()
+                .map(|r| log(r.log_likelihood_std))
+                .chain(rounds.iter().filter_map(|r| r.surrogate_error.map(log))),
+        )
+        .unwrap_or((-1.0, 0.0));
         let (lo, hi) = if hi - lo < 1.0 {
             (lo - 0.5, hi + 0.5)
         } else {
@@ -172,6 +178,19 @@ impl ConvergenceChart<'_> {
                 .into_iter()
                 .map(|p| Circle::new(p, 3, DATA_COLOUR.filled())),
         )?;
+        let errors: Vec<(f64, f64)> = rounds
+            .iter()
+            .filter_map(|r| r.surrogate_error.map(|e| (r.runs as f64, log(e))))
+            .collect();
+        chart.draw_series(LineSeries::new(
+            errors.clone(),
+            MODEL_COLOUR.stroke_width(2),
+        ))?;
+        chart.draw_series(
+            errors
+                .into_iter()
+                .map(|p| Circle::new(p, 3, MODEL_COLOUR.filled())),
+        )?;
         Ok(())
     }
 }
@@ -185,7 +204,11 @@ impl Chart for ConvergenceChart<'_> {
             ),
             (
                 LegendMark::Line(DATA_COLOUR, 2),
-                "surrogate log-likelihood std".to_string(),
+                "surrogate log-likelihood std (nats)".to_string(),
+            ),
+            (
+                LegendMark::Line(MODEL_COLOUR, 2),
+                "surrogate error of the moments (posterior stds)".to_string(),
             ),
         ];
         let body = header(area, "Convergence of the adaptive design", &entries, HEADER)?;

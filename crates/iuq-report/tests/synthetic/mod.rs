@@ -404,13 +404,15 @@ pub fn add_adaptive_results(report: &mut StudyReport, rounds: usize, panels: usi
                     .collect(),
                 std: (0..3).map(|p| spread[p] * (1.0 + 1.2 * decay)).collect(),
                 shift: (r > 0).then_some(1.2 * decay),
+                shift_noise: (r > 0).then_some(0.05),
+                surrogate_error: Some(0.5 * decay),
                 log_likelihood_std: 2.4 * decay,
                 extrapolation_share: 0.3 * decay,
             }
         })
         .collect();
     report.convergence = Some(Convergence {
-        criterion: "every posterior mean and std moves by less than 0.1 posterior stds between rounds, and the surrogate's std of the log-likelihood averaged over the posterior is below 0.2 nats".to_string(),
+        criterion: "every posterior mean and std moves by less than 0.1 posterior stds between rounds beyond the sampler's noise, and the surrogate's error could move none by more than 0.1 posterior stds".to_string(),
         converged: true,
         stop_reason: "the convergence rule was met".to_string(),
         parameters,

@@ -1,13 +1,19 @@
 //! The adaptive engine: after the initial design, rounds of
 //!
 //! 1. fit the surrogate (a GP per data point, a failure classifier per run group with failures);
-//! 2. sample its posterior with BASIS (`samples` per round, seed = the sampler's + round);
+//! 2. sample its posterior with `replicates` independent BASIS runs of `samples` each (seeds
+//!    from the sampler's, the round and the replicate), pooled; their spread is the Monte Carlo
+//!    error of the moments;
 //! 3. judge convergence (`iuq_adaptive::convergence`): every parameter's posterior mean and std
-//!    moved by less than `tolerance` posterior stds since the previous round, the surrogate's
-//!    std of the log-likelihood, averaged over the posterior, is below `log_likelihood_tolerance`
-//!    nats, and the region of the posterior where a failure classifier is unsure
+//!    moved by less than `tolerance` posterior stds since the previous round beyond the
+//!    sampler's noise, and that noise is below `tolerance` (else the next round's replicates
+//!    sample twice as many, up to `max_samples`); the GPs' error could move no posterior mean or
+//!    std by more than `tolerance` posterior stds (`iuq_adaptive::moment_error`: the std of the
+//!    reweighted moments over [`SURROGATE_ERROR_DRAWS`] joint draws of the GPs' error);
+//!    and the region of the posterior where a failure classifier is unsure
 //!    (0.1 ≤ p_fail ≤ 0.9) has runs every [`BOUNDARY_RESOLUTION`] posterior stds — else boundary
-//!    runs go there;
+//!    runs go there, once the surrogate's std of the log-likelihood averaged over the posterior
+//!    is below `log_likelihood_tolerance` nats;
 //! 4. otherwise score the distinct posterior samples by the variance the surrogate leaves in the
 //!    log-likelihood there, times their squared relative posterior density and the probability
 //!    that the model answers (`iuq_adaptive::acquisition`), pick up to `batch` runs per run group greedily with
@@ -31,8 +37,9 @@ use std::time::Instant;
 use serde::Serialize;
 
 use iuq_adaptive::{
-    ConvergenceCriterion, LikelihoodTerm, PosteriorMoments, extrapolation_share,
-    likelihood_weights, log_likelihood_variance, select_batch, surrogate_log_likelihood_std,
+    ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
+    likelihood_weights, log_likelihood_variance, sampled_moment_error, select_batch,
+    surrogate_log_likelihood_std,
 };
 
 use super::Events;
@@ -50,6 +57,10 @@ use crate::table_io::{write_atomically, write_numeric_csv};
 /// Distance to the nearest training run, in length scales, beyond which the surrogate
 /// extrapolates.
 pub const EXTRAPOLATION_THRESHOLD: f64 = 1.0;
+
+/// Joint draws of the GPs' error over the candidates from which the surrogate error ε is
+/// estimated (its relative Monte Carlo error is about 1/√(2·64) ≈ 9 %).
+pub const SURROGATE_ERROR_DRAWS: usize = 64;
 
 /// A failure classifier is unsure at θ when 0.1 ≤ p_fail(θ) ≤ 0.9.
 const UNSURE: (f64, f64) = (0.1, 0.9);
@@ -154,10 +165,25 @@ pub struct AdaptiveRound {
     pub mean: Vec<f64>,
     /// Posterior std of each sampled parameter.
     pub std: Vec<f64>,
-    /// max_k of the parameters' shifts since the previous round, in posterior stds.
+    /// Monte Carlo standard error of each posterior mean (from the replicates' spread).
+    pub mean_error: Vec<f64>,
+    /// Monte Carlo standard error of each posterior std.
+    pub std_error: Vec<f64>,
+    /// Posterior samples of the round, all replicates together.
+    pub samples: usize,
+    /// max_k of the parameters' shifts since the previous round beyond the sampler's noise, in
+    /// posterior stds.
     pub shift: Option<f64>,
+    /// max_k of the sampler's noise on those shifts (2 Monte Carlo errors of the difference),
+    /// in posterior stds: a shift is resolved only when this is below the tolerance.
+    pub shift_noise: Option<f64>,
     /// The surrogate's std of the log-likelihood, averaged over the posterior (nats).
     pub log_likelihood_std: f64,
+    /// ε: the largest first-order std of a posterior mean or std under the GPs' error, in
+    /// posterior stds (`iuq_adaptive::moment_error`).
+    pub surrogate_error: f64,
+    /// The first-order std of the log evidence under the GPs' error (nats).
+    pub log_evidence_error: f64,
     /// Share of posterior samples farther than one length scale from every training run of
     /// some data point's GP (the largest share over the GPs).
     pub extrapolation_share: f64,
@@ -260,13 +286,25 @@ fn likelihood_variances(
 /// (ℓ + ln π of the surrogate posterior), and how many posterior samples each stands for.
 struct Candidates {
     theta: Vec<Vec<f64>>,
+    /// Every sampled parameter of each candidate (θ, then σ_m where sampled).
+    full: Vec<Vec<f64>>,
     variance: Vec<Vec<f64>>,
     log_density: Vec<f64>,
     copies: Vec<f64>,
 }
 
+/// A round's posterior: the replicates' final populations pooled.
+struct PooledPosterior {
+    samples: Vec<Vec<f64>>,
+    log_likelihood: Vec<f64>,
+    log_prior: Vec<f64>,
+    /// The mean of the replicates' log evidence.
+    log_evidence: f64,
+    moments: PosteriorMoments,
+}
+
 fn candidates(
-    state: &iuq_basis::BasisState,
+    state: &PooledPosterior,
     d: usize,
     modelling_error: bool,
     data: &DataLikelihood,
@@ -282,6 +320,10 @@ fn candidates(
         .map(|&(i, _)| state.log_likelihood[i] + state.log_prior[i])
         .collect();
     let copies = rows.iter().map(|&(_, n)| n as f64).collect();
+    let full = rows
+        .iter()
+        .map(|&(i, _)| state.samples[i].clone())
+        .collect();
     let variance = rows
         .iter()
         .map(|&(i, _)| {
@@ -294,6 +336,7 @@ fn candidates(
         .collect();
     Candidates {
         theta,
+        full,
         variance,
         log_density,
         copies,
@@ -332,6 +375,7 @@ pub(super) fn refine(
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
     let mut rounds: Vec<AdaptiveRound> = Vec::new();
     let mut previous: Option<PosteriorMoments> = None;
+    let mut round_samples = settings.samples;
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
     let mut converged = false;
     let mut parameters = Vec::new();
@@ -342,28 +386,46 @@ pub(super) fn refine(
         let made: usize = groups.iter().map(GroupRuns::len).sum();
         let surrogate = Surrogate::fit(groups, runs, &study.space, training_seed, describe)?;
         let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
-        let sampler = parse_sampler(
-            study,
-            &SamplerOverrides {
-                samples: Some(settings.samples),
-                seed: Some(base_seed.wrapping_add(round as u64)),
-                ..Default::default()
-            },
-        )?;
-        let sampled = events.sample(
-            "adaptive round",
-            study,
-            &posterior,
-            sampler,
-            &dir.join(format!("round-{round}")),
-            None,
-        )?;
-        let state = &sampled.run.state;
-        parameters = state.parameter_names.clone();
-        let moments = PosteriorMoments {
-            mean: sampled.summary.mean.clone(),
-            std: sampled.summary.std.clone(),
+        let mut pooled = PooledPosterior {
+            samples: Vec::new(),
+            log_likelihood: Vec::new(),
+            log_prior: Vec::new(),
+            log_evidence: 0.0,
+            moments: PosteriorMoments::exact(Vec::new(), Vec::new()),
         };
+        let mut replicate_moments = Vec::with_capacity(settings.replicates);
+        for replicate in 0..settings.replicates {
+            let sampler = parse_sampler(
+                study,
+                &SamplerOverrides {
+                    samples: Some(round_samples),
+                    seed: Some(
+                        base_seed.wrapping_add((round * settings.replicates + replicate) as u64),
+                    ),
+                    ..Default::default()
+                },
+            )?;
+            let sampled = events.sample(
+                "adaptive round",
+                study,
+                &posterior,
+                sampler,
+                &dir.join(format!("round-{round}"))
+                    .join(format!("replicate-{}", replicate + 1)),
+                None,
+            )?;
+            let state = sampled.run.state;
+            parameters = state.parameter_names.clone();
+            pooled.samples.extend(state.samples);
+            pooled.log_likelihood.extend(state.log_likelihood);
+            pooled.log_prior.extend(state.log_prior);
+            pooled.log_evidence += state.log_evidence / settings.replicates as f64;
+            replicate_moments.push((sampled.summary.mean, sampled.summary.std));
+        }
+        pooled.moments = PosteriorMoments::pooled(&replicate_moments)
+            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+        let moments = pooled.moments.clone();
+        let state = &pooled;
         let c = candidates(state, d, modelling_error, data, settings.candidates);
         // The surrogate's predictions at the candidates, per data point.
         let gps = surrogate.bank.gps();
@@ -390,7 +452,40 @@ pub(super) fn refine(
             .collect();
         // The posterior mean of the spread: each candidate weighted by the samples it stands for.
         let u = surrogate_log_likelihood_std(&spread, &c.copies);
-        let assessment = criterion.assess(previous.as_ref(), &moments, u)?;
+        // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
+        let mut residuals = Vec::with_capacity(gps.len());
+        let mut variances = Vec::with_capacity(gps.len());
+        let mut covariances = Vec::with_capacity(gps.len());
+        for (j, (gp, p)) in gps.iter().zip(&predictions).enumerate() {
+            let y = data.observations.values[j];
+            residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
+            variances.push(
+                likelihood_variance
+                    .iter()
+                    .map(|v| v[j])
+                    .collect::<Vec<f64>>(),
+            );
+            covariances.push(gp.posterior_covariance(&c.theta, &c.theta)?);
+        }
+        let terms: Vec<MomentTerm<'_>> = (0..gps.len())
+            .map(|j| MomentTerm {
+                residual: &residuals[j],
+                variance: &variances[j],
+                covariance: &covariances[j],
+            })
+            .collect();
+        let surrogate_error = sampled_moment_error(
+            &c.full,
+            &c.copies,
+            &terms,
+            SURROGATE_ERROR_DRAWS,
+            base_seed.wrapping_add(round as u64),
+        )
+        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+        drop(terms);
+        drop(covariances);
+        let assessment =
+            criterion.assess(previous.as_ref(), &moments, u, surrogate_error.largest())?;
         let posterior_theta: Vec<Vec<f64>> =
             state.samples.iter().map(|s| s[..d].to_vec()).collect();
         let mut extrapolation: f64 = 0.0;
@@ -408,10 +503,16 @@ pub(super) fn refine(
             runs: made,
             new_runs: 0,
             new_runs_per_group: vec![0; groups.len()],
+            samples: round_samples * settings.replicates,
             mean: moments.mean.clone(),
             std: moments.std.clone(),
+            mean_error: moments.mean_error.clone(),
+            std_error: moments.std_error.clone(),
             shift: assessment.shift,
+            shift_noise: assessment.noise,
             log_likelihood_std: u,
+            surrogate_error: surrogate_error.largest(),
+            log_evidence_error: surrogate_error.log_evidence,
             extrapolation_share: extrapolation,
             unsure_share: 0.0,
             log_evidence: state.log_evidence,
@@ -524,10 +625,14 @@ pub(super) fn refine(
         }
         record.new_runs = requests.len();
         events.message(format!(
-            "adaptive round {round}: {made} runs so far; posterior shift {}, surrogate log-likelihood std {u:.3}, {:.0} % of the posterior extrapolated; {}",
+            "adaptive round {round}: {made} runs so far; posterior shift {} (sampler noise {}), surrogate error {:.3} posterior stds, surrogate log-likelihood std {u:.3}, {:.0} % of the posterior extrapolated; {}",
             assessment
                 .shift
                 .map_or("-".to_string(), |s| format!("{s:.3}")),
+            assessment
+                .noise
+                .map_or("-".to_string(), |s| format!("{s:.3}")),
+            assessment.surrogate_error,
             100.0 * extrapolation,
             match (&stop, no_candidate) {
                 (Some(reason), _) => format!("stop: {reason}"),
@@ -575,6 +680,10 @@ pub(super) fn refine(
                 }
             );
             break;
+        }
+        // The shift cannot be told from the sampler's noise: sample more next round.
+        if assessment.noise.is_some_and(|n| n >= settings.tolerance) {
+            round_samples = (2 * round_samples).min(settings.max_samples);
         }
         previous = Some(moments);
     }

@@ -21,8 +21,8 @@ const MAX_PANELS: usize = 8;
 pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
     Convergence {
         criterion: format!(
-            "every posterior mean and std moves by less than {} posterior stds between rounds, and the surrogate's std of the log-likelihood averaged over the posterior is below {} nats",
-            outcome.tolerance, outcome.log_likelihood_tolerance
+            "every posterior mean and std moves by less than {0} posterior stds between rounds beyond twice the sampler's Monte Carlo error, that noise is itself below {0} posterior stds, and the surrogate's error could move no posterior mean or std by more than {0} posterior stds",
+            outcome.tolerance
         ),
         converged: outcome.converged,
         stop_reason: outcome.stop_reason.clone(),
@@ -37,6 +37,8 @@ pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
                 mean: r.mean.clone(),
                 std: r.std.clone(),
                 shift: r.shift,
+                shift_noise: r.shift_noise,
+                surrogate_error: Some(r.surrogate_error),
                 log_likelihood_std: r.log_likelihood_std,
                 extrapolation_share: r.extrapolation_share,
             })

@@ -7,7 +7,8 @@
 //! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per group (n = 0: none)
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
 //! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.05,
-//!              samples = 2000, max_rounds = 30, candidates = 1000 }
+//!              samples = 2000, replicates = 4, max_samples = 32000, max_rounds = 30,
+//!              candidates = 1000 }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
 //! [sensitivity]
@@ -101,8 +102,16 @@ pub struct AdaptiveSettings {
     /// The largest posterior-mean std of the log-likelihood due to the surrogate, in nats, that
     /// counts as converged (`log_likelihood_tolerance`, default 0.05).
     pub log_likelihood_tolerance: f64,
-    /// BASIS population of each round's posterior (`samples`, default 2000).
+    /// BASIS population of each replicate of a round's posterior at first (`samples`,
+    /// default 2000).
     pub samples: usize,
+    /// Independent BASIS runs per round (`replicates`, default 4): their pooled population is the
+    /// round's posterior, their spread the Monte Carlo error of its moments (1: error unknown,
+    /// taken as zero).
+    pub replicates: usize,
+    /// The population a replicate may grow to (`max_samples`, default 16 × `samples`): while
+    /// the sampler's noise on the shift exceeds the tolerance, each round doubles it.
+    pub max_samples: usize,
     /// Rounds at most (`max_rounds`, default 30).
     pub max_rounds: usize,
     /// Distinct posterior samples scored as candidates for new runs (`candidates`, default 1000).
@@ -110,12 +119,14 @@ pub struct AdaptiveSettings {
 }
 
 /// The keys of `[surrogate] adaptive`.
-pub const ADAPTIVE_KEYS: [&str; 7] = [
+pub const ADAPTIVE_KEYS: [&str; 9] = [
     "batch",
     "max_runs",
     "tolerance",
     "log_likelihood_tolerance",
     "samples",
+    "replicates",
+    "max_samples",
     "max_rounds",
     "candidates",
 ];
@@ -158,12 +169,15 @@ fn parse_adaptive(value: &toml::Value, file: &str) -> Result<AdaptiveSettings> {
         }
         Ok(v as usize)
     };
+    let samples = count("samples", 2000, 10)?;
     let settings = AdaptiveSettings {
         batch: count("batch", 4, 1)?,
         max_runs: count("max_runs", 200, 1)?,
         tolerance: positive_number(table, "tolerance", file, 0.1)?,
         log_likelihood_tolerance: positive_number(table, "log_likelihood_tolerance", file, 0.05)?,
-        samples: count("samples", 2000, 10)?,
+        samples,
+        replicates: count("replicates", 4, 1)?,
+        max_samples: count("max_samples", 16 * samples as u64, samples as u64)?,
         max_rounds: count("max_rounds", 30, 1)?,
         candidates: count("candidates", 1000, 1)?,
     };
