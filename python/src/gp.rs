@@ -26,20 +26,15 @@ pub struct NativeGaussianProcess {
 
 /// Read a GP file: a GP bank of one output.
 fn read_gp_file(path: &Path) -> PyResult<NativeGaussianProcess> {
-    let file = path.display();
-    let bad = |reason: String| bad_input("path", format!("{file}: {reason}"));
-    let text = std::fs::read_to_string(path).map_err(|e| bad(format!("cannot read: {e}")))?;
-    let bank = GpBank::from_json_str(&text).map_err(|e| bad(format!("not a GP file: {e}")))?;
+    let bank = iuq_study::gp_file::read_gp_file(path, "GaussianProcess.load")
+        .map_err(|e| bad_input("path", e.message().to_string()))?;
     match (bank.gps(), bank.output_names()) {
         ([gp], [output]) => Ok(NativeGaussianProcess {
             gp: gp.clone(),
             inputs: bank.input_names().to_vec(),
             output: output.clone(),
         }),
-        (gps, _) => Err(bad(format!(
-            "a GP bank of {} outputs; GaussianProcess.load takes a GP file of one output",
-            gps.len()
-        ))),
+        _ => Err(bad_input("path", "a GP file of one output".to_string())),
     }
 }
 

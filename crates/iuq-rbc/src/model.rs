@@ -43,22 +43,34 @@ impl Default for CellParameters {
 }
 
 impl CellParameters {
-    /// Set the parameter called `name` (one of [`PARAMETER_NAMES`]).
-    pub fn set(&mut self, name: &str, value: f64) -> Result<()> {
-        match name {
-            "kLink" => self.membrane.k_link = value,
-            "kBend" => self.membrane.k_bend = value,
-            "viscosityRatio" => self.viscosity_ratio = value,
-            "kArea" => self.membrane.k_area = value,
-            "kVolume" => self.membrane.k_volume = value,
+    /// The value of the parameter called `name` (one of [`PARAMETER_NAMES`]): the one place that
+    /// maps HemoCell's names onto the fields.
+    fn slot(&mut self, name: &str) -> Result<&mut f64> {
+        Ok(match name {
+            "kLink" => &mut self.membrane.k_link,
+            "kBend" => &mut self.membrane.k_bend,
+            "viscosityRatio" => &mut self.viscosity_ratio,
+            "kArea" => &mut self.membrane.k_area,
+            "kVolume" => &mut self.membrane.k_volume,
             other => {
                 return Err(RbcError::InvalidData(format!(
                     "unknown parameter `{other}` (the rbc-shear model knows {})",
                     PARAMETER_NAMES.join(", ")
                 )));
             }
-        }
+        })
+    }
+
+    /// Set the parameter called `name` (one of [`PARAMETER_NAMES`]).
+    pub fn set(&mut self, name: &str, value: f64) -> Result<()> {
+        *self.slot(name)? = value;
         Ok(())
+    }
+
+    /// The value of the parameter called `name` (one of [`PARAMETER_NAMES`]).
+    pub fn get(&self, name: &str) -> Result<f64> {
+        let mut copy = *self;
+        copy.slot(name).map(|v| *v)
     }
 }
 
@@ -150,14 +162,7 @@ impl RbcShearModel {
         let mut probe = settings.fixed;
         let defaults = CellParameters::default();
         for name in &inputs {
-            let value = match name.as_str() {
-                "kLink" => defaults.membrane.k_link,
-                "kBend" => defaults.membrane.k_bend,
-                "viscosityRatio" => defaults.viscosity_ratio,
-                "kArea" => defaults.membrane.k_area,
-                _ => defaults.membrane.k_volume,
-            };
-            probe.set(name, value)?;
+            probe.set(name, defaults.get(name)?)?;
         }
         let model = Self {
             inputs,
@@ -306,6 +311,20 @@ mod tests {
 
     fn names(v: &[&str]) -> Vec<String> {
         v.iter().map(|s| s.to_string()).collect()
+    }
+
+    #[test]
+    fn every_parameter_name_reads_back_what_was_set() {
+        let mut c = CellParameters::default();
+        for (k, name) in PARAMETER_NAMES.iter().enumerate() {
+            c.set(name, 10.0 + k as f64).unwrap();
+        }
+        for (k, name) in PARAMETER_NAMES.iter().enumerate() {
+            assert_eq!(c.get(name).unwrap(), 10.0 + k as f64, "{name}");
+        }
+        assert_eq!(c.membrane.k_volume, 14.0);
+        assert_eq!(c.viscosity_ratio, 12.0);
+        assert!(c.get("kLnk").is_err() && c.set("kLnk", 1.0).is_err());
     }
 
     #[test]

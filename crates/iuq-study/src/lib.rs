@@ -19,6 +19,8 @@
 //! | [`umbridge_section`] | `[model] kind = "umbridge"`: a model on a UM-Bridge server |
 //! | [`posterior`] | a study's posterior, sampled with BASIS into a results directory |
 //! | [`campaign_runs`] | campaigns of model runs: opening, resuming, progress lines |
+//! | [`gp_bank_benchmark`] | the benchmark problem of `iuq bench basis-gp-bank` |
+//! | [`gp_file`] | GP files: a GP bank of one output |
 //! | [`pipeline`] | the calibration study end to end, its settings, the report's data |
 //! | [`table_io`] | numeric CSV tables, atomic writes |
 //! | [`error`] | the crate's error type [`StudyError`] and its helpers |
@@ -27,6 +29,8 @@
 
 pub mod campaign_runs;
 pub mod error;
+pub mod gp_bank_benchmark;
+pub mod gp_file;
 pub mod likelihood_section;
 pub mod pipeline;
 pub mod posterior;

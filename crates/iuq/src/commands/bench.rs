@@ -10,11 +10,13 @@ use clap::{Args, Subcommand};
 use serde_json::json;
 
 use iuq_basis::{
-    Basis, BasisSettings, ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, ErrorModel,
-    Observations, PosteriorSummary, PredictionErrorLikelihood, Silent,
+    Basis, BasisSettings, ComputationalError, PosteriorSummary, PredictionErrorLikelihood, Silent,
 };
-use iuq_core::{GaussianKde, Model, Parameter, ParameterSpace, Prior};
-use iuq_gp::{FitOptions, GpBank};
+use iuq_core::{GaussianKde, Model};
+use iuq_gp::GpBank;
+use iuq_study::gp_bank_benchmark::{
+    GpBankBenchmark, MEASUREMENT_STD, RBC_PRIOR, RBC_TRUTH, SHEAR_STRESSES,
+};
 use iuq_study::table_io::{read_numeric_csv, write_numeric_csv};
 
 use crate::input_error::{BadInput, input_error};
@@ -201,40 +203,6 @@ pub fn run(command: &BenchCommand, json: bool) -> Result<()> {
     }
 }
 
-/// Shear stresses (Pa) of the synthetic elongation-index curve of `iuq bench basis-gp-bank`.
-pub const SHEAR_STRESSES: [f64; 8] = [0.3, 0.6, 1.2, 2.4, 4.8, 9.6, 19.2, 38.4];
-/// The RBC prior box of the benchmark: kLink U(10, 300), kBend U(50, 400), viscosityRatio
-/// U(1, 15).
-const RBC_PRIOR: [(&str, f64, f64); 3] = [
-    ("kLink", 10.0, 300.0),
-    ("kBend", 50.0, 400.0),
-    ("viscosityRatio", 1.0, 15.0),
-];
-/// The parameters the synthetic data are generated at.
-const RBC_TRUTH: [f64; 3] = [120.0, 180.0, 6.0];
-/// Measurement std of every synthetic datum.
-const MEASUREMENT_STD: f64 = 0.008;
-
-/// A smooth stand-in for the elongation index EI(τ) of a red blood cell at shear stress `tau`
-/// (a saturating Hill-type curve, as fitted to ektacytometry data) whose plateau, half-saturation
-/// stress and steepness depend on (kLink, kBend, viscosityRatio). Not a physical model: it only
-/// gives the benchmark's GPs curves of the right shape and smoothness.
-pub fn synthetic_elongation_index(theta: &[f64], tau: f64) -> f64 {
-    let (g, b, v) = (theta[0] / 100.0, theta[1] / 100.0, theta[2]);
-    let plateau = 0.64 - 0.008 * (v - 1.0) - 0.015 * b;
-    let half = 0.35 * g.powf(0.75) * (1.0 + 0.12 * b) * (1.0 + 0.05 * (v - 1.0));
-    let steepness = 0.9 + 0.025 * (v - 1.0) + 0.04 * g.ln();
-    let t = (tau / half).powf(steepness);
-    plateau * t / (1.0 + t)
-}
-
-/// A standard normal deviate keyed by (seed, index) (inverse CDF of a SplitMix64 uniform).
-fn keyed_normal(seed: u64, index: u64) -> f64 {
-    let h = iuq_core::random::splitmix64(iuq_core::random::splitmix64(seed ^ 0x6461_7461) ^ index);
-    let u = ((h >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
-    iuq_core::normal::quantile(u)
-}
-
 /// Arguments of `iuq bench basis-gp-bank`.
 #[derive(Debug, Args)]
 pub struct BasisGpBankArgs {
@@ -307,107 +275,33 @@ fn basis_gp_bank_in_pool(
     computational_error: ComputationalError,
     json: bool,
 ) -> Result<()> {
-    let input_names: Vec<String> = RBC_PRIOR.iter().map(|p| p.0.to_string()).collect();
-    let output_names: Vec<String> = SHEAR_STRESSES.iter().map(|t| format!("EI_{t}Pa")).collect();
-    let bounds: Vec<(f64, f64)> = RBC_PRIOR.iter().map(|p| (p.1, p.2)).collect();
-
-    // The surrogate: 8 GPs on a maximin LHS (fitted, or loaded).
-    let (bank, fit_seconds) = match &args.bank {
+    // The surrogate: 8 GPs on a maximin LHS (fitted, or loaded), and the synthetic data.
+    let loaded = match &args.bank {
         Some(path) => {
             let text = std::fs::read_to_string(path)
                 .map_err(|e| input_error(format!("--bank: cannot read {}: {e}", path.display())))?;
-            let bank =
-                GpBank::from_json_str(&text).bad_input(|| format!("--bank {}", path.display()))?;
-            if bank.input_names() != input_names.as_slice()
-                || bank.output_names() != output_names.as_slice()
-            {
-                return Err(input_error(format!(
-                    "--bank {}: not a bank of this benchmark (inputs {:?}, outputs {:?})",
-                    path.display(),
-                    bank.input_names(),
-                    bank.output_names()
-                )));
-            }
-            (bank, None)
+            Some(GpBank::from_json_str(&text).bad_input(|| format!("--bank {}", path.display()))?)
         }
-        None => {
-            let unit = iuq_doe::latin_hypercube(
-                args.training,
-                3,
-                iuq_doe::LhsMethod::maximin(),
-                args.data_seed,
-            )?;
-            let x = iuq_doe::scale_to_bounds(&unit, &bounds)?;
-            let outputs: Vec<Vec<f64>> = SHEAR_STRESSES
-                .iter()
-                .map(|&tau| {
-                    x.iter()
-                        .map(|p| synthetic_elongation_index(p, tau))
-                        .collect()
-                })
-                .collect();
-            let options = FitOptions {
-                seed: args.data_seed,
-                ..FitOptions::default()
-            };
-            let start = Instant::now();
-            let bank = GpBank::fit(
-                input_names.clone(),
-                output_names.clone(),
-                &x,
-                &outputs,
-                &options,
-            )?;
-            (bank, Some(start.elapsed().as_secs_f64()))
-        }
+        None => None,
     };
-
-    // Synthetic data at the truth, with measurement errors.
-    let values: Vec<f64> = SHEAR_STRESSES
-        .iter()
-        .enumerate()
-        .map(|(j, &tau)| {
-            synthetic_elongation_index(&RBC_TRUTH, tau)
-                + MEASUREMENT_STD * keyed_normal(args.data_seed, j as u64)
-        })
-        .collect();
-    let observations = Observations {
-        values: values.clone(),
-        measurement_std: Some(vec![MEASUREMENT_STD; values.len()]),
-    };
-    let errors = ErrorModel {
-        measurement_error: true,
-        computational_error,
-        modelling_error: Some(DEFAULT_MODELLING_ERROR_PRIOR),
-    };
-    let model_space = ParameterSpace::new(
-        RBC_PRIOR
-            .iter()
-            .map(|p| Parameter {
-                name: p.0.to_string(),
-                prior: Prior::Uniform(p.1, p.2),
-            })
-            .collect(),
-    )?;
+    let GpBankBenchmark {
+        bank,
+        fit_seconds,
+        observations,
+        errors,
+        model_space,
+    } = GpBankBenchmark::new(args.training, args.data_seed, computational_error, loaded)
+        .bad_input(|| match &args.bank {
+            Some(path) => format!("--bank {}", path.display()),
+            None => "--training".to_string(),
+        })?;
+    let values = observations.values.clone();
 
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir)
             .map_err(|e| input_error(format!("--out: cannot create {}: {e}", dir.display())))?;
         // Reference predictions for the Python side's equality check.
-        let check: Vec<Vec<f64>> = (0..5)
-            .map(|i| {
-                bounds
-                    .iter()
-                    .enumerate()
-                    .map(|(k, (lo, hi))| {
-                        let u = (0.5
-                            + (i + 1) as f64 * [0.7548776662, 0.5698402910, 0.4301597090][k])
-                            .rem_euclid(1.0);
-                        lo + u * (hi - lo)
-                    })
-                    .collect()
-            })
-            .collect();
+        let check = GpBankBenchmark::check_points();
         let predictions = bank.predict(&check)?;
         let data = json!({
             "parameters": RBC_PRIOR.iter().map(|p| json!({"name": p.0, "lower": p.1, "upper": p.2})).collect::<Vec<_>>(),

@@ -101,18 +101,7 @@ pub struct ValidateArgs {
 
 /// Read a GP file (a GP bank of one output); errors name the file.
 pub fn load_gp(path: &Path) -> Result<GpBank> {
-    let text = std::fs::read_to_string(path)
-        .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())))?;
-    let bank =
-        GpBank::from_json_str(&text).bad_input(|| format!("{}: not a GP file", path.display()))?;
-    if bank.gps().len() != 1 {
-        return Err(input_error(format!(
-            "{}: a GP bank of {} outputs; `iuq gp` takes a GP file of one output",
-            path.display(),
-            bank.gps().len()
-        )));
-    }
-    Ok(bank)
+    Ok(iuq_study::gp_file::read_gp_file(path, "`iuq gp`")?)
 }
 
 fn fit(args: &FitArgs, json: bool) -> Result<()> {
