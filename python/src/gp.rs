@@ -95,7 +95,7 @@ impl NativeGaussianProcess {
             ..FitOptions::default()
         };
         let gp = py
-            .allow_threads(|| GaussianProcess::fit(&x, &y, &options))
+            .allow_threads(|| GaussianProcess::fit(&x, &y, &options.check()?))
             .map_err(|e| bad_input("X, y", e))?;
         Ok(Self { gp, inputs, output })
     }

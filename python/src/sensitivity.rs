@@ -166,7 +166,7 @@ pub fn sobol_indices<'py>(
         confidence_level: confidence,
         ..Default::default()
     };
-    let result = py.allow_threads(|| analyse(model.as_model(), &space, &options));
+    let result = py.allow_threads(|| analyse(model.as_model(), &space, &options.check()?));
     if let Some(error) = model.take_error() {
         return Err(error);
     }

@@ -205,8 +205,10 @@ impl NativeStudy {
         let report = py
             .allow_threads(|| {
                 let model = study.model()?;
-                analyse(&model, &study.space, &options)
-                    .map_err(|e| StudyError::BadInput(format!("{}: {e}", study.path.display())))
+                let bad = |e: iuq_sensitivity::SensitivityError| {
+                    StudyError::BadInput(format!("{}: {e}", study.path.display()))
+                };
+                analyse(&model, &study.space, &options.check().map_err(bad)?).map_err(bad)
             })
             .map_err(study_error)?;
         crate::sensitivity::report_dict(py, &report, n, confidence)

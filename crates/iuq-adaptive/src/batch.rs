@@ -205,7 +205,7 @@ mod tests {
             })
             .collect();
         let y: Vec<f64> = x.iter().map(|p| (3.0 * p[0]).sin()).collect();
-        GaussianProcess::fit(&x, &y, &FitOptions::default()).unwrap()
+        GaussianProcess::fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap()
     }
 
     #[test]
@@ -308,7 +308,7 @@ mod clustered {
             .iter()
             .map(|p| 20.0 + (p[1] - 20.0) * (-p[0] * 3.0f64).exp())
             .collect();
-        let gp = GaussianProcess::fit(&x, &y, &FitOptions::default()).unwrap();
+        let gp = GaussianProcess::fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap();
         let candidates: Vec<Vec<f64>> = (0..400)
             .map(|i| {
                 let a = (i % 20) as f64 / 19.0 - 0.5;

@@ -59,7 +59,7 @@ fn main() {
     println!("threads: {}", rayon::current_num_threads());
     for rep in 0..2 {
         let t = Instant::now();
-        let gp = GaussianProcess::fit(&x, &y, &options).expect("fit");
+        let gp = GaussianProcess::fit(&x, &y, &options.check().unwrap()).expect("fit");
         let fit_s = t.elapsed().as_secs_f64();
         let d = gp.diagnostics();
         println!(

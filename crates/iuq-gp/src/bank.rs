@@ -8,7 +8,7 @@ use iuq_core::model::{Evaluation, EvaluationFailure, Model, Outcome};
 
 use crate::data::validate_points;
 use crate::error::{GpError, Result};
-use crate::fit::{FitOptions, fit_with_stream};
+use crate::fit::{CheckedFitOptions, fit_with_stream};
 use crate::gaussian_process::GaussianProcess;
 use crate::prediction::{BLOCK, Prediction};
 
@@ -131,7 +131,7 @@ impl GpBank {
         output_names: Vec<String>,
         x: &[Vec<f64>],
         outputs: &[Vec<f64>],
-        options: &FitOptions,
+        options: &CheckedFitOptions,
     ) -> Result<Self> {
         if outputs.len() != output_names.len() {
             return Err(GpError::LengthMismatch {
@@ -284,6 +284,7 @@ impl Model for GpBank {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fit::FitOptions;
     use crate::test_data::spec_data;
 
     fn names(prefix: &str, n: usize) -> Vec<String> {
@@ -300,7 +301,14 @@ mod tests {
             ..Default::default()
         };
         let outputs = vec![y1, y2];
-        let b = GpBank::fit(names("x", 3), names("y", 2), &x, &outputs, &opts).unwrap();
+        let b = GpBank::fit(
+            names("x", 3),
+            names("y", 2),
+            &x,
+            &outputs,
+            &opts.check().unwrap(),
+        )
+        .unwrap();
         (b, x, outputs)
     }
 
@@ -404,7 +412,7 @@ mod tests {
                 names("y", 2),
                 &x,
                 &outputs,
-                &FitOptions::default()
+                &FitOptions::default().check().unwrap()
             )
             .is_err()
         );
@@ -414,7 +422,7 @@ mod tests {
                 names("y", 3),
                 &x,
                 &outputs,
-                &FitOptions::default()
+                &FitOptions::default().check().unwrap()
             )
             .is_err()
         );

@@ -51,8 +51,12 @@ impl Default for ClassifierOptions {
 }
 
 impl ClassifierOptions {
-    /// Checks that every grid value is positive and finite and that the grids are not empty.
-    pub fn validate(&self) -> Result<()> {
+    /// Checks that every grid value is positive and finite and that the grids are not empty,
+    /// and returns the options as the value [`FailureClassifier::fit`] takes.
+    ///
+    /// # Errors
+    /// The first invalid option, named.
+    pub fn check(self) -> Result<CheckedClassifierOptions> {
         let positive = |what: &'static str, values: &[f64]| -> Result<()> {
             if values.is_empty() || values.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
                 return Err(GpError::InvalidParameter {
@@ -83,7 +87,25 @@ impl ClassifierOptions {
                 reason: "at least 1".into(),
             });
         }
-        Ok(())
+        Ok(CheckedClassifierOptions(self))
+    }
+}
+
+/// Options that passed [`ClassifierOptions::check`]; read them through `Deref`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedClassifierOptions(ClassifierOptions);
+
+impl CheckedClassifierOptions {
+    /// The options as plain data.
+    pub fn options(&self) -> &ClassifierOptions {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for CheckedClassifierOptions {
+    type Target = ClassifierOptions;
+    fn deref(&self) -> &ClassifierOptions {
+        &self.0
     }
 }
 
@@ -278,9 +300,8 @@ impl FailureClassifier {
         points: &[Vec<f64>],
         failed: &[bool],
         bounds: &[(f64, f64)],
-        options: &ClassifierOptions,
+        options: &CheckedClassifierOptions,
     ) -> Result<Option<Self>> {
-        options.validate()?;
         let d = bounds.len();
         if d == 0 {
             return Err(GpError::ZeroDimension);
@@ -479,7 +500,7 @@ mod tests {
             &points,
             &failed,
             &[(0.0, 1.0), (0.0, 1.0)],
-            &ClassifierOptions::default(),
+            &ClassifierOptions::default().check().unwrap(),
         )
         .unwrap();
         assert!(c.is_none());
@@ -492,7 +513,7 @@ mod tests {
             &points,
             &failed,
             &[(0.0, 1.0), (0.0, 1.0)],
-            &ClassifierOptions::default(),
+            &ClassifierOptions::default().check().unwrap(),
         )
         .unwrap()
         .unwrap();
@@ -522,7 +543,7 @@ mod tests {
             &scaled,
             &failed,
             &[(10.0, 15.0), (-3.0, 0.0)],
-            &ClassifierOptions::default(),
+            &ClassifierOptions::default().check().unwrap(),
         )
         .unwrap()
         .unwrap();
@@ -552,9 +573,14 @@ mod tests {
             refinement_factors: vec![],
             ..ClassifierOptions::default()
         };
-        let c = FailureClassifier::fit(&points, &failed, &[(0.0, 1.0), (0.0, 1.0)], &options)
-            .unwrap()
-            .unwrap();
+        let c = FailureClassifier::fit(
+            &points,
+            &failed,
+            &[(0.0, 1.0), (0.0, 1.0)],
+            &options.check().unwrap(),
+        )
+        .unwrap()
+        .unwrap();
         let p = c.failure_probability(&[vec![1.0, 1.0]]).unwrap()[0];
         // The prior there: f ~ N(logit(share), c), averaged through the probit approximation.
         let share: f64 = 1.5 / 5.0;
@@ -568,7 +594,7 @@ mod tests {
     fn bad_input_is_an_error() {
         let (points, failed) = grid();
         let b = [(0.0, 1.0), (0.0, 1.0)];
-        let o = ClassifierOptions::default();
+        let o = ClassifierOptions::default().check().unwrap();
         assert!(FailureClassifier::fit(&points, &failed[..3], &b, &o).is_err());
         assert!(FailureClassifier::fit(&points, &failed, &[(1.0, 0.0), (0.0, 1.0)], &o).is_err());
         assert!(FailureClassifier::fit(&points, &vec![true; points.len()], &b, &o).is_err());
@@ -576,7 +602,10 @@ mod tests {
             length_scales: vec![-1.0],
             ..ClassifierOptions::default()
         };
-        assert!(FailureClassifier::fit(&points, &failed, &b, &bad).is_err());
+        assert!(
+            bad.check().is_err(),
+            "invalid options are refused by check()"
+        );
         let c = FailureClassifier::fit(&points, &failed, &b, &o)
             .unwrap()
             .unwrap();

@@ -76,8 +76,12 @@ impl Default for FitOptions {
 }
 
 impl FitOptions {
-    /// Checks kernel, bounds, jitter, optimiser settings and threshold.
-    pub fn validate(&self) -> Result<()> {
+    /// Checks kernel, bounds, jitter, optimiser settings and threshold, and returns the options
+    /// as the value [`fit`] takes.
+    ///
+    /// # Errors
+    /// The first invalid setting, named.
+    pub fn check(self) -> Result<CheckedFitOptions> {
         self.kernel.validate()?;
         self.bounds.validate()?;
         validate_jitter(self.jitter)?;
@@ -88,7 +92,25 @@ impl FitOptions {
                 reason: "must be finite".into(),
             });
         }
-        Ok(())
+        Ok(CheckedFitOptions(self))
+    }
+}
+
+/// Fit options that passed [`FitOptions::check`]; read them through `Deref`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CheckedFitOptions(FitOptions);
+
+impl CheckedFitOptions {
+    /// The options as plain data.
+    pub fn options(&self) -> &FitOptions {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for CheckedFitOptions {
+    type Target = FitOptions;
+    fn deref(&self) -> &FitOptions {
+        &self.0
     }
 }
 
@@ -99,7 +121,7 @@ impl FitOptions {
 /// Invalid options, fewer than 2 points, ragged or non-finite data, or no start that can be
 /// evaluated. Degenerate optima are not errors: they come back as warnings in
 /// [`GaussianProcess::diagnostics`].
-pub fn fit(x: &[Vec<f64>], y: &[f64], options: &FitOptions) -> Result<GaussianProcess> {
+pub fn fit(x: &[Vec<f64>], y: &[f64], options: &CheckedFitOptions) -> Result<GaussianProcess> {
     fit_with_stream(x, y, options, 0)
 }
 
@@ -108,10 +130,9 @@ pub fn fit(x: &[Vec<f64>], y: &[f64], options: &FitOptions) -> Result<GaussianPr
 pub(crate) fn fit_with_stream(
     x: &[Vec<f64>],
     y: &[f64],
-    options: &FitOptions,
+    options: &CheckedFitOptions,
     index: u64,
 ) -> Result<GaussianProcess> {
-    options.validate()?;
     let prepared = prepare(x, y, options.scale_inputs, options.standardize_outputs)?;
     let kernel = options.kernel;
     let d = prepared.x.d;
@@ -373,7 +394,7 @@ mod tests {
     #[test]
     fn reaches_the_reference_optimum_unnormalised() {
         let (x, y) = spec_data();
-        let gp = fit(&x, &y, &raw(false)).unwrap();
+        let gp = fit(&x, &y, &raw(false).check().unwrap()).unwrap();
         assert!(
             gp.log_marginal_likelihood() >= 137.66278 - 1e-4,
             "{} {:?}",
@@ -391,7 +412,7 @@ mod tests {
     #[test]
     fn reaches_the_reference_optimum_standardised_and_predicts_like_scikit_learn() {
         let (x, y) = spec_data();
-        let gp = fit(&x, &y, &raw(true)).unwrap();
+        let gp = fit(&x, &y, &raw(true).check().unwrap()).unwrap();
         assert!(
             gp.log_marginal_likelihood() >= 121.03245 - 1e-4,
             "{}",
@@ -411,7 +432,7 @@ mod tests {
             assert!((s - std[i]).abs() < 1e-2 * std[i], "{i}: {s}");
         }
         // Scaling the inputs to the unit cube reaches the same optimum (the LML is invariant).
-        let scaled = fit(&x, &y, &FitOptions::default()).unwrap();
+        let scaled = fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap();
         assert!((scaled.log_marginal_likelihood() - gp.log_marginal_likelihood()).abs() < 1e-4);
         assert!(scaled.loo_q2().unwrap() > 0.99);
     }
@@ -432,7 +453,7 @@ mod tests {
                 n_restarts: 4,
                 ..Default::default()
             };
-            let gp = fit(&x, &y, &opts).unwrap();
+            let gp = fit(&x, &y, &opts.check().unwrap()).unwrap();
             assert_eq!(gp.theta().len(), kernel.n_theta(3));
             assert!(gp.log_marginal_likelihood().is_finite());
             if let Variance::Fixed(c) = kernel.signal_variance {
@@ -473,13 +494,13 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| fit(&x, &y, &opts).unwrap())
+                .install(|| fit(&x, &y, &opts.check().unwrap()).unwrap())
         };
         let (a, b) = (run(1), run(3));
         assert_eq!(a.theta(), b.theta());
         assert_eq!(a.diagnostics(), b.diagnostics());
         // Another seed gives other starts.
-        let c = fit(&x, &y, &FitOptions { seed: 12, ..opts }).unwrap();
+        let c = fit(&x, &y, &FitOptions { seed: 12, ..opts }.check().unwrap()).unwrap();
         assert_ne!(
             a.diagnostics().starts[1].start,
             c.diagnostics().starts[1].start
@@ -500,7 +521,7 @@ mod tests {
                     (h >> 11) as f64 / (1u64 << 53) as f64 - 0.5
                 })
                 .collect();
-            let gp = fit(&x, &y, &FitOptions::default()).unwrap();
+            let gp = fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap();
             let diag = gp.diagnostics();
             assert!(
                 diag.is_degenerate(),
@@ -532,7 +553,7 @@ mod tests {
                 .num_threads(threads)
                 .build()
                 .unwrap()
-                .install(|| fit(&x, &y, &screened_options).unwrap())
+                .install(|| fit(&x, &y, &screened_options.check().unwrap()).unwrap())
         };
         let screened = run(2);
         let full = fit(
@@ -541,7 +562,9 @@ mod tests {
             &FitOptions {
                 screening_points: 0,
                 ..screened_options
-            },
+            }
+            .check()
+            .unwrap(),
         )
         .unwrap();
         let (s, f) = (screened.diagnostics(), full.diagnostics());
@@ -575,25 +598,31 @@ mod tests {
         let (x, y) = spec_data();
         let o = FitOptions::default();
         assert!(matches!(
-            fit(&x[..1], &y[..1], &o),
+            fit(&x[..1], &y[..1], &o.check().unwrap()),
             Err(GpError::TooFewPoints { .. })
         ));
-        assert!(fit(&x, &y[..5], &o).is_err());
-        assert!(fit(&[], &[], &o).is_err());
+        assert!(fit(&x, &y[..5], &o.check().unwrap()).is_err());
+        assert!(fit(&[], &[], &o.check().unwrap()).is_err());
         let mut xb = x.clone();
         xb[4][1] = f64::INFINITY;
-        assert!(matches!(fit(&xb, &y, &o), Err(GpError::NonFinite { .. })));
+        assert!(matches!(
+            fit(&xb, &y, &o.check().unwrap()),
+            Err(GpError::NonFinite { .. })
+        ));
         let mut xb = x.clone();
         xb[4].push(0.0);
         assert!(matches!(
-            fit(&xb, &y, &o),
+            fit(&xb, &y, &o.check().unwrap()),
             Err(GpError::DimensionMismatch { .. })
         ));
         let bad = FitOptions {
             jitter: f64::NAN,
             ..o
         };
-        assert!(fit(&x, &y, &bad).is_err());
+        assert!(
+            bad.check().is_err(),
+            "invalid options are refused by check()"
+        );
         let bad = FitOptions {
             bounds: Bounds {
                 length_scale: [-1.0, 1.0],
@@ -601,7 +630,10 @@ mod tests {
             },
             ..o
         };
-        assert!(fit(&x, &y, &bad).is_err());
+        assert!(
+            bad.check().is_err(),
+            "invalid options are refused by check()"
+        );
         let bad = FitOptions {
             kernel: Kernel {
                 signal_variance: Variance::Fixed(f64::INFINITY),
@@ -609,7 +641,10 @@ mod tests {
             },
             ..o
         };
-        assert!(fit(&x, &y, &bad).is_err());
+        assert!(
+            bad.check().is_err(),
+            "invalid options are refused by check()"
+        );
         assert!(
             GaussianProcess::with_hyperparameters(
                 &x,
@@ -619,7 +654,7 @@ mod tests {
                     length_scales: vec![1.0; 2],
                     noise_variance: 1e-3,
                 },
-                &o
+                &o.check().unwrap()
             )
             .is_err()
         );
@@ -635,7 +670,9 @@ mod tests {
             &FitOptions {
                 n_restarts: 1,
                 ..Default::default()
-            },
+            }
+            .check()
+            .unwrap(),
         )
         .unwrap();
         assert!(
@@ -653,7 +690,9 @@ mod tests {
             &FitOptions {
                 n_restarts: 1,
                 ..Default::default()
-            },
+            }
+            .check()
+            .unwrap(),
         )
         .unwrap();
         assert!(

@@ -5,10 +5,10 @@ use crate::bounds::Bounds;
 use crate::data::{ColumnMajor, validate_points, validate_values};
 use crate::diagnostics::{FitDiagnostics, FitWarning};
 use crate::error::{GpError, Result};
-use crate::fit::FitOptions;
+use crate::fit::CheckedFitOptions;
 use crate::forward_substitution::PackedFactor;
 use crate::kernel::{Hyperparameters, Kernel, LengthScales, Variance};
-use crate::log_marginal_likelihood::{LmlWorkspace, validate_jitter};
+use crate::log_marginal_likelihood::LmlWorkspace;
 use crate::scaling::{InputScaling, OutputScaling};
 use crate::validation::{LeaveOneOut, closed_form_leave_one_out};
 
@@ -150,7 +150,7 @@ pub(crate) fn bound_warnings(
 
 impl GaussianProcess {
     /// Fits a GP to (`x`, `y`) by maximising the log marginal likelihood ([`crate::fit()`]).
-    pub fn fit(x: &[Vec<f64>], y: &[f64], options: &FitOptions) -> Result<Self> {
+    pub fn fit(x: &[Vec<f64>], y: &[f64], options: &CheckedFitOptions) -> Result<Self> {
         crate::fit::fit(x, y, options)
     }
 
@@ -160,10 +160,8 @@ impl GaussianProcess {
         x: &[Vec<f64>],
         y: &[f64],
         hyperparameters: Hyperparameters,
-        options: &FitOptions,
+        options: &CheckedFitOptions,
     ) -> Result<Self> {
-        options.kernel.validate()?;
-        validate_jitter(options.jitter)?;
         let prepared = prepare(x, y, options.scale_inputs, options.standardize_outputs)?;
         hyperparameters.validate(&options.kernel, prepared.x.d)?;
         Self::assemble(

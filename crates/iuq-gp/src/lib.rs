@@ -47,10 +47,10 @@ mod vector_math;
 
 pub use bank::{BANK_FORMAT, BANK_FORMAT_VERSION, GpBank, PredictiveStd};
 pub use bounds::Bounds;
-pub use classification::{ClassifierOptions, FailureClassifier};
+pub use classification::{CheckedClassifierOptions, ClassifierOptions, FailureClassifier};
 pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
 pub use error::{GpError, Result};
-pub use fit::{FitOptions, fit};
+pub use fit::{CheckedFitOptions, FitOptions, fit};
 pub use gaussian_process::GaussianProcess;
 pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};

@@ -83,7 +83,7 @@ mod tests {
             .iter()
             .map(|p| (0.3 * p[0]).sin() + 0.02 * p[1])
             .collect();
-        let gp = fit(&points, &values, &FitOptions::default()).unwrap();
+        let gp = fit(&points, &values, &FitOptions::default().check().unwrap()).unwrap();
         for probe in [vec![3.3, 120.0], vec![7.1, 141.5], vec![0.4, 104.0]] {
             let (mean, gradient) = gp.mean_and_gradient(&probe).unwrap();
             let predicted = gp.predict_mean(std::slice::from_ref(&probe)).unwrap()[0];

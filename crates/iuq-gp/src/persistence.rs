@@ -189,7 +189,7 @@ mod tests {
             n_restarts: 2,
             ..Default::default()
         };
-        GaussianProcess::fit(&x[..30], &y[..30], &opts).unwrap()
+        GaussianProcess::fit(&x[..30], &y[..30], &opts.check().unwrap()).unwrap()
     }
 
     #[test]

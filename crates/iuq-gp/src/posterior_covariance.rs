@@ -95,7 +95,7 @@ mod tests {
     #[test]
     fn the_diagonal_equals_the_predicted_variance() {
         let (x, y) = training();
-        let gp = GaussianProcess::fit(&x, &y, &FitOptions::default()).unwrap();
+        let gp = GaussianProcess::fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap();
         let points = vec![vec![0.33, 0.2], vec![0.9, -0.4], vec![1.3, 0.8]];
         let covariance = gp.posterior_covariance(&points, &points).unwrap();
         let variance = gp.predict(&points).unwrap().variance;
@@ -123,7 +123,7 @@ mod tests {
             standardize_outputs: false,
             ..FitOptions::default()
         };
-        let gp = GaussianProcess::fit(&x, &y, &options).unwrap();
+        let gp = GaussianProcess::fit(&x, &y, &options.check().unwrap()).unwrap();
         let s = vec![0.55, 0.5];
         // Probes off the training curve x1 = sin(3 x0), where the variance is well above the
         // rounding of its O(1) terms.
@@ -137,9 +137,13 @@ mod tests {
         x2.push(s.clone());
         let mut y2 = y.clone();
         y2.push(at_s.mean[0]);
-        let refit =
-            GaussianProcess::with_hyperparameters(&x2, &y2, gp.hyperparameters().clone(), &options)
-                .unwrap();
+        let refit = GaussianProcess::with_hyperparameters(
+            &x2,
+            &y2,
+            gp.hyperparameters().clone(),
+            &options.check().unwrap(),
+        )
+        .unwrap();
         let after = refit.predict(&probe).unwrap();
         for i in 0..probe.len() {
             // The refit's kernel matrix has the jitter on its diagonal as well as the noise.

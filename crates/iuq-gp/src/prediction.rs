@@ -316,7 +316,7 @@ mod tests {
         let (x, y) = spec_data();
         let opts = raw_standardised();
         let h = Kernel::ard().hyperparameters(&SKLEARN_THETA, 3).unwrap();
-        let gp = GaussianProcess::with_hyperparameters(&x, &y, h, &opts).unwrap();
+        let gp = GaussianProcess::with_hyperparameters(&x, &y, h, &opts.check().unwrap()).unwrap();
         assert!((gp.log_marginal_likelihood() - 121.03244938819157).abs() < 1e-7);
         let pts: Vec<Vec<f64>> = POINTS.iter().map(|p| p.to_vec()).collect();
         let p = gp.predict(&pts).unwrap();
@@ -362,7 +362,13 @@ mod tests {
             length_scales: vec![0.4, 0.6, 0.8],
             noise_variance: 1e-8,
         };
-        let gp = GaussianProcess::with_hyperparameters(&x, &y, h, &FitOptions::default()).unwrap();
+        let gp = GaussianProcess::with_hyperparameters(
+            &x,
+            &y,
+            h,
+            &FitOptions::default().check().unwrap(),
+        )
+        .unwrap();
         let p = gp.predict(&x).unwrap();
         for (i, yi) in y.iter().enumerate() {
             assert!((p.mean[i] - yi).abs() < 1e-3, "{i}");
@@ -427,7 +433,7 @@ mod tests {
                 length_scales: vec![0.5; 3],
                 noise_variance: 1e-4,
             },
-            &FitOptions::default(),
+            &FitOptions::default().check().unwrap(),
         )
         .unwrap();
         assert!(gp.predict(&[vec![0.1, 0.2]]).is_err());
@@ -448,7 +454,13 @@ mod tests {
             length_scales: vec![0.6, 5.0, 60.0],
             noise_variance: 1e-4,
         };
-        let gp = GaussianProcess::with_hyperparameters(&x, &y, h, &FitOptions::default()).unwrap();
+        let gp = GaussianProcess::with_hyperparameters(
+            &x,
+            &y,
+            h,
+            &FitOptions::default().check().unwrap(),
+        )
+        .unwrap();
         let n = gp.x.n;
         let mut ws = crate::log_marginal_likelihood::LmlWorkspace::new(n);
         ws.factorize(&gp.x, &gp.hyperparameters, gp.jitter).unwrap();

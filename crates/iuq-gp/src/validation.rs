@@ -153,7 +153,9 @@ mod tests {
             noise_variance: 1e-3,
         };
         let options = FitOptions::default();
-        let gp = GaussianProcess::with_hyperparameters(&x, &y, h.clone(), &options).unwrap();
+        let gp =
+            GaussianProcess::with_hyperparameters(&x, &y, h.clone(), &options.check().unwrap())
+                .unwrap();
         let loo = gp.leave_one_out();
         let mut sum_r2 = 0.0;
         for i in 0..x.len() {

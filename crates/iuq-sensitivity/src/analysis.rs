@@ -57,6 +57,67 @@ impl Default for SensitivityOptions {
     }
 }
 
+impl SensitivityOptions {
+    /// Checks the base points (at least 2), the interval method (at least 2 replicates, or at
+    /// least 1 bootstrap resample), the confidence level (in (0, 1)) and the usable fraction (in
+    /// [0, 1]), and returns the options as the value [`analyse`] takes.
+    ///
+    /// # Errors
+    /// The first invalid option, named.
+    pub fn check(self) -> Result<CheckedSensitivityOptions> {
+        if self.base_points < 2 {
+            return Err(SensitivityError::InvalidOption(format!(
+                "at least 2 base points are needed, got {}",
+                self.base_points
+            )));
+        }
+        match self.interval {
+            IntervalMethod::Replicates { count } if count < 2 => {
+                return Err(SensitivityError::InvalidOption(format!(
+                    "at least 2 replicates are needed, got {count}"
+                )));
+            }
+            IntervalMethod::Bootstrap { resamples: 0 } => {
+                return Err(SensitivityError::InvalidOption(
+                    "at least 1 bootstrap resample is needed".into(),
+                ));
+            }
+            _ => {}
+        }
+        if !(self.confidence_level > 0.0 && self.confidence_level < 1.0) {
+            return Err(SensitivityError::InvalidOption(format!(
+                "the confidence level must lie in (0, 1), got {}",
+                self.confidence_level
+            )));
+        }
+        if !(0.0..=1.0).contains(&self.min_usable_fraction) {
+            return Err(SensitivityError::InvalidOption(format!(
+                "the minimum usable fraction must lie in [0, 1], got {}",
+                self.min_usable_fraction
+            )));
+        }
+        Ok(CheckedSensitivityOptions(self))
+    }
+}
+
+/// Options that passed [`SensitivityOptions::check`]; read them through `Deref`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CheckedSensitivityOptions(SensitivityOptions);
+
+impl CheckedSensitivityOptions {
+    /// The options as plain data.
+    pub fn options(&self) -> &SensitivityOptions {
+        &self.0
+    }
+}
+
+impl std::ops::Deref for CheckedSensitivityOptions {
+    type Target = SensitivityOptions;
+    fn deref(&self) -> &SensitivityOptions {
+        &self.0
+    }
+}
+
 /// First-order and total indices of one output, with confidence half-widths.
 #[derive(Debug, Clone, PartialEq)]
 pub struct OutputIndices {
@@ -114,7 +175,7 @@ impl SensitivityReport {
 pub fn analyse(
     model: &dyn Model,
     space: &ParameterSpace,
-    options: &SensitivityOptions,
+    options: &CheckedSensitivityOptions,
 ) -> Result<SensitivityReport> {
     let d = space.dimension();
     if model.input_dimension() != d {
@@ -123,20 +184,9 @@ pub fn analyse(
             model.input_dimension()
         )));
     }
-    if options.base_points < 2 {
-        return Err(SensitivityError::InvalidOption(format!(
-            "at least 2 base points are needed, got {}",
-            options.base_points
-        )));
-    }
     let designs = match options.interval {
         IntervalMethod::Bootstrap { .. } => 1,
-        IntervalMethod::Replicates { count } if count >= 2 => count,
-        IntervalMethod::Replicates { count } => {
-            return Err(SensitivityError::InvalidOption(format!(
-                "at least 2 replicates are needed, got {count}"
-            )));
-        }
+        IntervalMethod::Replicates { count } => count,
     };
     let mut rows = Vec::new();
     let mut saltelli = Vec::with_capacity(designs);
@@ -297,7 +347,12 @@ mod tests {
             seed: 2024,
             ..Default::default()
         };
-        let report = analyse(&ishigami(ISHIGAMI), &ishigami_space(), &options).unwrap();
+        let report = analyse(
+            &ishigami(ISHIGAMI),
+            &ishigami_space(),
+            &options.check().unwrap(),
+        )
+        .unwrap();
         assert_eq!(report.evaluations, (1 << 13) * 5);
         assert_eq!(report.failed_evaluations, 0);
         let f = &report.outputs[0];
@@ -325,7 +380,12 @@ mod tests {
             interval: IntervalMethod::Replicates { count: 8 },
             ..Default::default()
         };
-        let report = analyse(&ishigami(ISHIGAMI), &ishigami_space(), &options).unwrap();
+        let report = analyse(
+            &ishigami(ISHIGAMI),
+            &ishigami_space(),
+            &options.check().unwrap(),
+        )
+        .unwrap();
         assert_eq!(report.evaluations, 8 * (1 << 11) * 5);
         let f = &report.outputs[0];
         for i in 0..3 {
@@ -354,7 +414,7 @@ mod tests {
             seed: 3,
             ..Default::default()
         };
-        let report = analyse(&model, &ishigami_space(), &options).unwrap();
+        let report = analyse(&model, &ishigami_space(), &options.check().unwrap()).unwrap();
         assert!(report.failed_evaluations > 0);
         assert!(report.dropped_groups > 0 && report.dropped_groups < report.total_groups);
         assert_eq!(
@@ -379,7 +439,7 @@ mod tests {
             ..Default::default()
         };
         assert!(matches!(
-            analyse(&model, &ishigami_space(), &options),
+            analyse(&model, &ishigami_space(), &options.check().unwrap()),
             Err(SensitivityError::TooManyFailures { .. })
         ));
     }

@@ -11,6 +11,9 @@ pub mod confidence;
 pub mod error;
 pub mod estimator;
 
-pub use analysis::{IntervalMethod, OutputIndices, SensitivityOptions, SensitivityReport, analyse};
+pub use analysis::{
+    CheckedSensitivityOptions, IntervalMethod, OutputIndices, SensitivityOptions,
+    SensitivityReport, analyse,
+};
 pub use error::{Result, SensitivityError};
 pub use estimator::{SaltelliValues, SobolEstimate, estimate_indices};

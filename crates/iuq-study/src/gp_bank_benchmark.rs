@@ -129,7 +129,7 @@ impl GpBankBenchmark {
                     ..FitOptions::default()
                 };
                 let start = std::time::Instant::now();
-                let bank = GpBank::fit(input_names, output_names, &x, &outputs, &options)?;
+                let bank = GpBank::fit(input_names, output_names, &x, &outputs, &options.check()?)?;
                 (bank, Some(start.elapsed().as_secs_f64()))
             }
         };

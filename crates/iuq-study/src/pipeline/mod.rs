@@ -558,12 +558,15 @@ fn run_stages(
 
     // 4. Sobol' indices.
     let stage = Instant::now();
+    let sensitivity_section = || format!("{}: section `[sensitivity]`", study.path.display());
     let surrogate_sobol = analyse(
         &bank,
         &study.space,
-        &sobol_options(&settings, settings.surrogate_sobol_n),
+        &sobol_options(&settings, settings.surrogate_sobol_n)
+            .check()
+            .bad_input(sensitivity_section)?,
     )
-    .bad_input(|| format!("{}: section `[sensitivity]`", study.path.display()))?;
+    .bad_input(sensitivity_section)?;
     stage_seconds.push((
         "Sobol' on the surrogate".into(),
         stage.elapsed().as_secs_f64(),
@@ -578,7 +581,9 @@ fn run_stages(
         let report = analyse(
             &model_runs.model_at_data(),
             &study.space,
-            &sobol_options(&settings, settings.model_sobol_n),
+            &sobol_options(&settings, settings.model_sobol_n)
+                .check()
+                .bad_input(sensitivity_section)?,
         )
         .context("Sobol' indices from model runs")?;
         stage_seconds.push(("Sobol' on model runs".into(), stage.elapsed().as_secs_f64()));

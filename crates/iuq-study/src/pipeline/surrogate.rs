@@ -78,15 +78,19 @@ impl Surrogate {
                     seed: seed.wrapping_add(j as u64),
                     ..Default::default()
                 };
-                let gp = GaussianProcess::fit(&training.x, &training.y, &options)
+                let gp = GaussianProcess::fit(&training.x, &training.y, &options.check()?)
                     .with_context(|| format!("GP fit {}", describe(j)))?;
                 gps.push(gp);
             }
             let (points, failed) = group.failure_labels();
             let bounds = classifier_bounds(space, &points);
-            let classifier =
-                FailureClassifier::fit(&points, &failed, &bounds, &ClassifierOptions::default())
-                    .with_context(|| format!("failure classifier of run group {}", g + 1))?;
+            let classifier = FailureClassifier::fit(
+                &points,
+                &failed,
+                &bounds,
+                &ClassifierOptions::default().check()?,
+            )
+            .with_context(|| format!("failure classifier of run group {}", g + 1))?;
             classifiers.push(classifier);
         }
         let bank = GpBank::new(

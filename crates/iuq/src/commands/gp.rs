@@ -135,6 +135,9 @@ fn fit(args: &FitArgs, json: bool) -> Result<()> {
         standardize_outputs: !args.raw_outputs,
         ..FitOptions::default()
     };
+    let options = options
+        .check()
+        .bad_input(|| "--kernel/--restarts".to_string())?;
     let start = Instant::now();
     let gp =
         GaussianProcess::fit(&x, &y, &options).bad_input(|| format!("{}", args.data.display()))?;

@@ -75,7 +75,9 @@ pub fn run(args: &SobolArgs, json: bool) -> Result<()> {
         interval,
         confidence_level: confidence,
         ..Default::default()
-    };
+    }
+    .check()
+    .bad_input(|| format!("{}", args.study.display()))?;
     let start = std::time::Instant::now();
     let report = analyse(&model, &study.space, &options)
         .bad_input(|| format!("{}", args.study.display()))?;
@@ -112,7 +114,7 @@ pub fn run(args: &SobolArgs, json: bool) -> Result<()> {
         "failure_reasons": report.failure_reasons,
         "base_points": n,
         "seconds": start.elapsed().as_secs_f64(),
-        "interval": match options.interval {
+        "interval": match &options.interval {
             IntervalMethod::Bootstrap { resamples } => json!({"method": "bootstrap", "resamples": resamples, "confidence": confidence}),
             IntervalMethod::Replicates { count } => json!({"method": "replicates", "count": count, "confidence": confidence}),
         },
