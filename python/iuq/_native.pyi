@@ -113,6 +113,7 @@ class Study:
         model_posterior: bool,
         fresh: bool,
         runs_only: bool,
+        recompute_rounds: bool,
         progress: Optional[Callable[[str], Any]],
     ) -> str: ...
     def sobol(

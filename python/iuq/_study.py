@@ -116,13 +116,16 @@ class Study:
         model_posterior: bool = False,
         fresh: bool = False,
         runs_only: bool = False,
+        recompute_rounds: bool = False,
         progress: Union[bool, Callable[[str], Any]] = False,
     ) -> PipelineResult:
         """Run the calibration pipeline into ``out`` (default ``<study stem>-report``).
 
         ``max_parallel`` model runs at once (default: the executor's setting, else the cores);
         ``model_posterior`` also samples on the model itself; ``fresh`` moves the campaign aside
-        and recomputes every run; ``runs_only`` stops after the training and test runs.
+        and recomputes every run; ``runs_only`` stops after the training and test runs;
+        ``recompute_rounds`` recomputes each adaptive round's measurement instead of reading
+        back the one the campaign store recorded for the same runs and settings.
         ``progress=True`` prints the pipeline's news on stderr as the CLI does; a callable
         receives each line (an exception it raises stops the reporting and is raised when the
         pipeline returns). The GIL is released while the pipeline works.
@@ -147,6 +150,7 @@ class Study:
                 bool(model_posterior),
                 bool(fresh),
                 bool(runs_only),
+                bool(recompute_rounds),
                 callback,
             )
         )

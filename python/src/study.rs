@@ -115,7 +115,7 @@ impl NativeStudy {
     }
 
     /// Run the pipeline (`iuq pipeline`); the outcome as the JSON text of `iuq pipeline --json`.
-    #[pyo3(signature = (out, max_parallel, model_posterior, fresh, runs_only, progress))]
+    #[pyo3(signature = (out, max_parallel, model_posterior, fresh, runs_only, recompute_rounds, progress))]
     #[allow(clippy::too_many_arguments)]
     fn run(
         &self,
@@ -125,6 +125,7 @@ impl NativeStudy {
         model_posterior: bool,
         fresh: bool,
         runs_only: bool,
+        recompute_rounds: bool,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<String> {
         let options = PipelineOptions {
@@ -133,6 +134,7 @@ impl NativeStudy {
             model_posterior,
             fresh,
             runs_only,
+            recompute_rounds,
         };
         let mut observer = ProgressObserver {
             callback: progress,

@@ -252,6 +252,12 @@ impl Campaign {
         &self.store
     }
 
+    /// The store, for recording results derived from the runs
+    /// ([`CampaignStore::record_derived_result`]); runs are changed through the campaign only.
+    pub fn store_mut(&mut self) -> &mut CampaignStore {
+        &mut self.store
+    }
+
     /// The campaign directory.
     pub fn directory(&self) -> &Path {
         &self.directory

@@ -78,6 +78,34 @@ impl CampaignModel {
         guard.0.store().design_points(label)
     }
 
+    /// The result derived from the runs recorded under `key` with `fingerprint`, if any (see
+    /// [`crate::CampaignStore::derived_result`]).
+    pub fn derived_result(&self, key: &str, fingerprint: &str) -> crate::Result<Option<String>> {
+        let guard = self
+            .state
+            .lock()
+            .map_err(|_| CampaignError::BadInput("the campaign's lock is poisoned".into()))?;
+        guard.0.store().derived_result(key, fingerprint)
+    }
+
+    /// Record a result derived from the runs (see
+    /// [`crate::CampaignStore::record_derived_result`]).
+    pub fn record_derived_result(
+        &self,
+        key: &str,
+        fingerprint: &str,
+        value: &str,
+    ) -> crate::Result<()> {
+        let mut guard = self
+            .state
+            .lock()
+            .map_err(|_| CampaignError::BadInput("the campaign's lock is poisoned".into()))?;
+        guard
+            .0
+            .store_mut()
+            .record_derived_result(key, fingerprint, value)
+    }
+
     /// Give the campaign back.
     pub fn into_campaign(self) -> Option<Campaign> {
         self.state.into_inner().ok().map(|s| s.0)

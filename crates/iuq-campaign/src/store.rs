@@ -81,6 +81,12 @@ CREATE TABLE IF NOT EXISTS outputs(
     value REAL NOT NULL,
     std REAL,
     PRIMARY KEY (run_id, position));
+CREATE TABLE IF NOT EXISTS derived_results(
+    key TEXT NOT NULL,
+    fingerprint TEXT NOT NULL,
+    value TEXT NOT NULL,
+    created_at REAL NOT NULL,
+    PRIMARY KEY (key, fingerprint));
 ";
 
 /// The status of a run.
@@ -903,6 +909,40 @@ impl CampaignStore {
         Ok(rows)
     }
 
+    /// A result computed from the store's runs and recorded under `key` by
+    /// [`CampaignStore::record_derived_result`], if one was recorded with exactly this
+    /// `fingerprint` (a digest of everything the result was computed from): an expensive
+    /// computation on the runs — an adaptive round's assessment — is then read back instead of
+    /// repeated when a study is replayed.
+    pub fn derived_result(&self, key: &str, fingerprint: &str) -> Result<Option<String>> {
+        self.connection
+            .query_row(
+                "SELECT value FROM derived_results WHERE key = ?1 AND fingerprint = ?2",
+                params![key, fingerprint],
+                |r| r.get(0),
+            )
+            .optional()
+            .map_err(|e| self.err(e))
+    }
+
+    /// Record `value`, computed from the runs, under `key` and the `fingerprint` of what it was
+    /// computed from (replacing a value recorded with the same key and fingerprint).
+    pub fn record_derived_result(
+        &mut self,
+        key: &str,
+        fingerprint: &str,
+        value: &str,
+    ) -> Result<()> {
+        let now = unix_now();
+        self.connection
+            .execute(
+                "INSERT OR REPLACE INTO derived_results(key, fingerprint, value, created_at) VALUES (?1, ?2, ?3, ?4)",
+                params![key, fingerprint, value, now],
+            )
+            .map(|_| ())
+            .map_err(|e| self.err(e))
+    }
+
     /// `PRAGMA integrity_check`: `ok` for a sound database.
     pub fn integrity_check(&self) -> Result<String> {
         self.connection
@@ -1142,6 +1182,39 @@ output = { file = "r.json", format = "json" }
         std::fs::create_dir_all(&dir).unwrap();
         let study = CampaignStudy::parse(STUDY, &dir.join("study.toml")).unwrap();
         (dir, study)
+    }
+
+    #[test]
+    fn a_derived_result_is_read_back_only_under_its_key_and_fingerprint_and_survives_reopening() {
+        let (dir, study) = fresh("derived");
+        let path = dir.join("c.sqlite");
+        let mut store = CampaignStore::open(&path, &study).unwrap();
+        assert_eq!(store.derived_result("round-1", "abc").unwrap(), None);
+        store
+            .record_derived_result("round-1", "abc", "{\"u\":1}")
+            .unwrap();
+        store
+            .record_derived_result("round-1", "def", "{\"u\":2}")
+            .unwrap();
+        assert_eq!(
+            store.derived_result("round-1", "abc").unwrap().as_deref(),
+            Some("{\"u\":1}")
+        );
+        assert_eq!(store.derived_result("round-2", "abc").unwrap(), None);
+        // The same key and fingerprint again replaces the value.
+        store
+            .record_derived_result("round-1", "abc", "{\"u\":3}")
+            .unwrap();
+        drop(store);
+        let store = CampaignStore::open(&path, &study).unwrap();
+        assert_eq!(
+            store.derived_result("round-1", "abc").unwrap().as_deref(),
+            Some("{\"u\":3}")
+        );
+        assert_eq!(
+            store.derived_result("round-1", "def").unwrap().as_deref(),
+            Some("{\"u\":2}")
+        );
     }
 
     #[test]

@@ -17,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{iuq, json_of, scratch};
+use common::{iuq, json_of, scratch, stderr_of};
 
 /// A copy of `examples/cooling` in a scratch directory (runs and reports stay out of the
 /// repository).
@@ -392,6 +392,76 @@ fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
     // A rerun computes the same posterior and takes the check's runs from the store.
     let again = pipeline(&path, &dir.join("expression-report-again"));
     assert_eq!(again["posterior_check"], v["posterior_check"]);
+}
+
+/// `adaptive/rounds.json` without the wall times.
+fn rounds_without_times(out: &Path) -> Vec<serde_json::Value> {
+    let text = std::fs::read_to_string(out.join("adaptive/rounds.json")).unwrap();
+    let mut rounds: Vec<serde_json::Value> = serde_json::from_str(&text).unwrap();
+    for round in &mut rounds {
+        round.as_object_mut().unwrap().remove("seconds");
+    }
+    rounds
+}
+
+#[test]
+fn a_rerun_reads_each_rounds_measurement_back_from_the_store_and_recomputing_agrees() {
+    let dir = cooling("measurements");
+    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
+        .unwrap()
+        .replace(
+            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
+            "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
+        );
+    let path = dir.join("expression.toml");
+    std::fs::write(&path, &study).unwrap();
+    let first = pipeline(&path, &dir.join("first"));
+    let rounds = rounds_without_times(&dir.join("first"));
+    assert!(rounds.len() >= 2, "{first}");
+    // The first run sampled every round's posterior (each replicate's results on disk).
+    for k in 1..=rounds.len() {
+        assert!(
+            dir.join(format!("first/adaptive/round-{k}/replicate-1"))
+                .is_dir()
+        );
+    }
+
+    // A rerun reads every round's measurement back: no round is sampled again, and the rounds,
+    // the runs and the final posterior are those of the first run, bit for bit.
+    let again = pipeline(&path, &dir.join("again"));
+    assert_eq!(rounds_without_times(&dir.join("again")), rounds);
+    assert!(!dir.join("again/adaptive/round-1").exists());
+    assert_eq!(again["posterior"], first["posterior"]);
+    assert_eq!(again["runs"], first["runs"]);
+
+    // Recomputing every round gives the same measurements (and says nothing of a difference).
+    let output = iuq(&[
+        "pipeline",
+        path.to_str().unwrap(),
+        "--out",
+        dir.join("recomputed").to_str().unwrap(),
+        "--recompute-rounds",
+    ]);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    assert!(
+        !stderr_of(&output).contains("differs"),
+        "{}",
+        stderr_of(&output)
+    );
+    assert_eq!(rounds_without_times(&dir.join("recomputed")), rounds);
+    assert!(dir.join("recomputed/adaptive/round-1/replicate-1").is_dir());
+
+    // Another sampler (here more burn-in steps) is another measurement: the rounds are
+    // measured afresh, taking their runs from the store.
+    let burnt = study.replace("[sampler]\n", "[sampler]\nburn = 12\n");
+    assert_ne!(burnt, study, "the study has a [sampler] section");
+    std::fs::write(&path, &burnt).unwrap();
+    let other = pipeline(&path, &dir.join("other-sampler"));
+    assert!(
+        dir.join("other-sampler/adaptive/round-1/replicate-1")
+            .is_dir()
+    );
+    assert_ne!(other["posterior"], first["posterior"]);
 }
 
 #[test]

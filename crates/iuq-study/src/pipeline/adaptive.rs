@@ -34,7 +34,7 @@
 use std::path::Path;
 use std::time::Instant;
 
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::{
     ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
@@ -343,6 +343,322 @@ fn candidates(
     }
 }
 
+/// What a round measured on its surrogate posterior: everything the stopping rule and the
+/// round's record need. It is recorded in the campaign store under the round's key and the
+/// fingerprint of its inputs ([`round_fingerprint`]), so that replaying a study reads it back
+/// instead of refitting the surrogate and resampling its posterior. Numbers are kept as their
+/// bits, so that what is read back is what was computed.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct RoundMeasurement {
+    parameters: Vec<String>,
+    #[serde(with = "f64_bits::vec")]
+    mean: Vec<f64>,
+    #[serde(with = "f64_bits::vec")]
+    std: Vec<f64>,
+    #[serde(with = "f64_bits::vec")]
+    mean_error: Vec<f64>,
+    #[serde(with = "f64_bits::vec")]
+    std_error: Vec<f64>,
+    #[serde(with = "f64_bits")]
+    log_likelihood_std: f64,
+    #[serde(with = "f64_bits")]
+    surrogate_error: f64,
+    #[serde(with = "f64_bits")]
+    log_evidence_error: f64,
+    #[serde(with = "f64_bits")]
+    extrapolation_share: f64,
+    #[serde(with = "f64_bits")]
+    unsure_share: f64,
+    #[serde(with = "f64_bits")]
+    log_evidence: f64,
+    /// Some run group's failure region wants boundary runs (once the surrogate is sure).
+    boundary_wanted: bool,
+}
+
+impl RoundMeasurement {
+    fn moments(&self) -> PosteriorMoments {
+        PosteriorMoments {
+            mean: self.mean.clone(),
+            std: self.std.clone(),
+            mean_error: self.mean_error.clone(),
+            std_error: self.std_error.clone(),
+        }
+    }
+}
+
+/// f64 serialised as its IEEE-754 bits (JSON numbers are not read back bit for bit by every
+/// parser).
+mod f64_bits {
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(value: &f64, serializer: S) -> Result<S::Ok, S::Error> {
+        serializer.serialize_u64(value.to_bits())
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<f64, D::Error> {
+        u64::deserialize(deserializer).map(f64::from_bits)
+    }
+
+    pub mod vec {
+        use serde::{Deserialize, Deserializer, Serializer};
+
+        pub fn serialize<S: Serializer>(values: &[f64], serializer: S) -> Result<S::Ok, S::Error> {
+            serializer.collect_seq(values.iter().map(|v| v.to_bits()))
+        }
+
+        pub fn deserialize<'de, D: Deserializer<'de>>(
+            deserializer: D,
+        ) -> Result<Vec<f64>, D::Error> {
+            Vec::<u64>::deserialize(deserializer)
+                .map(|bits| bits.into_iter().map(f64::from_bits).collect())
+        }
+    }
+}
+
+/// Version of a round's measurement: raise it whenever the engine computes a measurement
+/// differently, so that measurements recorded by an earlier version are not read back.
+const MEASUREMENT_VERSION: u32 = 1;
+
+/// The digest (SHA-256, hex) of everything a round's measurement is computed from: the
+/// measurement's version, the priors, the `[likelihood]` and `[sampler]` sections, the data,
+/// the seeds, the samples and replicates of the round, the candidates, the error draws, and every
+/// run of every group with what it returned. The stopping rule's tolerances and `max_runs` are
+/// not in it: the rule is applied to the measurement afresh.
+#[allow(clippy::too_many_arguments)]
+fn round_fingerprint(
+    study: &Study,
+    data: &DataLikelihood,
+    settings: &AdaptiveSettings,
+    training_seed: u64,
+    base_seed: u64,
+    round_samples: usize,
+    groups: &[GroupRuns],
+) -> String {
+    use std::fmt::Write;
+    let table = |t: &Option<toml::Table>| {
+        t.as_ref()
+            .map_or(String::new(), |t| toml::Value::Table(t.clone()).to_string())
+    };
+    let mut text = format!(
+        "iuq-study {} measurement {MEASUREMENT_VERSION}\nspace {:?}\nlikelihood {}\nsampler {}\n",
+        env!("CARGO_PKG_VERSION"),
+        study.space,
+        table(&study.likelihood),
+        table(&study.sampler),
+    );
+    let _ = write!(
+        text,
+        "data x {:?} y {:?} std {:?} modelling {:?} measurement {} computational {:?}\n\
+         seeds {training_seed} {base_seed} samples {round_samples} replicates {} candidates {} draws {SURROGATE_ERROR_DRAWS} boundary runs {}\n",
+        data.x,
+        data.observations.values,
+        data.observations.measurement_std,
+        data.modelling_error,
+        data.measurement_error,
+        data.computational_error,
+        settings.replicates,
+        settings.candidates,
+        settings.batch > 0,
+    );
+    for (g, group) in groups.iter().enumerate() {
+        let _ = writeln!(
+            text,
+            "group {g} points {:?} outcomes {:?}",
+            group.points, group.outcomes
+        );
+    }
+    iuq_campaign::study::hex_sha256(text.as_bytes())
+}
+
+/// What a freshly measured round keeps for choosing its new runs.
+struct RoundScoring {
+    surrogate: Surrogate,
+    candidates: Candidates,
+    likelihood_variance: Vec<Vec<f64>>,
+    /// Boundary runs (group, candidate), at most `batch` per group.
+    boundary: Vec<(usize, usize)>,
+}
+
+/// Fit the surrogate of `groups`, sample its posterior with the replicates, and measure the
+/// round: moments, u, ε, extrapolation, the failure boundaries.
+#[allow(clippy::too_many_arguments)]
+fn measure_round(
+    study: &Study,
+    data: &DataLikelihood,
+    settings: &AdaptiveSettings,
+    training_seed: u64,
+    base_seed: u64,
+    round: usize,
+    round_samples: usize,
+    runs: &ModelRuns,
+    groups: &[GroupRuns],
+    dir: &Path,
+    events: &Events,
+    describe: &dyn Fn(usize) -> String,
+) -> Result<(RoundMeasurement, RoundScoring)> {
+    let d = study.space.dimension();
+    let modelling_error = data.modelling_error.is_some();
+    let surrogate = Surrogate::fit(groups, runs, &study.space, training_seed, describe)?;
+    let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
+    let mut pooled = PooledPosterior {
+        samples: Vec::new(),
+        log_likelihood: Vec::new(),
+        log_prior: Vec::new(),
+        log_evidence: 0.0,
+        moments: PosteriorMoments::exact(Vec::new(), Vec::new()),
+    };
+    let mut parameters = Vec::new();
+    let mut replicate_moments = Vec::with_capacity(settings.replicates);
+    for replicate in 0..settings.replicates {
+        let sampler = parse_sampler(
+            study,
+            &SamplerOverrides {
+                samples: Some(round_samples),
+                seed: Some(
+                    base_seed.wrapping_add((round * settings.replicates + replicate) as u64),
+                ),
+                ..Default::default()
+            },
+        )?;
+        let sampled = events.sample(
+            "adaptive round",
+            study,
+            &posterior,
+            sampler,
+            &dir.join(format!("round-{round}"))
+                .join(format!("replicate-{}", replicate + 1)),
+            None,
+        )?;
+        let state = sampled.run.state;
+        parameters = state.parameter_names.clone();
+        pooled.samples.extend(state.samples);
+        pooled.log_likelihood.extend(state.log_likelihood);
+        pooled.log_prior.extend(state.log_prior);
+        pooled.log_evidence += state.log_evidence / settings.replicates as f64;
+        replicate_moments.push((sampled.summary.mean, sampled.summary.std));
+    }
+    pooled.moments = PosteriorMoments::pooled(&replicate_moments)
+        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+    let moments = pooled.moments.clone();
+    let state = &pooled;
+    let c = candidates(state, d, modelling_error, data, settings.candidates);
+    // The surrogate's predictions at the candidates, per data point.
+    let gps = surrogate.bank.gps();
+    let mut predictions = Vec::with_capacity(gps.len());
+    for gp in gps {
+        predictions.push(gp.predict(&c.theta)?);
+    }
+    let likelihood_variance = likelihood_variances(data, &predictions, &c.variance);
+    let spread: Vec<f64> = (0..c.theta.len())
+        .map(|i| {
+            predictions
+                .iter()
+                .enumerate()
+                .map(|(j, p)| {
+                    log_likelihood_variance(
+                        data.observations.values[j],
+                        p.mean[i],
+                        p.variance[i],
+                        likelihood_variance[i][j],
+                    )
+                })
+                .sum()
+        })
+        .collect();
+    // The posterior mean of the spread: each candidate weighted by the samples it stands for.
+    let u = surrogate_log_likelihood_std(&spread, &c.copies);
+    // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
+    let mut residuals = Vec::with_capacity(gps.len());
+    let mut variances = Vec::with_capacity(gps.len());
+    let mut covariances = Vec::with_capacity(gps.len());
+    for (j, (gp, p)) in gps.iter().zip(&predictions).enumerate() {
+        let y = data.observations.values[j];
+        residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
+        variances.push(
+            likelihood_variance
+                .iter()
+                .map(|v| v[j])
+                .collect::<Vec<f64>>(),
+        );
+        covariances.push(gp.posterior_covariance(&c.theta, &c.theta)?);
+    }
+    let terms: Vec<MomentTerm<'_>> = (0..gps.len())
+        .map(|j| MomentTerm {
+            residual: &residuals[j],
+            variance: &variances[j],
+            covariance: &covariances[j],
+        })
+        .collect();
+    let surrogate_error = sampled_moment_error(
+        &c.full,
+        &c.copies,
+        &terms,
+        SURROGATE_ERROR_DRAWS,
+        base_seed.wrapping_add(round as u64),
+    )
+    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+    drop(terms);
+    drop(covariances);
+    let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
+    let mut extrapolation: f64 = 0.0;
+    for gp in gps {
+        let share = extrapolation_share(
+            &posterior_theta,
+            gp.training_inputs(),
+            &gp.length_scales_in_input_units(),
+            EXTRAPOLATION_THRESHOLD,
+        )?;
+        extrapolation = extrapolation.max(share);
+    }
+    // Where a classifier is unsure over the posterior, runs on the boundary of its failure
+    // region (the acquisition does not go there: the GPs are sure of their extrapolation, the
+    // classifier is not). They are made only once the GPs are sure where the posterior lies
+    // (the caller's decision): before, the posterior is not yet where it will be, and far from
+    // every run the classifier is unsure of everything.
+    let mut boundary: Vec<(usize, usize)> = Vec::new();
+    let mut unsure_share: f64 = 0.0;
+    for (g, group) in groups.iter().enumerate() {
+        if surrogate.classifiers[g].is_none() {
+            continue;
+        }
+        let p_fail = surrogate.group_failure_probability(g, &c.theta)?;
+        let (_, failed) = group.failure_labels();
+        let (share, picks) = boundary_picks(
+            &p_fail,
+            &c.theta,
+            &group.points,
+            &failed,
+            &moments.std[..d],
+            settings.batch.max(1),
+        );
+        unsure_share = unsure_share.max(share);
+        boundary.extend(picks.into_iter().map(|i| (g, i)));
+    }
+    let measurement = RoundMeasurement {
+        parameters,
+        mean: moments.mean,
+        std: moments.std,
+        mean_error: moments.mean_error,
+        std_error: moments.std_error,
+        log_likelihood_std: u,
+        surrogate_error: surrogate_error.largest(),
+        log_evidence_error: surrogate_error.log_evidence,
+        extrapolation_share: extrapolation,
+        unsure_share,
+        log_evidence: state.log_evidence,
+        boundary_wanted: !boundary.is_empty(),
+    };
+    Ok((
+        measurement,
+        RoundScoring {
+            surrogate,
+            candidates: c,
+            likelihood_variance,
+            boundary,
+        },
+    ))
+}
+
 /// Run the adaptive engine on `groups` (holding the initial and test runs), adding its runs to
 /// them. `out` receives `adaptive/round-<k>/` (each round's BASIS results),
 /// `adaptive/rounds.json` (the rounds' summaries) and `adaptive/runs.csv` (every new run: round,
@@ -358,6 +674,7 @@ pub(super) fn refine(
     out: &Path,
     events: &Events,
     describe: &dyn Fn(usize) -> String,
+    recompute: bool,
 ) -> Result<AdaptiveOutcome> {
     let file = study.path.display().to_string();
     let criterion = ConvergenceCriterion {
@@ -367,8 +684,6 @@ pub(super) fn refine(
     .check()
     .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
     let base_seed = parse_sampler(study, &SamplerOverrides::default())?.seed;
-    let d = study.space.dimension();
-    let modelling_error = data.modelling_error.is_some();
     let min_score = (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64;
     let dir = out.join("adaptive");
     std::fs::create_dir_all(&dir)
@@ -384,120 +699,93 @@ pub(super) fn refine(
     for round in 1..=settings.max_rounds {
         let started = Instant::now();
         let made: usize = groups.iter().map(GroupRuns::len).sum();
-        let surrogate = Surrogate::fit(groups, runs, &study.space, training_seed, describe)?;
-        let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
-        let mut pooled = PooledPosterior {
-            samples: Vec::new(),
-            log_likelihood: Vec::new(),
-            log_prior: Vec::new(),
-            log_evidence: 0.0,
-            moments: PosteriorMoments::exact(Vec::new(), Vec::new()),
+        let label = format!("adaptive-round-{round}");
+        // A round an earlier pipeline already chose (the same study, a rerun after a stop) is
+        // replayed from the store as it was chosen, bit for bit, even where recomputing the
+        // choice would differ in the last bits (another processor, another library version).
+        let recorded = runs.recorded_requests(&label)?;
+        let key = format!("{label}/assessment");
+        let fingerprint = round_fingerprint(
+            study,
+            data,
+            settings,
+            training_seed,
+            base_seed,
+            round_samples,
+            groups,
+        );
+        let cached = runs
+            .derived_result(&key, &fingerprint)?
+            .and_then(|text| serde_json::from_str::<RoundMeasurement>(&text).ok());
+        let judge = |m: &RoundMeasurement| {
+            criterion.assess(
+                previous.as_ref(),
+                &m.moments(),
+                m.log_likelihood_std,
+                m.surrogate_error,
+            )
         };
-        let mut replicate_moments = Vec::with_capacity(settings.replicates);
-        for replicate in 0..settings.replicates {
-            let sampler = parse_sampler(
+        // The recorded measurement serves when nothing new is to be chosen from it: the round
+        // stops, or its runs are recorded.
+        let reusable = match &cached {
+            Some(m) if !recompute => {
+                let judged = judge(m)?;
+                let boundary = m.boundary_wanted
+                    && m.log_likelihood_std < settings.log_likelihood_tolerance
+                    && settings.batch > 0;
+                let stops = (judged.converged && !boundary) || made >= settings.max_runs;
+                stops || recorded.is_some()
+            }
+            _ => false,
+        };
+        let (measured, scoring) = if reusable {
+            let Some(m) = cached else {
+                return Err(StudyError::Failure(format!(
+                    "adaptive round {round}: the recorded assessment vanished"
+                )));
+            };
+            (m, None)
+        } else {
+            let (m, scoring) = measure_round(
                 study,
-                &SamplerOverrides {
-                    samples: Some(round_samples),
-                    seed: Some(
-                        base_seed.wrapping_add((round * settings.replicates + replicate) as u64),
-                    ),
-                    ..Default::default()
-                },
+                data,
+                settings,
+                training_seed,
+                base_seed,
+                round,
+                round_samples,
+                runs,
+                groups,
+                &dir,
+                events,
+                describe,
             )?;
-            let sampled = events.sample(
-                "adaptive round",
-                study,
-                &posterior,
-                sampler,
-                &dir.join(format!("round-{round}"))
-                    .join(format!("replicate-{}", replicate + 1)),
-                None,
-            )?;
-            let state = sampled.run.state;
-            parameters = state.parameter_names.clone();
-            pooled.samples.extend(state.samples);
-            pooled.log_likelihood.extend(state.log_likelihood);
-            pooled.log_prior.extend(state.log_prior);
-            pooled.log_evidence += state.log_evidence / settings.replicates as f64;
-            replicate_moments.push((sampled.summary.mean, sampled.summary.std));
-        }
-        pooled.moments = PosteriorMoments::pooled(&replicate_moments)
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-        let moments = pooled.moments.clone();
-        let state = &pooled;
-        let c = candidates(state, d, modelling_error, data, settings.candidates);
-        // The surrogate's predictions at the candidates, per data point.
-        let gps = surrogate.bank.gps();
-        let mut predictions = Vec::with_capacity(gps.len());
-        for gp in gps {
-            predictions.push(gp.predict(&c.theta)?);
-        }
-        let likelihood_variance = likelihood_variances(data, &predictions, &c.variance);
-        let spread: Vec<f64> = (0..c.theta.len())
-            .map(|i| {
-                predictions
-                    .iter()
-                    .enumerate()
-                    .map(|(j, p)| {
-                        log_likelihood_variance(
-                            data.observations.values[j],
-                            p.mean[i],
-                            p.variance[i],
-                            likelihood_variance[i][j],
-                        )
-                    })
-                    .sum()
-            })
-            .collect();
-        // The posterior mean of the spread: each candidate weighted by the samples it stands for.
-        let u = surrogate_log_likelihood_std(&spread, &c.copies);
-        // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
-        let mut residuals = Vec::with_capacity(gps.len());
-        let mut variances = Vec::with_capacity(gps.len());
-        let mut covariances = Vec::with_capacity(gps.len());
-        for (j, (gp, p)) in gps.iter().zip(&predictions).enumerate() {
-            let y = data.observations.values[j];
-            residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
-            variances.push(
-                likelihood_variance
-                    .iter()
-                    .map(|v| v[j])
-                    .collect::<Vec<f64>>(),
-            );
-            covariances.push(gp.posterior_covariance(&c.theta, &c.theta)?);
-        }
-        let terms: Vec<MomentTerm<'_>> = (0..gps.len())
-            .map(|j| MomentTerm {
-                residual: &residuals[j],
-                variance: &variances[j],
-                covariance: &covariances[j],
-            })
-            .collect();
-        let surrogate_error = sampled_moment_error(
-            &c.full,
-            &c.copies,
-            &terms,
-            SURROGATE_ERROR_DRAWS,
-            base_seed.wrapping_add(round as u64),
-        )
-        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-        drop(terms);
-        drop(covariances);
-        let assessment =
-            criterion.assess(previous.as_ref(), &moments, u, surrogate_error.largest())?;
-        let posterior_theta: Vec<Vec<f64>> =
-            state.samples.iter().map(|s| s[..d].to_vec()).collect();
-        let mut extrapolation: f64 = 0.0;
-        for gp in gps {
-            let share = extrapolation_share(
-                &posterior_theta,
-                gp.training_inputs(),
-                &gp.length_scales_in_input_units(),
-                EXTRAPOLATION_THRESHOLD,
-            )?;
-            extrapolation = extrapolation.max(share);
-        }
+            if let Some(old) = cached.as_ref().filter(|old| **old != m) {
+                events.message(format!(
+                    "adaptive round {round}: the recomputed assessment differs from the one recorded in the store (surrogate error {} vs {}, log evidence {} vs {}); the new one is recorded",
+                    m.surrogate_error, old.surrogate_error, m.log_evidence, old.log_evidence
+                ));
+            }
+            let text = serde_json::to_string(&m).map_err(|e| {
+                StudyError::Failure(format!("adaptive round {round}: cannot record: {e}"))
+            })?;
+            runs.record_derived_result(&key, &fingerprint, &text)?;
+            (m, Some(scoring))
+        };
+        parameters = measured.parameters.clone();
+        let moments = measured.moments();
+        let u = measured.log_likelihood_std;
+        let assessment = judge(&measured)?;
+        let surrogate_sure = u < settings.log_likelihood_tolerance;
+        let boundary: Vec<(usize, usize)> = match &scoring {
+            Some(s) if surrogate_sure && settings.batch > 0 => s.boundary.clone(),
+            Some(_) => Vec::new(),
+            // Read back: whether there are boundary picks is all the stop needs.
+            None if measured.boundary_wanted && surrogate_sure && settings.batch > 0 => {
+                vec![(0, 0)]
+            }
+            None => Vec::new(),
+        };
         let mut record = AdaptiveRound {
             round,
             runs: made,
@@ -511,40 +799,15 @@ pub(super) fn refine(
             shift: assessment.shift,
             shift_noise: assessment.noise,
             log_likelihood_std: u,
-            surrogate_error: surrogate_error.largest(),
-            log_evidence_error: surrogate_error.log_evidence,
-            extrapolation_share: extrapolation,
-            unsure_share: 0.0,
-            log_evidence: state.log_evidence,
+            surrogate_error: measured.surrogate_error,
+            log_evidence_error: measured.log_evidence_error,
+            extrapolation_share: measured.extrapolation_share,
+            unsure_share: measured.unsure_share,
+            log_evidence: measured.log_evidence,
             converged: assessment.converged,
             seconds: 0.0,
         };
-        // Where a classifier is unsure over the posterior, runs on the boundary of its failure
-        // region (the acquisition below does not go there: the GPs are sure of their
-        // extrapolation, the classifier is not). Only once the GPs are sure where the posterior
-        // lies: before, the posterior is not yet where it will be, and far from every run the
-        // classifier is unsure of everything.
-        let mut boundary: Vec<(usize, usize)> = Vec::new();
-        let mut unsure_share: f64 = 0.0;
-        let surrogate_sure = u < settings.log_likelihood_tolerance;
-        for (g, group) in groups.iter().enumerate() {
-            if surrogate.classifiers[g].is_none() {
-                continue;
-            }
-            let p_fail = surrogate.group_failure_probability(g, &c.theta)?;
-            let (_, failed) = group.failure_labels();
-            let (share, picks) = boundary_picks(
-                &p_fail,
-                &c.theta,
-                &group.points,
-                &failed,
-                &moments.std[..d],
-                if surrogate_sure { settings.batch } else { 0 },
-            );
-            unsure_share = unsure_share.max(share);
-            boundary.extend(picks.into_iter().map(|i| (g, i)));
-        }
-        record.unsure_share = unsure_share;
+        let extrapolation = measured.extrapolation_share;
         let stop = if assessment.converged && boundary.is_empty() {
             converged = true;
             Some("converged".to_string())
@@ -555,21 +818,25 @@ pub(super) fn refine(
         };
         let mut requests: Vec<(usize, Vec<f64>)> = Vec::new();
         let mut no_candidate = false;
-        let label = format!("adaptive-round-{round}");
-        // A round an earlier pipeline already chose (the same study, a rerun after a stop) is
-        // replayed from the store as it was chosen, bit for bit, even where recomputing the
-        // choice would differ in the last bits (another processor, another library version).
-        let recorded = if stop.is_none() {
-            runs.recorded_requests(&label)?
-        } else {
-            None
-        };
+        let recorded = if stop.is_none() { recorded } else { None };
         if let Some(recorded) = recorded {
             for (g, theta) in recorded {
                 record.new_runs_per_group[g] += 1;
                 requests.push((g, theta));
             }
         } else if stop.is_none() {
+            let Some(scoring) = &scoring else {
+                return Err(StudyError::Failure(format!(
+                    "adaptive round {round}: no surrogate to choose runs from"
+                )));
+            };
+            let RoundScoring {
+                surrogate,
+                candidates: c,
+                likelihood_variance,
+                ..
+            } = scoring;
+            let gps = surrogate.bank.gps();
             let remaining = settings.max_runs - made;
             // (score, group, order within the group's batch, candidate index)
             let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();

@@ -79,6 +79,10 @@ pub struct PipelineOptions {
     pub fresh: bool,
     /// Stop after the training and test runs (e.g. to make the campaign in a batch job).
     pub runs_only: bool,
+    /// Recompute every adaptive round's measurement (surrogate fit, replicate samplers,
+    /// surrogate error) instead of reading back the one the campaign store recorded for the
+    /// same inputs; a recomputed measurement that differs from the recorded one is reported.
+    pub recompute_rounds: bool,
 }
 
 /// What the pipeline reports while it works.
@@ -523,6 +527,7 @@ fn run_stages(
                 &out,
                 events,
                 &describe,
+                options.recompute_rounds,
             )?;
             stage_seconds.push(("adaptive rounds".into(), stage.elapsed().as_secs_f64()));
             Some(outcome)

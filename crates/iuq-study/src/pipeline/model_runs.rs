@@ -460,6 +460,19 @@ impl ModelRuns {
         Ok(Some(requests))
     }
 
+    /// A result derived from the runs, recorded in the campaign store under `key` with
+    /// `fingerprint` (see `iuq_campaign::CampaignStore::derived_result`).
+    pub fn derived_result(&self, key: &str, fingerprint: &str) -> Result<Option<String>> {
+        Ok(self.campaign.derived_result(key, fingerprint)?)
+    }
+
+    /// Record a result derived from the runs in the campaign store.
+    pub fn record_derived_result(&self, key: &str, fingerprint: &str, value: &str) -> Result<()> {
+        Ok(self
+            .campaign
+            .record_derived_result(key, fingerprint, value)?)
+    }
+
     /// The model at the data as a [`Model`] of θ with one output per data point: a point's runs
     /// (one per abscissa, or one) go into the same campaign batch; it fails when one fails.
     pub fn model_at_data(&self) -> ModelAtData {

@@ -38,6 +38,11 @@ pub struct PipelineArgs {
     /// Stop after the training and test runs (e.g. to make the campaign in a batch job).
     #[arg(long)]
     pub runs_only: bool,
+    /// Recompute every adaptive round's surrogate, posterior and surrogate error instead of
+    /// reading back what the campaign store recorded for the same runs and settings (a
+    /// recomputation that differs from the record is reported).
+    #[arg(long)]
+    pub recompute_rounds: bool,
 }
 
 /// Prints the pipeline's events on stderr.
@@ -85,6 +90,7 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
         model_posterior: args.model_posterior,
         fresh: args.fresh,
         runs_only: args.runs_only,
+        recompute_rounds: args.recompute_rounds,
     };
     let outcome = iuq_study::pipeline::run(&study, &options, &mut StderrObserver::default())?;
     let out = &outcome.out;
