@@ -49,6 +49,7 @@ use crate::decoder::{CsvRow, DecoderFormat, DecoderSpec, OutputDecoder};
 use crate::error::{CampaignError, Result};
 use crate::outcome::OutcomeKind;
 use crate::retry_policy::RetryPolicy;
+use crate::study_section::StudySection;
 use crate::template::Template;
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
@@ -295,108 +296,6 @@ pub fn parse_duration(text: &str) -> std::result::Result<f64, String> {
     Ok(total)
 }
 
-/// Reads keys of one table, remembering which were used, for errors naming file and key.
-struct Section<'a> {
-    table: &'a toml::Table,
-    prefix: &'a str,
-    file: &'a str,
-    used: Vec<&'static str>,
-}
-
-impl<'a> Section<'a> {
-    fn new(table: &'a toml::Table, prefix: &'a str, file: &'a str) -> Self {
-        Self {
-            table,
-            prefix,
-            file,
-            used: Vec::new(),
-        }
-    }
-
-    fn err(&self, key: &str, reason: impl Into<String>) -> CampaignError {
-        CampaignError::study(self.file, format!("{}.{key}", self.prefix), reason)
-    }
-
-    fn get(&mut self, key: &'static str) -> Option<&'a toml::Value> {
-        self.used.push(key);
-        self.table.get(key)
-    }
-
-    fn string(&mut self, key: &'static str) -> Result<Option<String>> {
-        match self.get(key) {
-            None => Ok(None),
-            Some(toml::Value::String(s)) => Ok(Some(s.clone())),
-            Some(other) => Err(self.err(
-                key,
-                format!("expected a string, found {}", other.type_str()),
-            )),
-        }
-    }
-
-    fn count(&mut self, key: &'static str, min: usize) -> Result<Option<usize>> {
-        match self.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Integer(i)) if *i >= min as i64 => Ok(Some(*i as usize)),
-            Some(other) => {
-                Err(self.err(key, format!("expected an integer ≥ {min}, found `{other}`")))
-            }
-        }
-    }
-
-    fn strings(&mut self, key: &'static str) -> Result<Option<Vec<String>>> {
-        match self.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Array(items)) => items
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    v.as_str().map(str::to_string).ok_or_else(|| {
-                        self.err(
-                            &format!("{key}[{i}]"),
-                            format!("expected a string, found `{v}`"),
-                        )
-                    })
-                })
-                .collect::<Result<Vec<_>>>()
-                .map(Some),
-            Some(other) => Err(self.err(
-                key,
-                format!("expected an array of strings, found `{other}`"),
-            )),
-        }
-    }
-
-    fn duration(&mut self, key: &'static str) -> Result<Option<f64>> {
-        match self.get(key) {
-            None => Ok(None),
-            Some(toml::Value::String(s)) => {
-                parse_duration(s).map(Some).map_err(|r| self.err(key, r))
-            }
-            Some(toml::Value::Integer(i)) if *i >= 0 => Ok(Some(*i as f64)),
-            Some(toml::Value::Float(f)) if f.is_finite() && *f >= 0.0 => Ok(Some(*f)),
-            Some(other) => Err(self.err(
-                key,
-                format!("expected a duration such as \"30m\", found `{other}`"),
-            )),
-        }
-    }
-
-    fn table(&mut self, key: &'static str) -> Result<Option<&'a toml::Table>> {
-        match self.get(key) {
-            None => Ok(None),
-            Some(toml::Value::Table(t)) => Ok(Some(t)),
-            Some(other) => Err(self.err(key, format!("expected a table, found `{other}`"))),
-        }
-    }
-
-    fn finish(&self, allowed_hint: &str) -> Result<()> {
-        if let Some(key) = self.table.keys().find(|k| !self.used.contains(&k.as_str())) {
-            return Err(self.err(key, format!("unknown key ({allowed_hint})")));
-        }
-        Ok(())
-    }
-}
-
 fn relative_to(base: &Path, p: &str) -> PathBuf {
     let p = Path::new(p);
     if p.is_absolute() {
@@ -537,21 +436,21 @@ fn parse_model(
     file: &str,
     study_dir: &Path,
 ) -> Result<CommandSpec> {
-    let mut s = Section::new(table, "model", file);
+    let mut s = StudySection::new(table, "model", file);
     let kind_name = s
         .string("kind")?
-        .ok_or_else(|| s.err("kind", "missing (\"command\" or \"batch-command\")"))?;
+        .ok_or_else(|| s.error("kind", "missing (\"command\" or \"batch-command\")"))?;
     let batch = match kind_name.as_str() {
         "command" => false,
         "batch-command" => true,
         "expression" | "rbc-shear" | "umbridge" => {
-            return Err(s.err(
+            return Err(s.error(
                 "kind",
                 format!("a campaign runs a model of kind \"command\" or \"batch-command\", not `{kind_name}`"),
             ));
         }
         other => {
-            return Err(s.err(
+            return Err(s.error(
                 "kind",
                 format!("unknown kind `{other}` (\"command\" or \"batch-command\")"),
             ));
@@ -559,13 +458,13 @@ fn parse_model(
     };
     let parameters = space.names();
     let mut command_text = s.strings("command")?.ok_or_else(|| {
-        s.err(
+        s.error(
             "command",
             "missing: the program and its arguments, e.g. [\"./sim.sh\"]",
         )
     })?;
     if command_text.is_empty() || command_text[0].trim().is_empty() {
-        return Err(s.err("command", "must name a program"));
+        return Err(s.error("command", "must name a program"));
     }
     if command_text[0].contains('/') && !Path::new(&command_text[0]).is_absolute() {
         command_text[0] = study_dir.join(&command_text[0]).display().to_string();
@@ -573,19 +472,19 @@ fn parse_model(
     // Derived values, in file order.
     let mut derived = Vec::new();
     let mut known = parameters.clone();
-    if let Some(t) = s.table("derived")? {
+    if let Some(t) = s.sub_table("derived")? {
         for (name, v) in t {
             let key = format!("derived.{name}");
             let formula = v
                 .as_str()
-                .ok_or_else(|| s.err(&key, "expected a formula string"))?;
+                .ok_or_else(|| s.error(&key, "expected a formula string"))?;
             if known.contains(name) || name == "run_id" {
-                return Err(s.err(
+                return Err(s.error(
                     &key,
                     "the name is already taken by a parameter or derived value",
                 ));
             }
-            Expression::parse(formula, &known).map_err(|e| s.err(&key, e.to_string()))?;
+            Expression::parse(formula, &known).map_err(|e| s.error(&key, e.to_string()))?;
             known.push(name.clone());
             derived.push((name.clone(), formula.to_string()));
         }
@@ -595,9 +494,9 @@ fn parse_model(
     let mut command = Vec::with_capacity(command_text.len());
     for (i, arg) in command_text.iter().enumerate() {
         let key = format!("command[{i}]");
-        let t = Template::parse(arg).map_err(|e| s.err(&key, e.reason))?;
+        let t = Template::parse(arg).map_err(|e| s.error(&key, e.reason))?;
         if let Some((name, _)) = t.unknown_names(is_known).into_iter().next() {
-            return Err(s.err(
+            return Err(s.error(
                 &key,
                 format!("unknown name `{name}` (known: {})", known.join(", ")),
             ));
@@ -614,11 +513,11 @@ fn parse_model(
         let key = format!("templates[{i}]");
         let source_path = relative_to(study_dir, source);
         let text = std::fs::read_to_string(&source_path)
-            .map_err(|e| s.err(&key, format!("cannot read {}: {e}", source_path.display())))?;
+            .map_err(|e| s.error(&key, format!("cannot read {}: {e}", source_path.display())))?;
         let template = Template::parse(&text)
-            .map_err(|e| s.err(&key, format!("{}: {e}", source_path.display())))?;
+            .map_err(|e| s.error(&key, format!("{}: {e}", source_path.display())))?;
         if let Some((name, line)) = template.unknown_names(is_known).into_iter().next() {
-            return Err(s.err(
+            return Err(s.error(
                 &key,
                 format!(
                     "{} line {line}: unknown name `{name}` (known: {})",
@@ -638,7 +537,7 @@ fn parse_model(
             .components()
             .any(|c| matches!(c, std::path::Component::ParentDir))
         {
-            return Err(s.err(
+            return Err(s.error(
                 &key,
                 "a template must lie in or below the study's folder (no `..`)",
             ));
@@ -646,17 +545,17 @@ fn parse_model(
         templates.push(TemplateFile { target, template });
     }
     let outputs = s.strings("outputs")?.ok_or_else(|| {
-        s.err(
+        s.error(
             "outputs",
             "missing: the names of the model's outputs, e.g. [\"f\"]",
         )
     })?;
     if outputs.is_empty() {
-        return Err(s.err("outputs", "at least one output is needed"));
+        return Err(s.error("outputs", "at least one output is needed"));
     }
     for (i, o) in outputs.iter().enumerate() {
         if o.trim().is_empty() || outputs[..i].contains(o) {
-            return Err(s.err(
+            return Err(s.error(
                 &format!("outputs[{i}]"),
                 "output names must be non-empty and distinct",
             ));
@@ -664,18 +563,18 @@ fn parse_model(
     }
     let timeout = s.duration("timeout")?;
     if timeout == Some(0.0) {
-        return Err(s.err("timeout", "must be positive"));
+        return Err(s.error("timeout", "must be positive"));
     }
     let kill_grace = s.duration("kill_grace")?.unwrap_or(10.0);
     let mut env = Vec::new();
-    if let Some(t) = s.table("env")? {
+    if let Some(t) = s.sub_table("env")? {
         for (k, v) in t {
             let value = match v {
                 toml::Value::String(x) => x.clone(),
                 toml::Value::Integer(x) => x.to_string(),
                 toml::Value::Float(x) => x.to_string(),
                 toml::Value::Boolean(x) => x.to_string(),
-                _ => return Err(s.err(&format!("env.{k}"), "expected a string or number")),
+                _ => return Err(s.error(&format!("env.{k}"), "expected a string or number")),
             };
             env.push((k.clone(), value));
         }
@@ -693,8 +592,8 @@ fn parse_model(
             None,
         )
     } else {
-        let t = s.table("output")?.ok_or_else(|| {
-            s.err(
+        let t = s.sub_table("output")?.ok_or_else(|| {
+            s.error(
                 "output",
                 "missing: e.g. { file = \"result.json\", format = \"json\" }",
             )
@@ -709,7 +608,7 @@ fn parse_model(
     } else {
         "kind, command, templates, derived, outputs, output, timeout, kill_grace, env"
     };
-    s.finish(hint)?;
+    s.finish_with_hint(hint)?;
     let spec = CommandSpec {
         kind,
         command,
@@ -729,25 +628,25 @@ fn parse_model(
 }
 
 fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<DecoderSpec> {
-    let mut s = Section::new(table, "model.output", file);
+    let mut s = StudySection::new(table, "model.output", file);
     let out_file = s.string("file")?.ok_or_else(|| {
-        s.err(
+        s.error(
             "file",
             "missing: the output file, relative to the run directory",
         )
     })?;
     let format = s
         .string("format")?
-        .ok_or_else(|| s.err("format", "missing (\"json\", \"csv\" or \"regex\")"))?;
+        .ok_or_else(|| s.error("format", "missing (\"json\", \"csv\" or \"regex\")"))?;
     let format = match format.as_str() {
         "json" => {
-            let pointers = match s.table("keys")? {
+            let pointers = match s.sub_table("keys")? {
                 Some(keys) => outputs
                     .iter()
                     .map(|o| match keys.get(o) {
                         Some(toml::Value::String(p)) if p.starts_with('/') => Ok(p.clone()),
                         Some(toml::Value::String(p)) => Ok(format!("/{p}")),
-                        Some(_) => Err(s.err(
+                        Some(_) => Err(s.error(
                             &format!("keys.{o}"),
                             "expected a JSON pointer string such as \"/a/0/b\"",
                         )),
@@ -760,13 +659,13 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
         }
         "csv" => {
             let column = s.string("column")?;
-            let row = match s.get("row") {
+            let row = match s.value("row") {
                 None => CsvRow::Last,
                 Some(toml::Value::String(r)) if r == "last" => CsvRow::Last,
                 Some(toml::Value::String(r)) if r == "first" => CsvRow::First,
                 Some(toml::Value::Integer(i)) if *i >= 0 => CsvRow::Index(*i as usize),
                 Some(other) => {
-                    return Err(s.err(
+                    return Err(s.error(
                         "row",
                         format!("expected \"first\", \"last\" or a row index ≥ 0, found `{other}`"),
                     ));
@@ -778,12 +677,12 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
             }
         }
         "regex" => {
-            let patterns = match (s.string("pattern")?, s.table("patterns")?) {
+            let patterns = match (s.string("pattern")?, s.sub_table("patterns")?) {
                 (Some(p), None) => {
-                    let re = regex::Regex::new(&p).map_err(|e| s.err("pattern", e.to_string()))?;
+                    let re = regex::Regex::new(&p).map_err(|e| s.error("pattern", e.to_string()))?;
                     for o in outputs {
                         if re.capture_names().flatten().all(|n| n != o) {
-                            return Err(s.err("pattern", format!("no named group `(?P<{o}>…)` for output `{o}`")));
+                            return Err(s.error("pattern", format!("no named group `(?P<{o}>…)` for output `{o}`")));
                         }
                     }
                     vec![p; outputs.len()]
@@ -792,21 +691,23 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
                     .iter()
                     .map(|o| match t.get(o) {
                         Some(toml::Value::String(p)) => Ok(p.clone()),
-                        _ => Err(s.err(&format!("patterns.{o}"), "missing: a regular expression whose first group is the value")),
+                        _ => Err(s.error(&format!("patterns.{o}"), "missing: a regular expression whose first group is the value")),
                     })
                     .collect::<Result<Vec<_>>>()?,
-                _ => return Err(s.err("pattern", "give either `pattern` (named groups per output) or `patterns = { output = 'regex' }`")),
+                _ => return Err(s.error("pattern", "give either `pattern` (named groups per output) or `patterns = { output = 'regex' }`")),
             };
             DecoderFormat::Regex { patterns }
         }
         other => {
-            return Err(s.err(
+            return Err(s.error(
                 "format",
                 format!("unknown format `{other}` (\"json\", \"csv\" or \"regex\")"),
             ));
         }
     };
-    s.finish("file, format, keys (json), column and row (csv), pattern or patterns (regex)")?;
+    s.finish_with_hint(
+        "file, format, keys (json), column and row (csv), pattern or patterns (regex)",
+    )?;
     let spec = DecoderSpec {
         file: out_file,
         format,
@@ -817,20 +718,20 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
 }
 
 fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<DesignSpec> {
-    let mut s = Section::new(table, "design", file);
+    let mut s = StudySection::new(table, "design", file);
     let kind = s.string("kind")?.unwrap_or_else(|| "lhs".into());
-    let seed = match s.get("seed") {
+    let seed = match s.value("seed") {
         None => 0,
         Some(toml::Value::Integer(i)) if *i >= 0 => *i as u64,
         Some(other) => {
-            return Err(s.err("seed", format!("expected an integer ≥ 0, found `{other}`")));
+            return Err(s.error("seed", format!("expected an integer ≥ 0, found `{other}`")));
         }
     };
     let spec = match kind.as_str() {
         "lhs" | "sobol" => {
             let n = s
                 .count("n", 1)?
-                .ok_or_else(|| s.err("n", "missing: the number of points"))?;
+                .ok_or_else(|| s.error("n", "missing: the number of points"))?;
             if kind == "lhs" {
                 DesignSpec::Lhs { n, seed }
             } else {
@@ -839,20 +740,20 @@ fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<Des
         }
         "file" => {
             let p = s.string("file")?.ok_or_else(|| {
-                s.err("file", "missing: a CSV file with one column per parameter")
+                s.error("file", "missing: a CSV file with one column per parameter")
             })?;
             DesignSpec::File {
                 path: relative_to(study_dir, &p),
             }
         }
         other => {
-            return Err(s.err(
+            return Err(s.error(
                 "kind",
                 format!("unknown design `{other}` (\"lhs\", \"sobol\" or \"file\")"),
             ));
         }
     };
-    s.finish("kind, n, seed, file")?;
+    s.finish_with_hint("kind, n, seed, file")?;
     Ok(spec)
 }
 
@@ -862,13 +763,13 @@ fn parse_executor(
     study_dir: &Path,
     stem: &str,
 ) -> Result<ExecutorSpec> {
-    let mut s = Section::new(table, "executor", file);
+    let mut s = StudySection::new(table, "executor", file);
     let kind = match s.string("kind")?.as_deref() {
         None | Some("local") => ExecutorKind::Local,
         Some("slurm") => ExecutorKind::Slurm,
         Some("hyperqueue") => ExecutorKind::Hyperqueue,
         Some(other) => {
-            return Err(s.err(
+            return Err(s.error(
                 "kind",
                 format!("unknown executor `{other}` (\"local\", \"slurm\" or \"hyperqueue\")"),
             ));
@@ -881,8 +782,8 @@ fn parse_executor(
             .unwrap_or_else(|| format!("{stem}.campaign")),
     );
     let mut retry = RetryPolicy::default();
-    if let Some(t) = s.table("retry")? {
-        let mut r = Section::new(t, "executor.retry", file);
+    if let Some(t) = s.sub_table("retry")? {
+        let mut r = StudySection::new(t, "executor.retry", file);
         if let Some(m) = r.count("max_attempts", 1)? {
             retry.max_attempts = m as u32;
         }
@@ -894,7 +795,7 @@ fn parse_executor(
                     OutcomeKind::from_name(k)
                         .filter(|k| *k != OutcomeKind::Succeeded)
                         .ok_or_else(|| {
-                            r.err(
+                            r.error(
                                 &format!("on[{i}]"),
                                 format!(
                                     "unknown outcome `{k}` (one of {})",
@@ -909,7 +810,7 @@ fn parse_executor(
                 })
                 .collect::<Result<Vec<_>>>()?;
         }
-        r.finish("max_attempts, on")?;
+        r.finish_with_hint("max_attempts, on")?;
     }
     let poll_interval = s.duration("poll_interval")?.unwrap_or(5.0).max(0.01);
     let array_chunk = s.count("array_chunk", 1)?.unwrap_or(1000);
@@ -918,9 +819,9 @@ fn parse_executor(
     let hq = s.string("hq")?;
     let worker = s.strings("worker")?;
     if worker.as_ref().is_some_and(Vec::is_empty) {
-        return Err(s.err("worker", "must name a program"));
+        return Err(s.error("worker", "must name a program"));
     }
-    s.finish("kind, max_parallel, directory, retry, poll_interval, array_chunk, sbatch_args, submit_args, hq, worker")?;
+    s.finish_with_hint("kind, max_parallel, directory, retry, poll_interval, array_chunk, sbatch_args, submit_args, hq, worker")?;
     Ok(ExecutorSpec {
         kind,
         max_parallel,

@@ -233,6 +233,9 @@ pub enum PastSingularity {
 }
 
 impl PastSingularity {
+    /// Both policies.
+    pub const ALL: [PastSingularity; 2] = [Self::CarryOn, Self::Fail];
+
     /// The name used in study files and on the command line (`fail`, `carry-on`).
     pub fn name(&self) -> &'static str {
         match self {

@@ -31,22 +31,19 @@ use std::path::{Path, PathBuf};
 use iuq_basis::{ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, Observations};
 use iuq_core::Prior;
 
+use iuq_campaign::StudySection;
+
 use crate::error::{BadInput, Result, input_error};
 use crate::study::Study;
 use crate::table_io::read_numeric_csv;
 
-/// The keys the `[likelihood]` section accepts.
-pub const LIKELIHOOD_KEYS: [&str; 6] = [
-    "log_density",
-    "data",
+/// The keys of a data-driven `[likelihood]` besides `data`.
+const DATA_LIKELIHOOD_KEYS: [&str; 4] = [
     "modelling_error",
     "measurement_error",
     "computational_error",
     "prediction",
 ];
-
-/// The keys of `[likelihood] data = { ... }`.
-pub const DATA_KEYS: [&str; 5] = ["file", "x", "y", "y_err", "x_range"];
 
 /// A parsed `[likelihood]` section.
 #[derive(Debug, Clone)]
@@ -80,112 +77,77 @@ pub struct DataLikelihood {
     pub prediction: Option<String>,
 }
 
-fn string_of(value: &toml::Value, file: &str, key: &str) -> Result<String> {
-    value
-        .as_str()
-        .map(str::to_string)
-        .ok_or_else(|| input_error(format!("{file}: key `{key}`: expected a string")))
-}
-
-fn number_of(value: &toml::Value) -> Option<f64> {
-    value
-        .as_float()
-        .or_else(|| value.as_integer().map(|i| i as f64))
-}
-
 /// Parse and load the `[likelihood]` section of `study` (reading the data file).
 pub fn parse_likelihood(study: &Study) -> Result<LikelihoodSection> {
     let file = study.path.display().to_string();
-    let table = study.likelihood.as_ref().ok_or_else(|| {
-        input_error(format!(
-            "{file}: section `[likelihood]`: missing (give `log_density = \"...\"` or `data = {{ file, x, y, y_err }}`)"
-        ))
-    })?;
-    if let Some(key) = table
-        .keys()
-        .find(|k| !LIKELIHOOD_KEYS.contains(&k.as_str()))
-    {
+    let Some(table) = study.likelihood.as_ref() else {
         return Err(input_error(format!(
-            "{file}: key `likelihood.{key}`: unknown key (expected one of {})",
-            LIKELIHOOD_KEYS.join(", ")
+            "{file}: section `[likelihood]`: missing (give `log_density = \"...\"` or `data = {{ file, x, y, y_err }}`)"
         )));
-    }
-    match (table.get("log_density"), table.get("data")) {
-        (Some(_), Some(_)) => Err(input_error(format!(
-            "{file}: key `likelihood.log_density`: give either `log_density` or `data`, not both"
-        ))),
-        (None, None) => Err(input_error(format!(
-            "{file}: section `[likelihood]`: give `log_density = \"...\"` or `data = {{ file, x, y, y_err }}`"
-        ))),
-        (Some(source), None) => {
-            if let Some(key) = table.keys().find(|k| *k != "log_density") {
-                return Err(input_error(format!(
-                    "{file}: key `likelihood.{key}`: only applies to a data-driven likelihood, not to `log_density`"
-                )));
-            }
-            Ok(LikelihoodSection::LogDensity(string_of(
-                source,
-                &file,
-                "likelihood.log_density",
-            )?))
+    };
+    let mut s = StudySection::new(table, "likelihood", &file);
+    let log_density = s.string("log_density")?;
+    let data = s.section("data", "{ file, x, y, y_err, x_range }")?;
+    match (log_density, data) {
+        (Some(_), Some(_)) => Err(s
+            .error(
+                "log_density",
+                "give either `log_density` or `data`, not both",
+            )
+            .into()),
+        (None, None) => {
+            // A misspelt `log_density` or `data` is named as such.
+            s.allow(&DATA_LIKELIHOOD_KEYS);
+            s.finish()?;
+            Err(s
+                .section_error("give `log_density = \"...\"` or `data = { file, x, y, y_err }`")
+                .into())
         }
-        (None, Some(data)) => Ok(LikelihoodSection::Data(parse_data(
-            study, table, data, &file,
-        )?)),
+        (Some(log_density), None) => {
+            if let Some(key) = table.keys().find(|k| *k != "log_density") {
+                return Err(s
+                    .error(
+                        key,
+                        "only applies to a data-driven likelihood, not to `log_density`",
+                    )
+                    .into());
+            }
+            Ok(LikelihoodSection::LogDensity(log_density))
+        }
+        (None, Some(data)) => Ok(LikelihoodSection::Data(parse_data(study, s, data)?)),
     }
 }
 
+/// Read `data = { ... }` and the prediction-error keys of `[likelihood]` (`s`).
 fn parse_data(
     study: &Study,
-    table: &toml::Table,
-    data: &toml::Value,
-    file: &str,
+    mut s: StudySection<'_>,
+    mut data: StudySection<'_>,
 ) -> Result<DataLikelihood> {
-    let data = data.as_table().ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `likelihood.data`: expected a table {{ file, x, y, y_err, x_range }}"
-        ))
-    })?;
-    if let Some(key) = data.keys().find(|k| !DATA_KEYS.contains(&k.as_str())) {
-        return Err(input_error(format!(
-            "{file}: key `likelihood.data.{key}`: unknown key (expected one of {})",
-            DATA_KEYS.join(", ")
-        )));
-    }
-    let required = |key: &str| -> Result<String> {
-        let value = data
-            .get(key)
-            .ok_or_else(|| input_error(format!("{file}: key `likelihood.data.{key}`: missing")))?;
-        string_of(value, file, &format!("likelihood.data.{key}"))
+    let mut required = |key: &str| -> Result<String> {
+        match data.string(key)? {
+            Some(v) => Ok(v),
+            None => Err(data.error(key, "missing").into()),
+        }
     };
     let data_file = required("file")?;
     let x_column = required("x")?;
     let y_column = required("y")?;
-    let y_err_column = match data.get("y_err") {
-        Some(v) => Some(string_of(v, file, "likelihood.data.y_err")?),
+    let y_err_column = data.string("y_err")?;
+    let x_range = match data.numbers("x_range")? {
         None => None,
-    };
-    let x_range = match data.get("x_range") {
-        None => None,
+        Some(v) if v.len() == 2 && v[0] <= v[1] => Some((v[0], v[1])),
         Some(v) => {
-            let pair = v
-                .as_array()
-                .filter(|a| a.len() == 2)
-                .and_then(|a| Some((number_of(&a[0])?, number_of(&a[1])?)))
-                .ok_or_else(|| {
-                    input_error(format!(
-                        "{file}: key `likelihood.data.x_range`: expected [lower, upper]"
-                    ))
-                })?;
-            if !(pair.0.is_finite() && pair.1.is_finite() && pair.0 <= pair.1) {
-                return Err(input_error(format!(
-                    "{file}: key `likelihood.data.x_range`: [{}, {}] must be finite with lower ≤ upper",
-                    pair.0, pair.1
-                )));
-            }
-            Some(pair)
+            return Err(data
+                .error(
+                    "x_range",
+                    format!("expected [lower, upper] with lower ≤ upper, found {v:?}"),
+                )
+                .into());
         }
     };
+    data.finish()?;
+    let file = s.file();
     let base = study.path.parent().unwrap_or(Path::new("."));
     let path = base.join(&data_file);
     let table_data = read_numeric_csv(&path, false)
@@ -220,7 +182,7 @@ fn parse_data(
         .validate()
         .bad_input(|| format!("{file}: key `likelihood.data` ({})", path.display()))?;
 
-    let modelling_error = match table.get("modelling_error") {
+    let modelling_error = match s.value("modelling_error") {
         None => Some(DEFAULT_MODELLING_ERROR_PRIOR),
         Some(toml::Value::Boolean(false)) => None,
         Some(toml::Value::Boolean(true)) => Some(DEFAULT_MODELLING_ERROR_PRIOR),
@@ -234,37 +196,29 @@ fn parse_data(
                 .validate("sigma_m")
                 .bad_input(|| format!("{file}: key `likelihood.modelling_error`"))?;
             if prior.support().0 < 0.0 {
-                return Err(input_error(format!(
-                    "{file}: key `likelihood.modelling_error`: the prior of sigma_m must not allow negative values"
-                )));
+                return Err(s
+                    .error(
+                        "modelling_error",
+                        "the prior of sigma_m must not allow negative values",
+                    )
+                    .into());
             }
             Some(prior)
         }
     };
-    let measurement_error = match table.get("measurement_error") {
-        None => true,
-        Some(v) => v.as_bool().ok_or_else(|| {
-            input_error(format!(
-                "{file}: key `likelihood.measurement_error`: expected true or false"
-            ))
+    let measurement_error = s.boolean("measurement_error")?.unwrap_or(true);
+    let names = ComputationalError::ALL.map(|c| c.name());
+    let computational_error = match s.choice("computational_error", &names)? {
+        None => ComputationalError::default(),
+        Some(name) => ComputationalError::from_name(name).ok_or_else(|| {
+            s.error(
+                "computational_error",
+                format!("unknown convention `{name}`"),
+            )
         })?,
     };
-    let computational_error = match table.get("computational_error") {
-        None => ComputationalError::default(),
-        Some(v) => {
-            let name = string_of(v, file, "likelihood.computational_error")?;
-            ComputationalError::from_name(&name).ok_or_else(|| {
-                input_error(format!(
-                    "{file}: key `likelihood.computational_error`: unknown convention `{name}` (one of {})",
-                    ComputationalError::ALL.map(|c| c.name()).join(", ")
-                ))
-            })?
-        }
-    };
-    let prediction = match table.get("prediction") {
-        None => None,
-        Some(v) => Some(string_of(v, file, "likelihood.prediction")?),
-    };
+    let prediction = s.string("prediction")?;
+    s.finish()?;
     Ok(DataLikelihood {
         file: path,
         x_column: x_column.clone(),

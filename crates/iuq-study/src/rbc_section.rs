@@ -21,6 +21,8 @@ use iuq_rbc::model::{CellParameters, PARAMETER_NAMES, RbcShearModel, RbcShearSet
 use iuq_rbc::protocol::{DEFAULT_LATTICE_SHEAR_RATE, Protocol};
 use iuq_rbc::{PastSingularity, RbcError};
 
+use iuq_campaign::StudySection;
+
 use crate::error::{Result, input_error};
 use crate::table_io::read_numeric_csv;
 
@@ -38,116 +40,95 @@ pub fn rbc_shear_model(
     inputs: Vec<String>,
     likelihood: Option<&toml::Table>,
 ) -> Result<RbcShearModel> {
-    let key_error = |key: &str, reason: &str| input_error(format!("{file}: key `{key}`: {reason}"));
-    let number = |key: &str, v: &toml::Value| -> Result<f64> {
-        v.as_float()
-            .or_else(|| v.as_integer().map(|i| i as f64))
-            .ok_or_else(|| key_error(key, "expected a number"))
-    };
+    let mut s = StudySection::new(table, "model", file);
+    s.allow(&["kind"]);
     let mut settings = RbcShearSettings::default();
-    let mut fixed = CellParameters::default();
-    let mut lattice_shear_rate = DEFAULT_LATTICE_SHEAR_RATE;
-    let mut stresses = None;
-    for (key, value) in table {
-        let full = format!("model.{key}");
-        match key.as_str() {
-            "kind" => {}
-            "protocol" => {
-                settings.protocol = match value.as_str() {
-                    Some("scaled") => Protocol::default(),
-                    Some("reference") => Protocol::Reference,
-                    _ => {
-                        return Err(key_error(&full, "expected \"scaled\" or \"reference\""));
-                    }
-                }
-            }
-            "lattice_shear_rate" => lattice_shear_rate = number(&full, value)?,
-            "past_singularity" => {
-                settings.past_singularity = value
-                    .as_str()
-                    .and_then(PastSingularity::from_name)
-                    .ok_or_else(|| key_error(&full, "expected \"fail\" or \"carry-on\""))?
-            }
-            // Quick checks and tests only: the study's window starts at 7.5 strain units.
-            "start_strain" => settings.start_strain = number(&full, value)?,
-            "window_factor" => {
-                let v = number(&full, value)?;
-                if !(v.is_finite() && v > 1.0 && v <= 100.0) {
-                    return Err(key_error(
-                        &full,
-                        "the window ends at window_factor × its start: expected a number in (1, 100]",
-                    ));
-                }
-                settings.window_factor = v;
-            }
-            "frames" => {
-                settings.frames = value
-                    .as_integer()
-                    .filter(|n| (2..=1000).contains(n))
-                    .map(|n| n as usize)
-                    .ok_or_else(|| {
-                        key_error(&full, "expected a whole number of frames, 2 to 1000")
-                    })?;
-            }
-            "precision" => {
-                settings.precision = match value.as_str() {
-                    Some("single") => Precision::Single,
-                    Some("double") => Precision::Double,
-                    _ => return Err(key_error(&full, "expected \"single\" or \"double\"")),
-                }
-            }
-            "stresses" => {
-                let list = value
-                    .as_array()
-                    .ok_or_else(|| key_error(&full, "expected a list of stresses in Pa"))?;
-                stresses = Some(
-                    list.iter()
-                        .map(|v| number(&full, v))
-                        .collect::<Result<Vec<f64>>>()?,
-                );
-            }
-            name if PARAMETER_NAMES.contains(&name) => {
-                if inputs.iter().any(|i| i == name) {
-                    return Err(key_error(
-                        &full,
-                        "this parameter is in [parameters]; fix it here or calibrate it, not both",
-                    ));
-                }
-                let v = number(&full, value)?;
-                fixed
-                    .set(name, v)
-                    .map_err(|e| key_error(&full, &e.to_string()))?;
-                let positive = matches!(name, "kLink" | "viscosityRatio");
-                if !v.is_finite() || v < 0.0 || (positive && v == 0.0) {
-                    return Err(key_error(
-                        &full,
-                        if positive {
-                            "must be a positive number"
-                        } else {
-                            "must be a non-negative number"
-                        },
-                    ));
-                }
-            }
-            other => {
-                return Err(key_error(
-                    &format!("model.{other}"),
-                    &format!(
-                        "unknown key for kind = \"rbc-shear\" (expected protocol, lattice_shear_rate, precision, past_singularity, start_strain, window_factor, frames, stresses or one of {})",
-                        PARAMETER_NAMES.join(", ")
-                    ),
-                ));
-            }
+    match s.choice("protocol", &["scaled", "reference"])? {
+        Some("reference") => settings.protocol = Protocol::Reference,
+        _ => settings.protocol = Protocol::default(),
+    }
+    let lattice_shear_rate = s.number("lattice_shear_rate")?;
+    match (settings.protocol, lattice_shear_rate) {
+        (Protocol::Scaled { .. }, rate) => {
+            settings.protocol = Protocol::Scaled {
+                lattice_shear_rate: rate.unwrap_or(DEFAULT_LATTICE_SHEAR_RATE),
+            };
         }
+        (_, Some(_)) => {
+            return Err(s
+                .error(
+                    "lattice_shear_rate",
+                    "only the scaled protocol has a lattice shear rate",
+                )
+                .into());
+        }
+        (_, None) => {}
     }
-    if let Protocol::Scaled { .. } = settings.protocol {
-        settings.protocol = Protocol::Scaled { lattice_shear_rate };
-    } else if table.contains_key("lattice_shear_rate") {
-        return Err(key_error(
-            "model.lattice_shear_rate",
-            "only the scaled protocol has a lattice shear rate",
-        ));
+    let names = PastSingularity::ALL.map(|p| p.name());
+    if let Some(name) = s.choice("past_singularity", &names)? {
+        settings.past_singularity = PastSingularity::from_name(name)
+            .ok_or_else(|| s.error("past_singularity", format!("unknown `{name}`")))?;
     }
+    // Quick checks and tests only: the study's window starts at 7.5 strain units.
+    if let Some(v) = s.number("start_strain")? {
+        settings.start_strain = v;
+    }
+    if let Some(v) = s.number("window_factor")? {
+        if !(v > 1.0 && v <= 100.0) {
+            return Err(s
+                .error(
+                    "window_factor",
+                    "the window ends at window_factor × its start: expected a number in (1, 100]",
+                )
+                .into());
+        }
+        settings.window_factor = v;
+    }
+    if let Some(frames) = s.count("frames", 2)? {
+        if frames > 1000 {
+            return Err(s
+                .error("frames", "expected a whole number of frames, 2 to 1000")
+                .into());
+        }
+        settings.frames = frames;
+    }
+    match s.choice("precision", &["single", "double"])? {
+        Some("single") => settings.precision = Precision::Single,
+        Some(_) => settings.precision = Precision::Double,
+        None => {}
+    }
+    let stresses = s.numbers("stresses")?;
+    let mut fixed = CellParameters::default();
+    for name in PARAMETER_NAMES {
+        let Some(v) = s.number(name)? else {
+            continue;
+        };
+        if inputs.iter().any(|i| i == name) {
+            return Err(s
+                .error(
+                    name,
+                    "this parameter is in [parameters]; fix it here or calibrate it, not both",
+                )
+                .into());
+        }
+        let positive = matches!(name, "kLink" | "viscosityRatio");
+        if v < 0.0 || (positive && v == 0.0) {
+            return Err(s
+                .error(
+                    name,
+                    if positive {
+                        "must be a positive number"
+                    } else {
+                        "must be a non-negative number"
+                    },
+                )
+                .into());
+        }
+        fixed
+            .set(name, v)
+            .map_err(|e| s.error(name, e.to_string()))?;
+    }
+    s.finish()?;
     settings.fixed = fixed;
     let stresses = match stresses {
         Some(s) => s,
@@ -171,44 +152,26 @@ fn stresses_from_likelihood(
     study_path: &Path,
     likelihood: Option<&toml::Table>,
 ) -> Result<Vec<f64>> {
-    let missing = || {
-        input_error(format!(
+    // Only the keys needed here; `[likelihood]` is checked whole where it is read.
+    let mut l = StudySection::optional(likelihood, "likelihood", file);
+    let Some(mut data) = l.section("data", "{ file, x, y, y_err, x_range }")? else {
+        return Err(input_error(format!(
             "{file}: key `model.stresses`: missing; give `stresses = [...]` (Pa) or a `[likelihood] data = {{ file, x }}` table"
-        ))
+        )));
     };
-    let data = likelihood
-        .and_then(|l| l.get("data"))
-        .and_then(|d| d.as_table())
-        .ok_or_else(missing)?;
-    let data_file = data.get("file").and_then(|f| f.as_str()).ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `likelihood.data.file`: expected a path"
-        ))
-    })?;
-    let x = data.get("x").and_then(|f| f.as_str()).ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `likelihood.data.x`: expected a column name"
-        ))
-    })?;
-    let range = match data.get("x_range") {
+    let Some(data_file) = data.string("file")? else {
+        return Err(data.error("file", "missing (the data file's path)").into());
+    };
+    let Some(x) = data.string("x")? else {
+        return Err(data.error("x", "missing (the stress column)").into());
+    };
+    let range = match data.numbers("x_range")? {
         None => (f64::NEG_INFINITY, f64::INFINITY),
-        Some(v) => {
-            let r: Vec<f64> = v
-                .as_array()
-                .map(|a| {
-                    a.iter()
-                        .filter_map(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)))
-                        .collect()
-                })
-                .unwrap_or_default();
-            if r.len() != 2 {
-                return Err(input_error(format!(
-                    "{file}: key `likelihood.data.x_range`: expected [lower, upper]"
-                )));
-            }
-            (r[0], r[1])
-        }
+        Some(r) if r.len() == 2 => (r[0], r[1]),
+        Some(_) => return Err(data.error("x_range", "expected [lower, upper]").into()),
     };
+    let data_file = data_file.as_str();
+    let x = x.as_str();
     let relative = study_path
         .parent()
         .unwrap_or(Path::new("."))

@@ -16,22 +16,10 @@
 
 use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Resampling};
 
+use iuq_campaign::StudySection;
+
 use crate::error::{Result, input_error};
 use crate::study::Study;
-
-/// The keys the `[sampler]` section accepts.
-pub const SAMPLER_KEYS: [&str; 10] = [
-    "samples",
-    "burn",
-    "max_chain",
-    "seed",
-    "cv_target",
-    "proposal_scale",
-    "resampling",
-    "min_step",
-    "on_min_step",
-    "max_stages",
-];
 
 /// Command-line overrides of the section.
 #[derive(Debug, Clone, Copy, Default)]
@@ -66,101 +54,53 @@ fn names_of(setting: &str) -> (&'static str, Option<&'static str>) {
 /// settings. Errors name the file and key, or the flag when the value came from one.
 pub fn parse_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<CheckedSettings> {
     let file = study.path.display().to_string();
-    let empty = toml::Table::new();
-    let table = study.sampler.as_ref().unwrap_or(&empty);
-    if let Some(key) = table.keys().find(|k| !SAMPLER_KEYS.contains(&k.as_str())) {
-        return Err(input_error(format!(
-            "{file}: key `sampler.{key}`: unknown key (expected one of {})",
-            SAMPLER_KEYS.join(", ")
-        )));
-    }
-    let count = |key: &str| -> Result<Option<u64>> {
-        match table.get(key) {
-            None => Ok(None),
-            Some(v) => v
-                .as_integer()
-                .and_then(|i| u64::try_from(i).ok())
-                .map(Some)
-                .ok_or_else(|| {
-                    input_error(format!(
-                        "{file}: key `sampler.{key}`: expected a non-negative integer, got {v}"
-                    ))
-                }),
-        }
-    };
-    let real = |key: &str| -> Result<Option<f64>> {
-        match table.get(key) {
-            None => Ok(None),
-            Some(v) => v
-                .as_float()
-                .or_else(|| v.as_integer().map(|i| i as f64))
-                .map(Some)
-                .ok_or_else(|| {
-                    input_error(format!(
-                        "{file}: key `sampler.{key}`: expected a number, got {v}"
-                    ))
-                }),
-        }
-    };
-    let word = |key: &str| -> Result<Option<String>> {
-        match table.get(key) {
-            None => Ok(None),
-            Some(v) => v.as_str().map(|s| Some(s.to_string())).ok_or_else(|| {
-                input_error(format!(
-                    "{file}: key `sampler.{key}`: expected a string, got {v}"
-                ))
-            }),
-        }
-    };
-    let usize_of = |v: Option<u64>, key: &str| -> Result<Option<usize>> {
-        v.map(|v| {
-            usize::try_from(v)
-                .map_err(|_| input_error(format!("{file}: key `sampler.{key}`: {v} is too large")))
-        })
-        .transpose()
-    };
+    parse_section(
+        StudySection::optional(study.sampler.as_ref(), "sampler", &file),
+        overrides,
+    )
+}
+
+/// Read the `[model_sampler]` section (BASIS on the model itself in `iuq pipeline`) as
+/// [`parse_sampler`] reads `[sampler]`.
+pub fn parse_model_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<CheckedSettings> {
+    let file = study.path.display().to_string();
+    parse_section(
+        StudySection::optional(study.model_sampler.as_ref(), "model_sampler", &file),
+        overrides,
+    )
+}
+
+fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Result<CheckedSettings> {
     let d = BasisSettings::default();
-    let resampling = match word("resampling")?.as_deref() {
+    let resampling = match s.choice("resampling", &["multinomial", "systematic"])? {
         None => d.resampling,
         Some("multinomial") => Resampling::Multinomial,
-        Some("systematic") => Resampling::Systematic,
-        Some(other) => {
-            return Err(input_error(format!(
-                "{file}: key `sampler.resampling`: unknown scheme `{other}` (multinomial or systematic)"
-            )));
-        }
+        Some(_) => Resampling::Systematic,
     };
-    let on_min_step = match word("on_min_step")?.as_deref() {
+    let on_min_step = match s.choice("on_min_step", &["clamp", "stop"])? {
         None => d.on_min_step,
         Some("clamp") => MinStepAction::Clamp,
-        Some("stop") => MinStepAction::Stop,
-        Some(other) => {
-            return Err(input_error(format!(
-                "{file}: key `sampler.on_min_step`: unknown action `{other}` (clamp or stop)"
-            )));
-        }
+        Some(_) => MinStepAction::Stop,
     };
     let settings = BasisSettings {
         samples: overrides
             .samples
-            .or(usize_of(count("samples")?, "samples")?)
+            .or(s.count("samples", 0)?)
             .unwrap_or(d.samples),
-        burn_in: overrides
-            .burn
-            .or(usize_of(count("burn")?, "burn")?)
-            .unwrap_or(d.burn_in),
+        burn_in: overrides.burn.or(s.count("burn", 0)?).unwrap_or(d.burn_in),
         max_chain_length: overrides
             .max_chain
-            .or(usize_of(count("max_chain")?, "max_chain")?)
+            .or(s.count("max_chain", 0)?)
             .unwrap_or(d.max_chain_length),
-        cv_target: real("cv_target")?.unwrap_or(d.cv_target),
-        proposal_scale: real("proposal_scale")?.unwrap_or(d.proposal_scale),
+        cv_target: s.number("cv_target")?.unwrap_or(d.cv_target),
+        proposal_scale: s.number("proposal_scale")?.unwrap_or(d.proposal_scale),
         resampling,
-        min_step: real("min_step")?.unwrap_or(d.min_step),
+        min_step: s.number("min_step")?.unwrap_or(d.min_step),
         on_min_step,
-        max_stages: usize_of(count("max_stages")?, "max_stages")?.unwrap_or(d.max_stages),
-        seed: overrides.seed.or(count("seed")?).unwrap_or(d.seed),
+        max_stages: s.count("max_stages", 0)?.unwrap_or(d.max_stages),
+        seed: overrides.seed.or(s.seed("seed")?).unwrap_or(d.seed),
     };
+    s.finish()?;
     settings.check().map_err(|e| match e {
         BasisError::InvalidSettings { setting, reason } => {
             let (key, flag) = names_of(setting);
@@ -173,9 +113,9 @@ pub fn parse_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<Chec
             };
             match (from_flag, flag) {
                 (true, Some(flag)) => input_error(format!("{flag}: {reason}")),
-                _ => input_error(format!("{file}: key `sampler.{key}`: {reason}")),
+                _ => s.error(key, reason).into(),
             }
         }
-        other => input_error(format!("{file}: section `[sampler]`: {other}")),
+        other => s.section_error(other.to_string()).into(),
     })
 }

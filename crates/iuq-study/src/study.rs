@@ -8,8 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use serde::Deserialize;
-
+use iuq_campaign::StudySection;
 use iuq_core::{ExpressionModel, Parameter, ParameterSpace, Prior};
 
 use crate::error::{BadInput, Result, input_error};
@@ -56,80 +55,70 @@ pub const MODEL_KINDS: [&str; 5] = [
 
 /// The `abscissa` key of `[model]`: the name under which every run receives the data's abscissa
 /// (one run per parameter vector and data point). It must not name a parameter.
-fn parse_abscissa(
-    table: &toml::Table,
-    file: &str,
-    space: &ParameterSpace,
-) -> Result<Option<String>> {
-    let Some(value) = table.get("abscissa") else {
+fn parse_abscissa(model: &mut StudySection<'_>, space: &ParameterSpace) -> Result<Option<String>> {
+    let Some(name) = model.string("abscissa")? else {
         return Ok(None);
     };
-    let name = value.as_str().ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `model.abscissa`: expected the name of the data's abscissa as the model knows it, e.g. \"t\""
-        ))
-    })?;
     let valid = name
         .chars()
         .next()
         .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
         && name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
     if !valid {
-        return Err(input_error(format!(
-            "{file}: key `model.abscissa`: `{name}` is not a name (letters, digits and _, not starting with a digit)"
-        )));
+        return Err(model
+            .error(
+                "abscissa",
+                format!(
+                    "`{name}` is not a name (letters, digits and _, not starting with a digit)"
+                ),
+            )
+            .into());
     }
-    if space.index_of(name).is_some() {
-        return Err(input_error(format!(
-            "{file}: key `model.abscissa`: `{name}` is also a parameter; the abscissa is set by the data, not calibrated"
-        )));
+    if space.index_of(&name).is_some() {
+        return Err(model
+            .error(
+                "abscissa",
+                format!(
+                    "`{name}` is also a parameter; the abscissa is set by the data, not calibrated"
+                ),
+            )
+            .into());
     }
-    Ok(Some(name.to_string()))
+    Ok(Some(name))
 }
 
-fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> {
-    let kind = table
-        .get("kind")
-        .ok_or_else(|| {
-            input_error(format!(
-                "{file}: key `model.kind`: missing (one of {})",
-                MODEL_KINDS.join(", ")
-            ))
-        })?
-        .as_str()
-        .ok_or_else(|| input_error(format!("{file}: key `model.kind`: expected a string")))?;
+/// Read `[model]`: its kind and what that kind needs here (the keys of the cell model, a
+/// program and a UM-Bridge server are read by their own sections).
+fn parse_model_section(mut model: StudySection<'_>) -> Result<ModelSection> {
+    let table = model.table();
+    let Some(kind) = model.choice("kind", &MODEL_KINDS)? else {
+        return Err(model
+            .error(
+                "kind",
+                format!("missing (one of {})", MODEL_KINDS.join(", ")),
+            )
+            .into());
+    };
     match kind {
         "expression" => {
-            if let Some(key) = table
-                .keys()
-                .find(|k| !["kind", "outputs", "abscissa"].contains(&k.as_str()))
-            {
-                return Err(input_error(format!(
-                    "{file}: key `model.{key}`: unknown key for kind = \"expression\" (expected `outputs`, `abscissa`)"
-                )));
-            }
-            let outputs = table
-                .get("outputs")
-                .ok_or_else(|| {
-                    input_error(format!(
-                        "{file}: key `model.outputs`: missing (outputs = {{ name = \"formula\" }})"
-                    ))
-                })?
-                .as_table()
-                .ok_or_else(|| {
-                    input_error(format!(
-                        "{file}: key `model.outputs`: expected a table of formulas"
-                    ))
-                })?;
+            let Some(outputs) = model.sub_table("outputs")? else {
+                return Err(model
+                    .error("outputs", "missing (outputs = { name = \"formula\" })")
+                    .into());
+            };
+            model.finish()?;
             Ok(ModelSection::Expression {
                 outputs: outputs.clone(),
             })
         }
         "rbc-shear" => {
-            if table.contains_key("abscissa") {
-                return Err(input_error(format!(
-                    "{file}: key `model.abscissa`: the cell model's abscissa is the shear stress of the data; remove the key"
-                )));
+            if model.has("abscissa") {
+                return Err(model
+                    .error(
+                        "abscissa",
+                        "the cell model's abscissa is the shear stress of the data; remove the key",
+                    )
+                    .into());
             }
             Ok(ModelSection::RbcShear {
                 table: table.clone(),
@@ -139,10 +128,10 @@ fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> 
             let mut without = table.clone();
             without.remove("abscissa");
             Ok(ModelSection::UmBridge(
-                crate::umbridge_section::parse_umbridge_section(&without, file)?,
+                crate::umbridge_section::parse_umbridge_section(&without, model.file())?,
             ))
         }
-        "command" | "batch-command" => {
+        _ => {
             let mut without = table.clone();
             without.remove("abscissa");
             Ok(ModelSection::Command {
@@ -150,16 +139,11 @@ fn parse_model_section(table: &toml::Table, file: &str) -> Result<ModelSection> 
                 table: without,
             })
         }
-        other => Err(input_error(format!(
-            "{file}: key `model.kind`: unknown kind `{other}` (one of {})",
-            MODEL_KINDS.join(", ")
-        ))),
     }
 }
 
 /// The `[sensitivity]` section.
-#[derive(Debug, Clone, Default, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[derive(Debug, Clone, Default)]
 pub struct SensitivitySection {
     /// Base points N of the Saltelli design.
     pub n: Option<usize>,
@@ -176,30 +160,20 @@ pub struct SensitivitySection {
     pub model_n: Option<usize>,
 }
 
-#[derive(Debug, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct StudyFile {
-    name: String,
-    #[serde(default)]
-    description: Option<String>,
-    parameters: toml::Table,
-    #[serde(default)]
-    model: Option<toml::Table>,
-    #[serde(default)]
-    sensitivity: Option<SensitivitySection>,
-    // Sections of later stages, validated by the verbs that use them.
-    #[serde(default)]
-    likelihood: Option<toml::Table>,
-    #[serde(default)]
-    surrogate: Option<toml::Table>,
-    #[serde(default)]
-    sampler: Option<toml::Table>,
-    #[serde(default)]
-    executor: Option<toml::Table>,
-    #[serde(default)]
-    design: Option<toml::Table>,
-    #[serde(default)]
-    model_sampler: Option<toml::Table>,
+impl SensitivitySection {
+    /// Read `[sensitivity]` (every key optional).
+    fn parse(mut s: StudySection<'_>) -> Result<Self> {
+        let section = Self {
+            n: s.count("n", 1)?,
+            seed: s.seed("seed")?,
+            replicates: s.count("replicates", 1)?,
+            resamples: s.count("resamples", 1)?,
+            confidence: s.number("confidence")?,
+            model_n: s.count("model_n", 0)?,
+        };
+        s.finish()?;
+        Ok(section)
+    }
 }
 
 /// A study read from a file.
@@ -241,16 +215,26 @@ impl Study {
 
     /// Parse and validate study text; `path` names the file in errors.
     pub fn parse(text: &str, path: &Path) -> Result<Self> {
-        let file = path.display();
-        let raw: StudyFile = toml::from_str(text).bad_input(|| format!("{file}"))?;
-        let _ = (&raw.description, &raw.design);
-        if raw.name.trim().is_empty() {
-            return Err(input_error(format!(
-                "{file}: key `name`: must not be empty"
-            )));
+        let file = path.display().to_string();
+        let root: toml::Table = text.parse().bad_input(|| file.clone())?;
+        let mut top = StudySection::new(&root, "", &file);
+        let Some(name) = top.string("name")? else {
+            return Err(top.error("name", "missing (the study's name)").into());
+        };
+        if name.trim().is_empty() {
+            return Err(top.error("name", "must not be empty").into());
         }
-        let mut parameters = Vec::with_capacity(raw.parameters.len());
-        for (name, value) in &raw.parameters {
+        top.string("description")?;
+        let Some(parameter_table) = top.sub_table("parameters")? else {
+            return Err(top
+                .error(
+                    "parameters",
+                    "missing (a table of priors, e.g. k = { uniform = [0, 1] })",
+                )
+                .into());
+        };
+        let mut parameters = Vec::with_capacity(parameter_table.len());
+        for (name, value) in parameter_table {
             let prior: Prior = value.clone().try_into().bad_input(|| {
                 format!(
                     "{file}: key `parameters.{name}`: expected a prior such as {{ uniform = [lower, upper] }}, {{ normal = [mean, std] }}, {{ log_normal = [mu, sigma] }} or {{ truncated_normal = [mean, std, lower, upper] }}"
@@ -266,25 +250,37 @@ impl Study {
         }
         let space = ParameterSpace::new(parameters)
             .bad_input(|| format!("{file}: section `[parameters]`"))?;
-        let abscissa = match &raw.model {
-            Some(table) => parse_abscissa(table, &file.to_string(), &space)?,
-            None => None,
+        let (model, abscissa) = match top.section("model", "{ kind = \"expression\" }")? {
+            Some(mut section) => {
+                let abscissa = parse_abscissa(&mut section, &space)?;
+                (parse_model_section(section)?, abscissa)
+            }
+            None => (ModelSection::Absent, None),
         };
+        let sensitivity = match top.section("sensitivity", "{ n = 1024, seed = 3 }")? {
+            Some(section) => SensitivitySection::parse(section)?,
+            None => SensitivitySection::default(),
+        };
+        // Sections of later stages, read by the code that uses them.
+        let likelihood = top.sub_table("likelihood")?.cloned();
+        let surrogate = top.sub_table("surrogate")?.cloned();
+        let sampler = top.sub_table("sampler")?.cloned();
+        let model_sampler = top.sub_table("model_sampler")?.cloned();
+        let executor = top.sub_table("executor")?.cloned();
+        top.sub_table("design")?;
+        top.finish()?;
         let study = Self {
             path: path.to_path_buf(),
-            name: raw.name,
+            name,
             space,
-            model: match &raw.model {
-                Some(table) => parse_model_section(table, &file.to_string())?,
-                None => ModelSection::Absent,
-            },
+            model,
             abscissa,
-            sensitivity: raw.sensitivity.unwrap_or_default(),
-            likelihood: raw.likelihood,
-            sampler: raw.sampler,
-            surrogate: raw.surrogate,
-            model_sampler: raw.model_sampler,
-            executor: raw.executor,
+            sensitivity,
+            likelihood,
+            sampler,
+            surrogate,
+            model_sampler,
+            executor,
         };
         if let ModelSection::Expression { .. } = study.model {
             study.expression_model()?;

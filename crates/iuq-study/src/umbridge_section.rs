@@ -24,21 +24,9 @@ use std::time::Duration;
 
 use iuq_umbridge::{ClientOptions, UmBridgeModel};
 
-use crate::error::{Result, StudyError, input_error};
+use iuq_campaign::StudySection;
 
-/// The keys the section accepts.
-pub const UMBRIDGE_KEYS: [&str; 10] = [
-    "kind",
-    "url",
-    "name",
-    "config",
-    "outputs",
-    "computational_std",
-    "concurrency",
-    "retries",
-    "retry_delay",
-    "timeout",
-];
+use crate::error::{Result, StudyError, input_error};
 
 /// A parsed `[model] kind = "umbridge"` section.
 #[derive(Debug, Clone)]
@@ -51,100 +39,79 @@ pub struct UmBridgeSection {
     pub options: ClientOptions,
 }
 
-fn positive_seconds(value: &toml::Value, file: &str, key: &str) -> Result<Duration> {
-    let seconds = value
-        .as_float()
-        .or_else(|| value.as_integer().map(|i| i as f64))
-        .filter(|s| s.is_finite() && *s >= 0.0 && *s < 1e9)
-        .ok_or_else(|| {
-            input_error(format!(
-                "{file}: key `model.{key}`: expected a number of seconds ≥ 0"
-            ))
-        })?;
-    Ok(Duration::from_secs_f64(seconds))
+/// A number of seconds, at least 0 and below 10⁹.
+fn seconds(s: &mut StudySection<'_>, key: &str) -> Result<Option<Duration>> {
+    match s.number(key)? {
+        None => Ok(None),
+        Some(v) if (0.0..1e9).contains(&v) => Ok(Some(Duration::from_secs_f64(v))),
+        Some(v) => Err(s
+            .error(key, format!("expected a number of seconds ≥ 0, found {v}"))
+            .into()),
+    }
 }
 
 /// Parses the section (no network access: the server is contacted when the model is built).
 pub fn parse_umbridge_section(table: &toml::Table, file: &str) -> Result<UmBridgeSection> {
-    if let Some(key) = table.keys().find(|k| !UMBRIDGE_KEYS.contains(&k.as_str())) {
-        return Err(input_error(format!(
-            "{file}: key `model.{key}`: unknown key for kind = \"umbridge\" (expected one of {})",
-            UMBRIDGE_KEYS[1..].join(", ")
-        )));
-    }
-    let string = |key: &str| -> Result<String> {
-        let value = table.get(key).ok_or_else(|| {
-            input_error(format!(
-                "{file}: key `model.{key}`: missing (kind = \"umbridge\" needs `url` and `name`)"
-            ))
-        })?;
-        match value.as_str() {
-            Some(s) if !s.trim().is_empty() => Ok(s.to_string()),
-            _ => Err(input_error(format!(
-                "{file}: key `model.{key}`: expected a non-empty string"
-            ))),
+    let mut s = StudySection::new(table, "model", file);
+    s.allow(&["kind"]);
+    let mut required = |key: &str| -> Result<String> {
+        match s.string(key)? {
+            Some(v) if !v.trim().is_empty() => Ok(v),
+            Some(_) => Err(s.error(key, "expected a non-empty string").into()),
+            None => Err(s
+                .error(key, "missing (kind = \"umbridge\" needs `url` and `name`)")
+                .into()),
         }
     };
-    let url = string("url")?;
-    let name = string("name")?;
+    let url = required("url")?;
+    let name = required("name")?;
     let mut options = ClientOptions::default();
-    if let Some(config) = table.get("config") {
-        options.config = serde_json::to_value(config).map_err(|e| {
-            input_error(format!(
-                "{file}: key `model.config`: not JSON-compatible: {e}"
-            ))
-        })?;
+    if let Some(config) = s.value("config") {
+        options.config = serde_json::to_value(config)
+            .map_err(|e| s.error("config", format!("not JSON-compatible: {e}")))?;
     }
-    if let Some(outputs) = table.get("outputs") {
-        let names = outputs
-            .as_array()
-            .and_then(|a| {
-                a.iter()
-                    .map(|v| v.as_str().map(str::to_string))
-                    .collect::<Option<Vec<_>>>()
-            })
-            .filter(|names| !names.is_empty())
-            .ok_or_else(|| {
-                input_error(format!(
-                    "{file}: key `model.outputs`: expected a non-empty array of output names"
-                ))
-            })?;
+    if let Some(names) = s.strings("outputs")? {
+        if names.is_empty() {
+            return Err(s
+                .error("outputs", "expected a non-empty array of output names")
+                .into());
+        }
         options.output_names = Some(names);
     }
-    if let Some(flag) = table.get("computational_std") {
-        options.std_output = flag.as_bool().ok_or_else(|| {
-            input_error(format!(
-                "{file}: key `model.computational_std`: expected true or false"
-            ))
-        })?;
+    if let Some(flag) = s.boolean("computational_std")? {
+        options.std_output = flag;
     }
-    let count = |key: &str, min: i64| -> Result<Option<i64>> {
-        match table.get(key) {
-            None => Ok(None),
-            Some(v) => match v.as_integer() {
-                Some(n) if n >= min && n <= 1024 => Ok(Some(n)),
-                _ => Err(input_error(format!(
-                    "{file}: key `model.{key}`: expected an integer from {min} to 1024"
-                ))),
-            },
+    let mut at_most_1024 = |key: &str, min: usize| -> Result<Option<usize>> {
+        match s.count(key, min)? {
+            Some(n) if n > 1024 => Err(s
+                .error(
+                    key,
+                    format!("expected an integer from {min} to 1024, found {n}"),
+                )
+                .into()),
+            other => Ok(other),
         }
     };
-    if let Some(n) = count("concurrency", 1)? {
-        options.concurrency = n as usize;
+    if let Some(n) = at_most_1024("concurrency", 1)? {
+        options.concurrency = n;
     }
-    if let Some(n) = count("retries", 0)? {
+    if let Some(n) = at_most_1024("retries", 0)? {
         options.retries = n as u32;
     }
-    if let Some(v) = table.get("retry_delay") {
-        options.retry_delay = positive_seconds(v, file, "retry_delay")?;
+    if let Some(delay) = seconds(&mut s, "retry_delay")? {
+        options.retry_delay = delay;
     }
-    if let Some(v) = table.get("timeout") {
-        options.read_timeout = Some(positive_seconds(v, file, "timeout")?);
+    if let Some(timeout) = seconds(&mut s, "timeout")? {
+        options.read_timeout = Some(timeout);
     }
+    s.finish()?;
     if !url.starts_with("http://") {
-        return Err(input_error(format!(
-            "{file}: key `model.url`: `{url}` is not an http:// URL (UM-Bridge servers speak plain HTTP)"
-        )));
+        return Err(s
+            .error(
+                "url",
+                format!("`{url}` is not an http:// URL (UM-Bridge servers speak plain HTTP)"),
+            )
+            .into());
     }
     Ok(UmBridgeSection { url, name, options })
 }

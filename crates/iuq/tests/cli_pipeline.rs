@@ -237,6 +237,17 @@ fn bad_pipeline_settings_are_input_errors() {
             "[model]\nkind = \"rbc-shear\"\nframes = 1\n",
             "model.frames",
         ),
+        // Misspelt keys, wherever they are, are named with their whole key.
+        ("[sensitivity]\nnn = 256\n", "sensitivity.nn"),
+        ("[sampler]\nburn_in = 2\n", "sampler.burn_in"),
+        (
+            "[model]\nkind = \"rbc-shear\"\nprotocl = \"scaled\"\n",
+            "model.protocl",
+        ),
+        (
+            "[likelihood]\ndata = { file = \"data.csv\", x = \"stress_pa\", y = \"el_healthy\", x_rnage = [1, 3] }\n",
+            "likelihood.data.x_rnage",
+        ),
     ] {
         let sub = dir.join(key.replace('.', "-"));
         std::fs::create_dir_all(&sub).unwrap();

@@ -52,7 +52,7 @@ use iuq_sensitivity::{IntervalMethod, SensitivityOptions, SensitivityReport, ana
 use crate::error::{BadInput, Context, Result, StudyError, input_error};
 use crate::likelihood_section::{DataLikelihood, LikelihoodSection, parse_likelihood};
 use crate::posterior::{SampledPosterior, build_posterior_with, sample_posterior};
-use crate::sampler_section::{SamplerOverrides, parse_sampler};
+use crate::sampler_section::{SamplerOverrides, parse_model_sampler, parse_sampler};
 use crate::study::{ModelSection, Study};
 use crate::table_io::{write_atomically, write_numeric_csv};
 use adaptive::AdaptiveOutcome;
@@ -420,10 +420,8 @@ fn run_stages(
     let settings = parse_pipeline_settings(study)?;
     let sampler_settings = parse_sampler(study, &SamplerOverrides::default())?;
     let model_sampler_settings = if options.model_posterior {
-        let mut model_study = study.clone();
-        model_study.sampler = study.model_sampler.clone();
-        Some(parse_sampler(
-            &model_study,
+        Some(parse_model_sampler(
+            study,
             &SamplerOverrides {
                 burn: Some(0),
                 max_chain: Some(1),

@@ -17,6 +17,8 @@
 //! seed = 3
 //! ```
 
+use iuq_campaign::StudySection;
+
 use crate::error::{Result, input_error};
 use crate::study::Study;
 
@@ -61,31 +63,11 @@ pub struct PosteriorCheckSettings {
 }
 
 /// Read `[surrogate] posterior_check`.
-fn parse_posterior_check(value: &toml::Value, file: &str) -> Result<PosteriorCheckSettings> {
-    let full = "surrogate.posterior_check";
-    let table = value.as_table().ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `{full}`: expected a table such as {{ samples = 20, seed = 5 }}"
-        ))
-    })?;
-    if let Some(k) = table
-        .keys()
-        .find(|k| !["samples", "seed"].contains(&k.as_str()))
-    {
-        return Err(input_error(format!(
-            "{file}: key `{full}.{k}`: unknown key (expected samples, seed)"
-        )));
-    }
-    let samples = integer(table, "samples", full, file, 20)?;
-    if samples < 2 {
-        return Err(input_error(format!(
-            "{file}: key `{full}.samples`: at least 2 posterior samples are needed for an RMSE, got {samples}"
-        )));
-    }
-    Ok(PosteriorCheckSettings {
-        samples: samples as usize,
-        seed: integer(table, "seed", full, file, 0)?,
-    })
+fn parse_posterior_check(mut s: StudySection<'_>) -> Result<PosteriorCheckSettings> {
+    let samples = s.count("samples", 2)?.unwrap_or(20);
+    let seed = s.seed("seed")?.unwrap_or(0);
+    s.finish()?;
+    Ok(PosteriorCheckSettings { samples, seed })
 }
 
 /// `[surrogate] adaptive = { ... }`: rounds of new runs placed where the posterior lies.
@@ -118,174 +100,70 @@ pub struct AdaptiveSettings {
     pub candidates: usize,
 }
 
-/// The keys of `[surrogate] adaptive`.
-pub const ADAPTIVE_KEYS: [&str; 9] = [
-    "batch",
-    "max_runs",
-    "tolerance",
-    "log_likelihood_tolerance",
-    "samples",
-    "replicates",
-    "max_samples",
-    "max_rounds",
-    "candidates",
-];
-
-fn positive_number(table: &toml::Table, key: &str, file: &str, default: f64) -> Result<f64> {
-    match table.get(key) {
-        None => Ok(default),
-        Some(v) => v
-            .as_float()
-            .or_else(|| v.as_integer().map(|i| i as f64))
-            .filter(|x| x.is_finite() && *x > 0.0)
-            .ok_or_else(|| {
-                input_error(format!(
-                    "{file}: key `surrogate.adaptive.{key}`: expected a positive number, found `{v}`"
-                ))
-            }),
-    }
-}
-
 /// Read `[surrogate] adaptive`.
-fn parse_adaptive(value: &toml::Value, file: &str) -> Result<AdaptiveSettings> {
-    let table = value.as_table().ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `surrogate.adaptive`: expected a table such as {{ batch = 4, max_runs = 200, tolerance = 0.1 }}"
-        ))
-    })?;
-    if let Some(k) = table.keys().find(|k| !ADAPTIVE_KEYS.contains(&k.as_str())) {
-        return Err(input_error(format!(
-            "{file}: key `surrogate.adaptive.{k}`: unknown key (expected one of {})",
-            ADAPTIVE_KEYS.join(", ")
-        )));
-    }
-    let count = |key: &str, default: u64, min: u64| -> Result<usize> {
-        let full = "surrogate.adaptive";
-        let v = integer(table, key, full, file, default)?;
-        if v < min {
-            return Err(input_error(format!(
-                "{file}: key `{full}.{key}`: must be at least {min}, got {v}"
-            )));
-        }
-        Ok(v as usize)
-    };
-    let samples = count("samples", 2000, 10)?;
+fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
+    let samples = s.count("samples", 10)?.unwrap_or(2000);
     let settings = AdaptiveSettings {
-        batch: count("batch", 4, 1)?,
-        max_runs: count("max_runs", 200, 1)?,
-        tolerance: positive_number(table, "tolerance", file, 0.1)?,
-        log_likelihood_tolerance: positive_number(table, "log_likelihood_tolerance", file, 0.05)?,
+        batch: s.count("batch", 1)?.unwrap_or(4),
+        max_runs: s.count("max_runs", 1)?.unwrap_or(200),
+        tolerance: s.positive("tolerance")?.unwrap_or(0.1),
+        log_likelihood_tolerance: s.positive("log_likelihood_tolerance")?.unwrap_or(0.05),
         samples,
-        replicates: count("replicates", 4, 1)?,
-        max_samples: count("max_samples", 16 * samples as u64, samples as u64)?,
-        max_rounds: count("max_rounds", 30, 1)?,
-        candidates: count("candidates", 1000, 1)?,
+        replicates: s.count("replicates", 1)?.unwrap_or(4),
+        max_samples: s.count("max_samples", samples)?.unwrap_or(16 * samples),
+        max_rounds: s.count("max_rounds", 1)?.unwrap_or(30),
+        candidates: s.count("candidates", 1)?.unwrap_or(1000),
     };
+    s.finish()?;
     Ok(settings)
 }
 
-fn integer(table: &toml::Table, key: &str, full: &str, file: &str, default: u64) -> Result<u64> {
-    match table.get(key) {
-        None => Ok(default),
-        Some(v) => v
-            .as_integer()
-            .filter(|i| *i >= 0)
-            .map(|i| i as u64)
-            .ok_or_else(|| {
-                input_error(format!(
-                    "{file}: key `{full}.{key}`: expected a non-negative integer"
-                ))
-            }),
-    }
-}
-
-/// Read one design table (`{ kind, n, seed }`) of `[surrogate]`.
+/// Read one design table (`{ kind, n, seed }`) of `[surrogate]` (absent: `defaults`).
 fn design(
-    surrogate: &toml::Table,
+    surrogate: &mut StudySection<'_>,
     key: &str,
-    kind: &str,
-    file: &str,
-    defaults: (u64, u64),
+    kind: &'static str,
+    defaults: (usize, u64),
     min_runs: usize,
 ) -> Result<(usize, u64)> {
-    let full = format!("surrogate.{key}");
-    let Some(value) = surrogate.get(key) else {
-        return Ok((defaults.0 as usize, defaults.1));
+    let example = format!("{{ kind = \"{kind}\", n = 24, seed = 1 }}");
+    let Some(mut s) = surrogate.section(key, &example)? else {
+        return Ok(defaults);
     };
-    let table = value.as_table().ok_or_else(|| {
-        input_error(format!(
-            "{file}: key `{full}`: expected a table such as {{ kind = \"{kind}\", n = 24, seed = 1 }}"
-        ))
-    })?;
-    if let Some(k) = table
-        .keys()
-        .find(|k| !["kind", "n", "seed"].contains(&k.as_str()))
-    {
-        return Err(input_error(format!(
-            "{file}: key `{full}.{k}`: unknown key (expected kind, n, seed)"
-        )));
-    }
-    match table.get("kind").map(|v| v.as_str()) {
-        None => {}
-        Some(Some(k)) if k == kind => {}
-        Some(_) => {
-            return Err(input_error(format!(
-                "{file}: key `{full}.kind`: expected \"{kind}\" (the {key} design of the pipeline)"
-            )));
-        }
-    }
-    let n = integer(table, "n", &full, file, defaults.0)? as usize;
-    if n < min_runs {
-        return Err(input_error(format!(
-            "{file}: key `{full}.n`: at least {min_runs} runs per run group are needed, got {n}"
-        )));
-    }
-    Ok((n, integer(table, "seed", &full, file, defaults.1)?))
+    s.choice("kind", &[kind])?;
+    let n = s.count("n", min_runs)?.unwrap_or(defaults.0);
+    let seed = s.seed("seed")?.unwrap_or(defaults.1);
+    s.finish()?;
+    Ok((n, seed))
 }
 
 /// Read and check the pipeline's settings of `study`.
 pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
     let file = study.path.display().to_string();
-    let empty = toml::Table::new();
-    let surrogate = study.surrogate.as_ref().unwrap_or(&empty);
-    if let Some(k) = surrogate.keys().find(|k| {
-        ![
-            "design",
-            "test",
-            "maximin_candidates",
-            "adaptive",
-            "posterior_check",
-        ]
-        .contains(&k.as_str())
-    }) {
-        return Err(input_error(format!(
-            "{file}: key `surrogate.{k}`: unknown key (expected design, test, maximin_candidates, adaptive, posterior_check)"
-        )));
-    }
+    let mut surrogate = StudySection::optional(study.surrogate.as_ref(), "surrogate", &file);
     let posterior_check = surrogate
-        .get("posterior_check")
-        .map(|v| parse_posterior_check(v, &file))
+        .section("posterior_check", "{ samples = 20, seed = 5 }")?
+        .map(parse_posterior_check)
         .transpose()?;
     let adaptive = surrogate
-        .get("adaptive")
-        .map(|v| parse_adaptive(v, &file))
+        .section("adaptive", "{ batch = 4, max_runs = 200, tolerance = 0.1 }")?
+        .map(parse_adaptive)
         .transpose()?;
     // A GP needs 3 successful runs.
-    let (training_runs, training_seed) = design(surrogate, "design", "lhs", &file, (40, 1), 3)?;
+    let (training_runs, training_seed) = design(&mut surrogate, "design", "lhs", (40, 1), 3)?;
     // An adaptive study spends its runs where the posterior lies: no test runs unless asked for.
     let default_test = if adaptive.is_some() { 0 } else { 8 };
-    let (test_runs, test_seed) = design(surrogate, "test", "sobol", &file, (default_test, 2), 0)?;
+    let (test_runs, test_seed) = design(&mut surrogate, "test", "sobol", (default_test, 2), 0)?;
     if test_runs == 1 {
-        return Err(input_error(format!(
-            "{file}: key `surrogate.test.n`: 0 (no test runs) or at least 2 (a Q2 needs two), got 1"
-        )));
+        return Err(surrogate
+            .error(
+                "test.n",
+                "0 (no test runs) or at least 2 (a Q2 needs two), got 1",
+            )
+            .into());
     }
-    let maximin_candidates = integer(surrogate, "maximin_candidates", "surrogate", &file, 100)?;
-    if maximin_candidates == 0 {
-        return Err(input_error(format!(
-            "{file}: key `surrogate.maximin_candidates`: must be at least 1"
-        )));
-    }
+    let maximin_candidates = surrogate.count("maximin_candidates", 1)?.unwrap_or(100);
+    surrogate.finish()?;
     let s = &study.sensitivity;
     let surrogate_sobol_n = s.n.unwrap_or(1024);
     if surrogate_sobol_n < 2 {
@@ -319,7 +197,7 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
     Ok(PipelineSettings {
         training_runs,
         training_seed,
-        maximin_candidates: maximin_candidates as usize,
+        maximin_candidates,
         test_runs,
         test_seed,
         surrogate_sobol_n,
