@@ -195,40 +195,31 @@ impl<'a> StudySection<'a> {
 
     /// An array of finite numbers.
     pub fn numbers(&mut self, key: &str) -> Result<Option<Vec<f64>>> {
-        match self.value(key) {
-            None => Ok(None),
-            Some(Value::Array(items)) => items
-                .iter()
-                .enumerate()
-                .map(|(i, v)| {
-                    number_of(v).ok_or_else(|| {
-                        self.error(
-                            &format!("{key}[{i}]"),
-                            format!("expected a number, found `{v}`"),
-                        )
-                    })
-                })
-                .collect::<Result<Vec<_>>>()
-                .map(Some),
-            Some(other) => Err(self.error(
-                key,
-                format!("expected an array of numbers, found `{other}`"),
-            )),
-        }
+        self.array(key, "number", number_of)
     }
 
     /// An array of strings.
     pub fn strings(&mut self, key: &str) -> Result<Option<Vec<String>>> {
+        self.array(key, "string", |v| v.as_str().map(str::to_string))
+    }
+
+    /// An array whose items `convert` reads (`None`: not a `what`).
+    fn array<T>(
+        &mut self,
+        key: &str,
+        what: &str,
+        convert: impl Fn(&Value) -> Option<T>,
+    ) -> Result<Option<Vec<T>>> {
         match self.value(key) {
             None => Ok(None),
             Some(Value::Array(items)) => items
                 .iter()
                 .enumerate()
                 .map(|(i, v)| {
-                    v.as_str().map(str::to_string).ok_or_else(|| {
+                    convert(v).ok_or_else(|| {
                         self.error(
                             &format!("{key}[{i}]"),
-                            format!("expected a string, found `{v}`"),
+                            format!("expected a {what}, found `{v}`"),
                         )
                     })
                 })
@@ -236,7 +227,7 @@ impl<'a> StudySection<'a> {
                 .map(Some),
             Some(other) => Err(self.error(
                 key,
-                format!("expected an array of strings, found `{other}`"),
+                format!("expected an array of {what}s, found `{other}`"),
             )),
         }
     }
