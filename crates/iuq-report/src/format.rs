@@ -41,9 +41,29 @@ pub(crate) fn format_tick(value: f64) -> String {
     }
 }
 
+/// The label of a tick on a logarithmic axis at log10 value `exponent`: 10^exponent with two
+/// significant digits (a tick between decades reads 3.2, not 3.162).
+pub(crate) fn format_log_tick(exponent: f64) -> String {
+    let value = 10f64.powf(exponent);
+    if !value.is_finite() || value <= 0.0 {
+        return format_tick(value);
+    }
+    let scale = 10f64.powf(value.log10().floor() - 1.0);
+    format_tick((value / scale).round() * scale)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn log_ticks_have_two_significant_digits() {
+        assert_eq!(format_log_tick(0.5), "3.2");
+        assert_eq!(format_log_tick(-0.5), "0.32");
+        assert_eq!(format_log_tick(1.0), "10");
+        assert_eq!(format_log_tick(-1.0), "0.1");
+        assert_eq!(format_log_tick(0.0), "1");
+    }
 
     #[test]
     fn four_significant_digits_in_the_middle_range() {

@@ -9,7 +9,7 @@ use plotters::prelude::*;
 
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
-use crate::format::format_tick;
+use crate::format::{format_log_tick, format_tick};
 use crate::model::{Convergence, ConvergenceRound};
 use crate::statistics::{extent, padded};
 use crate::style::{DATA_COLOUR, FONT, GRID_COLOUR, MODEL_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
@@ -92,7 +92,7 @@ impl ConvergenceChart<'_> {
             })
             .y_label_formatter(&|v| {
                 if log_y {
-                    format_tick(10f64.powf(*v))
+                    format_log_tick(*v)
                 } else {
                     format_tick(*v)
                 }
