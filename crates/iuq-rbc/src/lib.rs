@@ -61,4 +61,4 @@ pub mod validation;
 pub use error::{RbcError, Result};
 pub use membrane_forces::{MembraneParameters, PastSingularity};
 pub use model::{CellParameters, RbcShearModel, RbcShearSettings};
-pub use protocol::{Protocol, ShearExperiment, ShearResult, run_shear};
+pub use protocol::{MeshOrientation, Protocol, ShearExperiment, ShearResult, run_shear};

@@ -7,7 +7,9 @@
 //! `z' = sign(z)·√(1−ρ²)·(C0 + C2ρ² + C4ρ⁴)`, `ρ² = x² + y²` (x and y unchanged), scaled by the
 //! cell radius. HemoCell rotates the sphere by the Euler angles (π/2, π/2, 0) before the map;
 //! that rotation is the cyclic permutation (x, y, z) → (y, z, x), which maps the icosahedron and
-//! its subdivisions onto themselves, so it is omitted here. The disk axis is z.
+//! its subdivisions onto themselves, so it is omitted here. The disk axis is z. HemoCell's later
+//! rotations (after the map, and the study's `RBC.pos` angles) turn the mesh by 90° in its disk
+//! plane; `protocol::MeshOrientation::Hemocell` applies that turn.
 
 use crate::units::CELL_RADIUS;
 

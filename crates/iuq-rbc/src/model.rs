@@ -18,7 +18,9 @@ use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
 use crate::error::{RbcError, Result};
 use crate::lattice::Precision;
 use crate::membrane_forces::{MembraneParameters, PastSingularity};
-use crate::protocol::{FRAMES, Protocol, START_STRAIN, ShearExperiment, WINDOW_FACTOR, run_shear};
+use crate::protocol::{
+    FRAMES, MeshOrientation, Protocol, START_STRAIN, ShearExperiment, WINDOW_FACTOR, run_shear,
+};
 
 /// Names of the parameters the model understands, in HemoCell's spelling.
 pub const PARAMETER_NAMES: [&str; 5] = ["kLink", "kBend", "viscosityRatio", "kArea", "kVolume"];
@@ -92,6 +94,8 @@ pub struct RbcShearSettings {
     /// Whether a strain past a force singularity carries on as HemoCell does (the default) or
     /// fails the run.
     pub past_singularity: PastSingularity,
+    /// How the mesh starts in the disk plane.
+    pub orientation: MeshOrientation,
 }
 
 impl Default for RbcShearSettings {
@@ -104,6 +108,7 @@ impl Default for RbcShearSettings {
             window_factor: WINDOW_FACTOR,
             frames: FRAMES,
             past_singularity: PastSingularity::default(),
+            orientation: MeshOrientation::default(),
         }
     }
 }
@@ -216,6 +221,7 @@ impl RbcShearModel {
             frames: self.settings.frames,
             precision: self.settings.precision,
             past_singularity: self.settings.past_singularity,
+            orientation: self.settings.orientation,
             ..ShearExperiment::new(cell.membrane, cell.viscosity_ratio, stress)
         }
     }

@@ -149,6 +149,60 @@ pub struct ShearExperiment {
     /// Whether a strain past a force singularity carries on as HemoCell does (the default) or
     /// fails the run.
     pub past_singularity: PastSingularity,
+    /// How the mesh starts in the disk plane.
+    pub orientation: MeshOrientation,
+}
+
+/// How the membrane mesh starts in its disk plane (the shear plane). The subdivided icosahedron
+/// is not round: which of its triangles lie at the tips of the elongating cell depends on this.
+///
+/// HemoCell's mesh generator rotates the mapped biconcave mesh once more after the map
+/// (`helper/meshGeneratingFunctions.hh`), and the study's `RBC.pos` angles `90 0 0` rotate it
+/// again; together the mesh is turned by 90° in the disk plane relative to the icosahedron's
+/// own axes (HemoCell's five-neighbour rim vertices lie at (±0.526, ±0.851, 0)·R in its
+/// flow–gradient plane, the unrotated mesh's at (±0.851, ±0.526, 0)·R). The two are the same
+/// shape and give the same elongation wherever the membrane stays within its singularities; past
+/// the area singularity (soft cells at 6.19–9.04 Pa) which triangles meet the load first decides
+/// whether any crosses it (`data/hemocell_vs_native.md`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MeshOrientation {
+    /// The icosahedron's own axes (iuq's orientation until 2026-11-25, which the shipped studies'
+    /// runs used).
+    #[default]
+    Unrotated,
+    /// HemoCell's: turned by 90° in the disk plane.
+    Hemocell,
+}
+
+impl MeshOrientation {
+    /// Both orientations.
+    pub const ALL: [MeshOrientation; 2] = [Self::Unrotated, Self::Hemocell];
+
+    /// The name used in study files and on the command line (`unrotated`, `hemocell`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Unrotated => "unrotated",
+            Self::Hemocell => "hemocell",
+        }
+    }
+
+    /// The orientation called `name` (see [`MeshOrientation::name`]).
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|o| o.name() == name)
+    }
+
+    /// Where vertex `v` of the unrotated mesh centred at `centre` starts, in HemoCell's frame
+    /// (disk axis z): for `Hemocell`, turned by 90° about the disk axis through the centre.
+    pub fn place(self, v: [f64; 3], centre: [f64; 3]) -> [f64; 3] {
+        match self {
+            Self::Unrotated => v,
+            Self::Hemocell => [
+                centre[0] - (v[1] - centre[1]),
+                centre[1] + (v[0] - centre[0]),
+                v[2],
+            ],
+        }
+    }
 }
 
 impl ShearExperiment {
@@ -165,6 +219,7 @@ impl ShearExperiment {
             precision: Precision::default(),
             parallel: true,
             past_singularity: PastSingularity::default(),
+            orientation: MeshOrientation::default(),
         }
     }
 
@@ -392,10 +447,10 @@ pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<Ce
     );
     lattice.set_parallel(experiment.parallel);
     // HemoCell's cell at (19, 19, 9) with its axis along HemoCell's z (the vorticity).
-    let mut mesh =
-        Mesh::red_blood_cell_lu(LatticeUnits::reference().dx, to_hemocell_frame(CELL_CENTRE));
+    let centre = to_hemocell_frame(CELL_CENTRE);
+    let mut mesh = Mesh::red_blood_cell_lu(LatticeUnits::reference().dx, centre);
     for v in &mut mesh.vertices {
-        *v = from_hemocell_frame(*v);
+        *v = from_hemocell_frame(experiment.orientation.place(*v, centre));
     }
     let mut cell = CellInFlow::new(
         lattice,
@@ -465,6 +520,37 @@ fn run_shear_on_worker(experiment: &ShearExperiment) -> Result<ShearResult> {
 
 #[cfg(test)]
 mod tests {
+
+    #[test]
+    fn hemocell_orientation_puts_the_five_neighbour_rim_vertices_where_hemocell_has_them() {
+        // HemoCell's first frame: the rim vertices with five neighbours at (±0.526, ±0.851, 0)·R
+        // in its flow–gradient plane; the unrotated mesh has them at (±0.851, ±0.526, 0)·R.
+        let centre = [0.0; 3];
+        let mesh = Mesh::red_blood_cell(1.0, centre);
+        for (orientation, cos) in [
+            (MeshOrientation::Unrotated, 0.851),
+            (MeshOrientation::Hemocell, 0.526),
+        ] {
+            let rim: Vec<[f64; 3]> = (0..mesh.vertices.len())
+                .filter(|&i| mesh.ring(i).len() == 5 && mesh.vertices[i][2].abs() < 1e-9)
+                .map(|i| orientation.place(mesh.vertices[i], centre))
+                .collect();
+            assert_eq!(rim.len(), 4, "{orientation:?}");
+            for v in rim {
+                let r = v[0].hypot(v[1]);
+                assert!(
+                    (v[0].abs() / r - cos).abs() < 1e-3,
+                    "{orientation:?}: {v:?}"
+                );
+            }
+        }
+        assert_eq!(
+            MeshOrientation::from_name("hemocell"),
+            Some(MeshOrientation::Hemocell)
+        );
+        assert_eq!(MeshOrientation::default(), MeshOrientation::Unrotated);
+    }
+
     use super::*;
 
     #[test]

@@ -8,6 +8,7 @@
 //! lattice_shear_rate = 3e-4     # scaled protocol only
 //! precision = "single"          # or "double"
 //! past_singularity = "carry-on" # as HemoCell (default), or "fail"
+//! initial_orientation = "unrotated" # or "hemocell" (the mesh turned 90° in the disk plane)
 //! window_factor = 1.25          # the window ends at this × its start (strain 7.5 to 9.4)
 //! frames = 10                   # shapes measured over the window
 //! stresses = [0.64, 1.36]       # Pa; default: the `x` column of `[likelihood] data`
@@ -19,7 +20,7 @@ use std::path::{Path, PathBuf};
 use iuq_rbc::lattice::Precision;
 use iuq_rbc::model::{CellParameters, PARAMETER_NAMES, RbcShearModel, RbcShearSettings};
 use iuq_rbc::protocol::{DEFAULT_LATTICE_SHEAR_RATE, Protocol};
-use iuq_rbc::{PastSingularity, RbcError};
+use iuq_rbc::{MeshOrientation, PastSingularity, RbcError};
 
 use iuq_campaign::StudySection;
 
@@ -68,6 +69,11 @@ pub fn rbc_shear_model(
     if let Some(name) = s.choice("past_singularity", &names)? {
         settings.past_singularity = PastSingularity::from_name(name)
             .ok_or_else(|| s.error("past_singularity", format!("unknown `{name}`")))?;
+    }
+    let orientations = MeshOrientation::ALL.map(|o| o.name());
+    if let Some(name) = s.choice("initial_orientation", &orientations)? {
+        settings.orientation = MeshOrientation::from_name(name)
+            .ok_or_else(|| s.error("initial_orientation", format!("unknown `{name}`")))?;
     }
     // Quick checks and tests only: the study's window starts at 7.5 strain units.
     if let Some(v) = s.number("start_strain")? {

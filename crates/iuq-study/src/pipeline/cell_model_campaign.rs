@@ -36,8 +36,9 @@ const PARAMETER_FLAGS: [(&str, &str); 5] = [
 ];
 
 /// Keys of the `[model]` section of kind `rbc-shear` passed on to `iuq rbc shear`.
-const SETTING_FLAGS: [(&str, &str); 6] = [
+const SETTING_FLAGS: [(&str, &str); 7] = [
     ("protocol", "--protocol"),
+    ("initial_orientation", "--initial-orientation"),
     ("lattice_shear_rate", "--lattice-shear-rate"),
     ("precision", "--precision"),
     ("start_strain", "--start-strain"),

@@ -17,7 +17,7 @@ use iuq_rbc::protocol::{
 use iuq_rbc::shape_output::ShapeFormat;
 use iuq_rbc::stretching::{OPTICAL_TWEEZERS, StretchExperiment, run_stretch};
 use iuq_rbc::validation::{validate_shear, validate_stretch};
-use iuq_rbc::{MembraneParameters, PastSingularity, RbcError};
+use iuq_rbc::{MembraneParameters, MeshOrientation, PastSingularity, RbcError};
 
 use crate::input_error::input_error;
 use crate::report_output::{emit, short};
@@ -94,6 +94,24 @@ impl From<PastSingularityArg> for PastSingularity {
     }
 }
 
+/// How the mesh starts in the disk plane.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum OrientationArg {
+    /// The icosahedron's own axes (iuq's orientation so far; the shipped studies' runs).
+    Unrotated,
+    /// Turned 90° in the disk plane, as HemoCell's mesh generator and RBC.pos leave it.
+    Hemocell,
+}
+
+impl From<OrientationArg> for MeshOrientation {
+    fn from(o: OrientationArg) -> Self {
+        match o {
+            OrientationArg::Unrotated => MeshOrientation::Unrotated,
+            OrientationArg::Hemocell => MeshOrientation::Hemocell,
+        }
+    }
+}
+
 /// Arguments of `iuq rbc shear`.
 #[derive(Debug, Args)]
 pub struct ShearArgs {
@@ -139,6 +157,11 @@ pub struct ShearArgs {
     /// absolute-value denominators, forces capped at 50 pN) or `fail` (a broken mesh).
     #[arg(long, value_enum, default_value_t = PastSingularityArg::CarryOn)]
     pub past_singularity: PastSingularityArg,
+    /// How the mesh starts in the disk plane: `unrotated` (the icosahedron's axes, iuq's
+    /// orientation so far) or `hemocell` (turned 90° as HemoCell's generator and RBC.pos leave
+    /// it; agrees with HemoCell v2.1 at 12 of 12 compared points, see data/hemocell_vs_native.md).
+    #[arg(long, value_enum, default_value_t = OrientationArg::Unrotated)]
+    pub initial_orientation: OrientationArg,
     /// Write the membrane at each measuring frame into this directory.
     #[arg(long)]
     pub shape_out: Option<PathBuf>,
@@ -209,6 +232,7 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
     experiment.frames = args.frames;
     experiment.precision = args.precision.into();
     experiment.past_singularity = args.past_singularity.into();
+    experiment.orientation = args.initial_orientation.into();
     experiment.validate().map_err(cli_error)?;
     if let Some(dir) = &args.shape_out {
         std::fs::create_dir_all(dir).map_err(|e| {
@@ -251,6 +275,7 @@ fn shear(args: &ShearArgs, json: bool) -> Result<()> {
         "start_strain": result.setup.t_start as f64 * result.setup.lattice_shear_rate,
         "end_strain": result.setup.t_max as f64 * result.setup.lattice_shear_rate,
         "past_singularity": experiment.past_singularity.name(),
+        "initial_orientation": experiment.orientation.name(),
         "steps": result.steps,
         "seconds": result.seconds,
         "mlups": result.mlups,
