@@ -327,51 +327,35 @@ impl CampaignStudy {
         let root: toml::Table = toml::from_str(text).map_err(|e| {
             CampaignError::study(&file, "(syntax)", e.to_string().trim().replace('\n', " "))
         })?;
-        if let Some(key) = root.keys().find(|k| !TOP_LEVEL_KEYS.contains(&k.as_str())) {
-            return Err(CampaignError::study(
-                &file,
-                key,
-                format!(
-                    "unknown section or key (one of {})",
-                    TOP_LEVEL_KEYS.join(", ")
-                ),
-            ));
-        }
-        let name = match root.get("name") {
-            Some(toml::Value::String(s)) if !s.trim().is_empty() => s.clone(),
-            Some(_) => {
-                return Err(CampaignError::study(
-                    &file,
-                    "name",
-                    "expected a non-empty string",
-                ));
-            }
-            None => return Err(CampaignError::study(&file, "name", "missing")),
+        let mut top = StudySection::new(&root, "", &file);
+        // The sections of the other stages are read by the pipeline (`iuq-study`).
+        top.allow(&TOP_LEVEL_KEYS);
+        top.finish_with_hint(&format!(
+            "an unknown section or key (one of {})",
+            TOP_LEVEL_KEYS.join(", ")
+        ))?;
+        let name = match top.string("name")? {
+            Some(s) if !s.trim().is_empty() => s,
+            Some(_) => return Err(top.error("name", "expected a non-empty string")),
+            None => return Err(top.error("name", "missing")),
         };
-        let space = parse_parameters(&root, &file)?;
-        let model_table = match root.get("model") {
-            Some(toml::Value::Table(t)) => t,
-            Some(_) => return Err(CampaignError::study(&file, "model", "expected a table")),
-            None => {
-                return Err(CampaignError::study(
-                    &file,
-                    "model",
-                    "missing: a campaign needs [model] with kind = \"command\" or \"batch-command\"",
-                ));
-            }
+        let Some(parameters) = top.sub_table("parameters")? else {
+            return Err(top.error("parameters", "missing"));
+        };
+        let space = parse_parameters(parameters, &file)?;
+        let Some(model_table) = top.sub_table("model")? else {
+            return Err(top.error(
+                "model",
+                "missing: a campaign needs [model] with kind = \"command\" or \"batch-command\"",
+            ));
         };
         let model = parse_model(model_table, &space, &file, &study_dir)?;
-        let design = match root.get("design") {
-            None => None,
-            Some(toml::Value::Table(t)) => Some(parse_design(t, &file, &study_dir)?),
-            Some(_) => return Err(CampaignError::study(&file, "design", "expected a table")),
-        };
+        let design = top
+            .sub_table("design")?
+            .map(|t| parse_design(t, &file, &study_dir))
+            .transpose()?;
         let empty = toml::Table::new();
-        let executor_table = match root.get("executor") {
-            None => &empty,
-            Some(toml::Value::Table(t)) => t,
-            Some(_) => return Err(CampaignError::study(&file, "executor", "expected a table")),
-        };
+        let executor_table = top.sub_table("executor")?.unwrap_or(&empty);
         let stem = path
             .file_stem()
             .map_or_else(|| "study".to_string(), |s| s.to_string_lossy().into_owned());
@@ -406,12 +390,7 @@ impl CampaignStudy {
     }
 }
 
-fn parse_parameters(root: &toml::Table, file: &str) -> Result<ParameterSpace> {
-    let table = match root.get("parameters") {
-        Some(toml::Value::Table(t)) => t,
-        Some(_) => return Err(CampaignError::study(file, "parameters", "expected a table")),
-        None => return Err(CampaignError::study(file, "parameters", "missing")),
-    };
+fn parse_parameters(table: &toml::Table, file: &str) -> Result<ParameterSpace> {
     let mut parameters = Vec::with_capacity(table.len());
     for (name, value) in table {
         let key = format!("parameters.{name}");
