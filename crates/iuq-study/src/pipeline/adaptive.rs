@@ -376,6 +376,14 @@ struct RoundMeasurement {
 }
 
 impl RoundMeasurement {
+    /// Whether this round makes boundary runs: some failure region wants them, the surrogate is
+    /// sure where the posterior lies, and rounds make runs at all.
+    fn boundary_runs_due(&self, settings: &AdaptiveSettings) -> bool {
+        self.boundary_wanted
+            && self.log_likelihood_std < settings.log_likelihood_tolerance
+            && settings.batch > 0
+    }
+
     fn moments(&self) -> PosteriorMoments {
         PosteriorMoments {
             mean: self.mean.clone(),
@@ -729,12 +737,8 @@ pub(super) fn refine(
         // stops, or its runs are recorded.
         let reusable = match &cached {
             Some(m) if !recompute => {
-                let judged = judge(m)?;
-                let boundary = m.boundary_wanted
-                    && m.log_likelihood_std < settings.log_likelihood_tolerance
-                    && settings.batch > 0;
-                let stops = (judged.converged && !boundary) || made >= settings.max_runs;
-                stops || recorded.is_some()
+                let converged = judge(m)?.converged && !m.boundary_runs_due(settings);
+                converged || made >= settings.max_runs || recorded.is_some()
             }
             _ => false,
         };
@@ -776,16 +780,7 @@ pub(super) fn refine(
         let moments = measured.moments();
         let u = measured.log_likelihood_std;
         let assessment = judge(&measured)?;
-        let surrogate_sure = u < settings.log_likelihood_tolerance;
-        let boundary: Vec<(usize, usize)> = match &scoring {
-            Some(s) if surrogate_sure && settings.batch > 0 => s.boundary.clone(),
-            Some(_) => Vec::new(),
-            // Read back: whether there are boundary picks is all the stop needs.
-            None if measured.boundary_wanted && surrogate_sure && settings.batch > 0 => {
-                vec![(0, 0)]
-            }
-            None => Vec::new(),
-        };
+        let boundary_due = measured.boundary_runs_due(settings);
         let mut record = AdaptiveRound {
             round,
             runs: made,
@@ -808,7 +803,7 @@ pub(super) fn refine(
             seconds: 0.0,
         };
         let extrapolation = measured.extrapolation_share;
-        let stop = if assessment.converged && boundary.is_empty() {
+        let stop = if assessment.converged && !boundary_due {
             converged = true;
             Some("converged".to_string())
         } else if made >= settings.max_runs {
@@ -834,8 +829,9 @@ pub(super) fn refine(
                 surrogate,
                 candidates: c,
                 likelihood_variance,
-                ..
+                boundary,
             } = scoring;
+            let boundary: &[(usize, usize)] = if boundary_due { boundary } else { &[] };
             let gps = surrogate.bank.gps();
             let remaining = settings.max_runs - made;
             // (score, group, order within the group's batch, candidate index)
