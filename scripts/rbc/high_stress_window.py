@@ -8,6 +8,8 @@ with the inclination of its long axis in the shear plane.
 
     python3 scripts/rbc/high_stress_window.py --klink 38 --kbend 300 --viscosity-ratio 5 --stress 9.04
 
+The mesh starts in HemoCell's orientation unless `--initial-orientation unrotated`.
+
 About 4-9 minutes of one core per cell (250,000 steps); needs numpy and an `iuq` on PATH (or
 IUQ=/path/to/iuq). The findings are in docs/cell-model-high-stress.md.
 """
@@ -61,6 +63,8 @@ def main():
     parser.add_argument("--stress", type=float, default=9.04)
     parser.add_argument("--end-strain", type=float, default=75.0)
     parser.add_argument("--frames", type=int, default=101)
+    parser.add_argument("--initial-orientation", choices=["unrotated", "hemocell"],
+                        default="hemocell", help="the mesh's orientation in the disk plane")
     parser.add_argument("--shapes", help="keep the shapes in this folder")
     args = parser.parse_args()
     if not args.end_strain > START_STRAIN:
@@ -74,6 +78,7 @@ def main():
         "--viscosity-ratio", str(args.viscosity_ratio), "--stress", str(args.stress),
         "--window-factor", str(args.end_strain / START_STRAIN), "--frames", str(args.frames),
         "--shape-out", shapes, "--shape-format", "vtk",
+        "--initial-orientation", args.initial_orientation,
     ]
     done = subprocess.run(command, capture_output=True, text=True,
                           env={**os.environ, "RAYON_NUM_THREADS": "1"})
@@ -86,7 +91,7 @@ def main():
     files = sorted(glob.glob(os.path.join(shapes, "*.vtk")),
                    key=lambda p: int(re.search(r"step_(\d+)", p).group(1)))
     print(f"kLink {args.klink}, kBend {args.kbend}, viscosity ratio {args.viscosity_ratio}, "
-          f"{args.stress} Pa, {run['past_singularity']}; the study's window is strain 7.5-9.4 "
+          f"{args.stress} Pa, {run['past_singularity']}, {args.initial_orientation} mesh; the study's window is strain 7.5-9.4 "
           f"(EL over all frames {run['el_mean']:.3f} ± {run['el_std']:.3f})")
     print("strain        EL mean ± std    Lx     Ly     Lz (µm)   inclination")
     stride = max(1, (len(el) - 1) // 10)

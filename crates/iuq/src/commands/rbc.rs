@@ -392,7 +392,7 @@ fn stretch(args: &StretchArgs, json: bool) -> Result<()> {
 pub enum ValidateProtocol {
     /// The scaled protocol only (7 runs of 31,250 steps).
     Scaled,
-    /// The reference protocol only (7 runs of 23k–230k steps).
+    /// The reference protocol only (7 runs of 34k–330k steps: 0.64–6.19 Pa).
     Reference,
     /// Both.
     Both,
