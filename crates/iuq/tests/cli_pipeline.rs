@@ -364,31 +364,28 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     // Prior standard deviations: kLink 290/√12 = 83.7, kBend 350/√12 = 101.
     assert!(std_of("kLink") < 0.1 * 83.7, "kLink is identified");
     assert!(std_of("kBend") > 0.3 * 101.0, "kBend is not");
-    // The cell model at the MAP and 20 posterior samples per stress, beside the surrogate. Up to
-    // 6.19 Pa the surrogate's error there is below the smallest measurement std (0.002) and its
-    // predictive std, with the run's frame std, covers the runs: a calibrated Gaussian covers
-    // each of the 21 runs with probability 0.95, and 16 or fewer covered has probability 0.003.
-    // At 9.04 Pa it does not, and this test says so rather than hide it: the cell's elongation
-    // still moves through the measuring window there (docs/cell-model-high-stress.md), the runs
-    // at posterior samples scatter by about 0.03 in EL (the MAP's run ends at 0.405, the
-    // surrogate says 0.526), while the GP's predictive std is 0.005: 15 of 21 runs are covered.
-    // An open problem of the surrogate at that stress (issue 14), not of this check.
+    // The cell model at the MAP and 20 posterior samples per stress, beside the surrogate. Its
+    // predictive std as the likelihood uses it (latent function and the GP's noise), with the
+    // run's frame std, covers the runs: a calibrated Gaussian covers each of the 21 runs with
+    // probability 0.95, and 16 or fewer covered has probability 0.003. Up to 6.19 Pa the
+    // surrogate's error there is also below the smallest measurement std (0.002). At 9.04 Pa
+    // soft cells with nearly equal parameters end the window 0.03 apart
+    // (docs/cell-model-high-stress.md): the GP holds that scatter as its noise (std 0.027), so
+    // its error against single runs is of that size (0.039) and still covered.
     let check = summary["posterior_check"].as_array().unwrap();
     assert_eq!(check.len(), 8, "one check per stress");
     for point in check {
         assert_eq!(point["failed"], 0, "{point}");
-        if point["x"].as_f64().unwrap() <= 6.19 {
-            assert!(point["rmse"].as_f64().unwrap() < 0.002, "{point}");
-            assert!(
-                point["within_two_std"].as_f64().unwrap() >= 17.0 / 21.0,
-                "{point}"
-            );
+        assert!(
+            point["within_two_std"].as_f64().unwrap() >= 17.0 / 21.0,
+            "{point}"
+        );
+        let largest_error = if point["x"].as_f64().unwrap() <= 6.19 {
+            0.002
         } else {
-            assert!(
-                point["within_two_std"].as_f64().unwrap() < 17.0 / 21.0,
-                "9.04 Pa is now covered: update this test and docs/cell-model-high-stress.md: {point}"
-            );
-        }
+            0.05
+        };
+        assert!(point["rmse"].as_f64().unwrap() < largest_error, "{point}");
     }
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();

@@ -29,7 +29,9 @@ pub struct CheckedRun {
     pub diagnostics: Vec<f64>,
     /// The surrogate's mean there.
     pub surrogate: f64,
-    /// The surrogate's predictive std there (latent function).
+    /// The surrogate's predictive std there, as the likelihood uses it: by default that of a new
+    /// run (latent function and the GP's noise, which at a stress where nearly equal cells end
+    /// apart holds that run-to-run scatter).
     pub surrogate_std: f64,
 }
 
@@ -165,7 +167,13 @@ pub fn check_posterior(
         for (k, j) in runs.group_outputs(g).enumerate() {
             let width = runs.group_outputs(g).len();
             let prediction = &predictions[j];
-            let std = prediction.std();
+            // The std the likelihood uses as the surrogate's computational std: with the
+            // default bank, that of a new run (latent and noise), so the check asks whether the
+            // runs scatter about the surrogate as the calibration assumed.
+            let std = match surrogate.bank.predictive_std() {
+                iuq_gp::PredictiveStd::WithNoise => prediction.std_with_noise(),
+                iuq_gp::PredictiveStd::Latent => prediction.std(),
+            };
             let checked: Vec<CheckedRun> = group
                 .iter()
                 .enumerate()
