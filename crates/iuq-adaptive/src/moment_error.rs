@@ -16,31 +16,55 @@
 //! g ([`linearised_moment_error`]). Where the GPs are unsure of a tail of the posterior that
 //! linearisation fails (a sample of weight 10⁻⁴ whose log-likelihood may be 5 nats off moves
 //! the first-order std by many posterior stds, the reweighting by a bounded amount), so the
-//! engine draws instead: [`sampled_moment_error`] draws the GPs' errors jointly over the samples,
-//! reweights the population by the exact change of each Gaussian likelihood term,
-//! δℓ_t = ((y_t − m_t)² − (y_t − m_t − δm_t)²)/(2s_t²), and takes the spread of the moments over
-//! the draws as half their central 68 % range (the std for a Gaussian spread): where a tail the
-//! GPs are unsure of takes over the population in one draw of sixty, that draw says where runs
-//! are needed (the acquisition goes there), not how far the moments typically stand from the
-//! truth, and a std over the draws would follow it from round to round (0.09 to 4.5 posterior
-//! stds on the TBHP red-cell study). Unlike the mean spread of the log-likelihood ([`crate::convergence`]'s u), this measure
-//! does not count an error the surrogate makes alike over the whole posterior (it moves ln Z, not
-//! the posterior), and it is in the units of the convergence tolerance, posterior stds. It is the
-//! first-order form of the "posterior moment uncertainty due to the surrogate" that Sinsbeck and
+//! engine draws instead: [`sampled_moment_error`] draws the GPs' errors jointly over the samples
+//! and reweights the population by the exact change of each Gaussian likelihood term from the one
+//! the population was sampled under to the one the model's true outputs would give,
+//!
+//! δℓ_t = [−(r_t − δm_t)²/(2s_t²) − ½ ln s_t²] − [−r_t²/(2c_t²) − ½ ln c_t²].
+//!
+//! s_t² is the term's variance once the GP's error is gone (data, modelling error and the runs'
+//! own scatter); c_t² the variance the population was sampled under. A surrogate likelihood that
+//! counts the GP's predictive std as computational error (the study's convention) has
+//! c_t² = s_t² + (its share of) v_t, the GP's latent variance: where the GP is unsure the surrogate
+//! likelihood is broad, and a tail sample it keeps for that reason loses weight when the truth is
+//! known unless the truth fits the datum. Taking c_t = s_t there instead credits such a sample
+//! with the whole misfit r²/(2s²) as if it had been sampled with it: on the healthy red-cell study
+//! two posterior samples of weight 1/16000 at 4.24 Pa (GP mean 0.15 below the datum, latent std
+//! 0.05–0.065, s 0.015–0.02) then gain 20–30 nats in a typical draw, and ε read 3.2 posterior stds
+//! where the exact change gives 0.15. The moments' change over the draws is summarised by the
+//! 68.3 % quantile of its absolute value, the std for a zero-centred Gaussian change that also
+//! counts a change every draw makes alike (with c_t > s_t the tails lose weight in every draw):
+//! where a tail the GPs are unsure of takes over the population in one draw of sixty, that draw
+//! says where runs are needed (the acquisition goes there), not how far the moments typically
+//! stand from the truth, and a std over the draws would follow it from round to round (0.09 to
+//! 4.5 posterior stds on the TBHP red-cell study). Unlike the mean spread of the log-likelihood
+//! ([`crate::convergence`]'s u), this measure does not count an error the surrogate makes alike
+//! over the whole posterior (it moves ln Z, not the posterior), and it is in the units of the
+//! convergence tolerance, posterior stds. It is the
+//! form of the "posterior moment uncertainty due to the surrogate" that Sinsbeck and
 //! Nowak (2017) and GPry (El Gammal et al. 2023) estimate by sampling GP realisations.
 
 use iuq_core::weighted_statistics::quantile_sorted;
 
 use crate::error::{AdaptiveError, Result};
 
-/// One data point's part: the residual y_t − m_t and the likelihood variance s_t² at each sample,
-/// and the GP's latent posterior covariance C_t between the samples.
+/// P(|Z| ≤ 1) for a standard normal Z: the quantile of |change| that equals the std of a
+/// zero-centred Gaussian change.
+const ONE_SIGMA_COVERAGE: f64 = 0.682_689_492_137_085_9;
+
+/// One data point's part: the residual y_t − m_t, the likelihood variance s_t² once the GP's
+/// error is gone and the variance c_t² the population was sampled under, at each sample, and the
+/// GP's latent posterior covariance C_t between the samples.
 #[derive(Debug, Clone, Copy)]
 pub struct MomentTerm<'a> {
     /// r_t(θ_i) = y_t − m_t(θ_i), one per sample.
     pub residual: &'a [f64],
-    /// s_t²(θ_i), the term's total variance, one per sample.
+    /// s_t²(θ_i), the term's total variance without the GP's latent variance, one per sample.
     pub variance: &'a [f64],
+    /// c_t²(θ_i), the term's variance in the likelihood the samples were drawn from: `variance`
+    /// plus whatever share of the GP's predictive variance that likelihood counts as
+    /// computational error.
+    pub sampled_variance: &'a [f64],
     /// C_t(θ_i, θ_j), a symmetric matrix over the samples.
     pub covariance: &'a [Vec<f64>],
 }
@@ -101,6 +125,9 @@ fn checked_weights(
         if t.variance.len() != n {
             return mismatch("variances vs. samples", t.variance.len(), n);
         }
+        if t.sampled_variance.len() != n {
+            return mismatch("sampled variances vs. samples", t.sampled_variance.len(), n);
+        }
         if t.covariance.len() != n {
             return mismatch("covariance rows vs. samples", t.covariance.len(), n);
         }
@@ -119,7 +146,8 @@ fn checked_weights(
 }
 
 /// The first-order std of the posterior moments under the surrogate's error (see the module
-/// doc): `samples[i]` is θ_i (every sampled parameter), `weights[i]` its weight (normalised
+/// doc), with s_t² held fixed at `variance` (the change c_t² → s_t² does not enter; see
+/// [`sampled_moment_error`]): `samples[i]` is θ_i (every sampled parameter), `weights[i]` its weight (normalised
 /// here), `terms` one per data point.
 ///
 /// # Errors
@@ -252,9 +280,9 @@ fn cholesky_with_jitter(c: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
     })
 }
 
-/// The spread (half the 16–84 % range) of the posterior moments over `draws` joint draws of the
-/// GPs' errors (see the module doc), each population reweighted by the exact change of the
-/// Gaussian likelihood terms;
+/// The typical change (68.3 % quantile of its absolute value) of the posterior moments over
+/// `draws` joint draws of the GPs' errors (see the module doc), each population reweighted by the
+/// exact change of the Gaussian likelihood terms from the sampled to the true one;
 /// `seed` makes it reproducible. `samples[i]` is θ_i (every sampled parameter), `weights[i]` its
 /// weight (normalised here), `terms` one per data point.
 ///
@@ -295,8 +323,9 @@ pub fn sampled_moment_error(
             }
             for i in 0..n {
                 let dm: f64 = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
-                let (r, s2) = (t.residual[i], t.variance[i]);
-                dl[i] += (r * r - (r - dm) * (r - dm)) / (2.0 * s2);
+                let (r, s2, c2) = (t.residual[i], t.variance[i], t.sampled_variance[i]);
+                dl[i] +=
+                    r * r / (2.0 * c2) - (r - dm) * (r - dm) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
             }
         }
         let (mean, std, log_z) = reweighted_moments(samples, &w, &dl);
@@ -310,12 +339,12 @@ pub fn sampled_moment_error(
         changes.push(row);
     }
     let spread = |c: usize| -> f64 {
-        let mut column: Vec<f64> = changes.iter().map(|r| r[c]).collect();
+        let mut column: Vec<f64> = changes.iter().map(|r| r[c].abs()).collect();
         if column.iter().any(|v| v.is_nan()) {
             return f64::NAN;
         }
         column.sort_by(f64::total_cmp);
-        0.5 * (quantile_sorted(&column, 0.84) - quantile_sorted(&column, 0.16))
+        quantile_sorted(&column, ONE_SIGMA_COVERAGE)
     };
     Ok(MomentError {
         mean: (0..d).map(|k| spread(2 * k)).collect(),
@@ -380,6 +409,7 @@ mod tests {
         let term = MomentTerm {
             residual: &a,
             variance: &ones,
+            sampled_variance: &ones,
             covariance: &cov,
         };
         let error = linearised_moment_error(&samples, &w, &[term]).unwrap();
@@ -453,6 +483,7 @@ mod tests {
         let term = MomentTerm {
             residual: &a,
             variance: &ones,
+            sampled_variance: &ones,
             covariance: &cov,
         };
         let error = linearised_moment_error(&samples, &w, &[term]).unwrap();
@@ -483,12 +514,101 @@ mod tests {
         let term = MomentTerm {
             residual: &residual,
             variance: &ones,
+            sampled_variance: &ones,
             covariance: &cov,
         };
         let linear = linearised_moment_error(&samples, &w, &[term]).unwrap();
         let sampled = sampled_moment_error(&samples, &w, &[term], 400, 2).unwrap();
         assert!(linear.std[0] > 20.0, "{linear:?}");
         assert!(sampled.mean[0] < 9.0 && sampled.std[0] < 3.4, "{sampled:?}");
+    }
+
+    /// With no GP error left to draw (C = 0) the change is the deterministic one from the
+    /// likelihood the population was sampled under (variance c² = s² + v(θ), broad where the GP
+    /// was unsure) to the true one (s²): the measure is exactly the difference of the two
+    /// posteriors' moments, computed here on the grid directly from their densities.
+    #[test]
+    fn a_broad_sampled_likelihood_is_replaced_by_the_true_one() {
+        let n = 201;
+        let samples: Vec<Vec<f64>> = (0..n).map(|i| vec![i as f64 / (n - 1) as f64]).collect();
+        let residual: Vec<f64> = samples.iter().map(|s| -s[0]).collect();
+        let s2 = vec![0.01; n];
+        let c2: Vec<f64> = samples.iter().map(|s| 0.01 + 0.05 * s[0] * s[0]).collect();
+        let density = |v: &[f64]| -> Vec<f64> {
+            residual
+                .iter()
+                .zip(v)
+                .map(|(r, v)| (-r * r / (2.0 * v)).exp() / v.sqrt())
+                .collect()
+        };
+        let moments = |p: &[f64]| -> (f64, f64, f64) {
+            let z: f64 = p.iter().sum();
+            let m = samples.iter().zip(p).map(|(s, p)| p * s[0]).sum::<f64>() / z;
+            let v = samples
+                .iter()
+                .zip(p)
+                .map(|(s, p)| p * (s[0] - m).powi(2))
+                .sum::<f64>()
+                / z;
+            (m, v.sqrt(), z)
+        };
+        let sampled = density(&c2);
+        let truth = density(&s2);
+        let (m_c, s_c, z_c) = moments(&sampled);
+        let (m_s, s_s, z_s) = moments(&truth);
+        let cov = vec![vec![0.0; n]; n];
+        let term = MomentTerm {
+            residual: &residual,
+            variance: &s2,
+            sampled_variance: &c2,
+            covariance: &cov,
+        };
+        let error = sampled_moment_error(&samples, &sampled, &[term], 8, 1).unwrap();
+        let expected = [
+            (error.mean[0], (m_s - m_c).abs() / s_c),
+            (error.std[0], (s_s - s_c).abs() / s_c),
+            (error.log_evidence, (z_s / z_c).ln().abs()),
+        ];
+        for (got, want) in expected {
+            assert!(want > 0.01, "the test needs a visible change: {want}");
+            assert!((got - want).abs() < 1e-9 * want, "{got} vs {want}");
+        }
+    }
+
+    /// The red-cell case that made the engine report ε ≈ 3 on a settled posterior: one tail
+    /// sample of weight 10⁻³ where the GP's mean misses the datum by 0.15 with a latent std of
+    /// 0.063, against s = 0.02. Sampled under c² = s² + v, its weight grows by at most
+    /// e^{r²/(2c²)}·c/s ≈ 43 and only in the draws where the truth fits the datum; credited with
+    /// the whole misfit r²/(2s²) = 28 nats (c = s) it takes over the population in most draws.
+    #[test]
+    fn a_tail_sampled_under_the_gp_variance_does_not_take_over() {
+        let n = 1000;
+        let mut samples: Vec<Vec<f64>> = (0..n - 1).map(|i| vec![(i % 10) as f64 / 10.0]).collect();
+        samples.push(vec![3.0]);
+        let w = vec![1.0; n];
+        let mut residual = vec![0.0; n];
+        residual[n - 1] = 0.15;
+        let s2 = vec![0.0004; n];
+        let mut c2 = s2.clone();
+        c2[n - 1] += 0.004;
+        let mut cov = vec![vec![0.0; n]; n];
+        for (i, row) in cov.iter_mut().enumerate() {
+            row[i] = if i == n - 1 { 0.004 } else { 1e-12 };
+        }
+        let exact = MomentTerm {
+            residual: &residual,
+            variance: &s2,
+            sampled_variance: &c2,
+            covariance: &cov,
+        };
+        let error = sampled_moment_error(&samples, &w, &[exact], 400, 5).unwrap();
+        assert!(error.largest() < 0.05, "{error:?}");
+        let fixed = MomentTerm {
+            sampled_variance: &s2,
+            ..exact
+        };
+        let error = sampled_moment_error(&samples, &w, &[fixed], 400, 5).unwrap();
+        assert!(error.largest() > 1.0, "{error:?}");
     }
 
     #[test]
@@ -498,6 +618,7 @@ mod tests {
         let term = MomentTerm {
             residual: &[1.0, 1.0],
             variance: &[1.0, 1.0],
+            sampled_variance: &[1.0, 1.0],
             covariance: &cov,
         };
         assert!(linearised_moment_error(&[], &[], &[]).is_err());
@@ -507,8 +628,16 @@ mod tests {
         let short = MomentTerm {
             residual: &[1.0],
             variance: &[1.0, 1.0],
+            sampled_variance: &[1.0, 1.0],
             covariance: &cov,
         };
         assert!(sampled_moment_error(&samples, &[1.0, 1.0], &[short], 10, 0).is_err());
+        let short_sampled = MomentTerm {
+            residual: &[1.0, 1.0],
+            variance: &[1.0, 1.0],
+            sampled_variance: &[1.0],
+            covariance: &cov,
+        };
+        assert!(sampled_moment_error(&samples, &[1.0, 1.0], &[short_sampled], 10, 0).is_err());
     }
 }

@@ -24,6 +24,24 @@ pub enum PredictiveStd {
     Latent,
 }
 
+impl PredictiveStd {
+    /// The part of a GP's noise variance `noise_variance` (in output units) that this
+    /// convention adds to the latent variance: all of it, or none.
+    pub fn added_noise_variance(self, noise_variance: f64) -> f64 {
+        match self {
+            PredictiveStd::WithNoise => noise_variance,
+            PredictiveStd::Latent => 0.0,
+        }
+    }
+
+    /// The variance whose square root a bank reports as the computational std at each point of
+    /// `prediction`: var_f + σ², or var_f.
+    pub fn variance(self, prediction: &Prediction) -> Vec<f64> {
+        let noise = self.added_noise_variance(prediction.noise_variance);
+        prediction.variance.iter().map(|v| v + noise).collect()
+    }
+}
+
 /// One GP per output, all on the same inputs. Implements [`Model`]: a batch of points gives,
 /// per point, the posterior means of every output and their predictive stds as the
 /// computational std.
@@ -219,10 +237,9 @@ impl GpBank {
         tasks.into_par_iter().for_each(|(gp, mc, sc, pc)| {
             gp.predict_block(pc, mc, Some(&mut *sc));
             let s = gp.output_scaling.std;
-            let noise = match self.predictive_std {
-                PredictiveStd::WithNoise => s * s * gp.hyperparameters.noise_variance,
-                PredictiveStd::Latent => 0.0,
-            };
+            let noise = self
+                .predictive_std
+                .added_noise_variance(s * s * gp.hyperparameters.noise_variance);
             for v in sc.iter_mut() {
                 *v = (*v + noise).sqrt();
             }

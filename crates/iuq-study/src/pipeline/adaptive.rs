@@ -282,6 +282,38 @@ fn likelihood_variances(
         .collect()
 }
 
+/// Σ_jj at each candidate as the surrogate's likelihood had it when the round's posterior was
+/// sampled: `data_variance[i][j]` plus the computational error of the bank's reported predictive
+/// std (`predictive_std`: the GP's latent variance, and its noise where the bank counts it).
+fn sampled_likelihood_variances(
+    data: &DataLikelihood,
+    predictions: &[iuq_gp::Prediction],
+    predictive_std: iuq_gp::PredictiveStd,
+    data_variance: &[Vec<f64>],
+) -> Vec<Vec<f64>> {
+    let reported: Vec<Vec<f64>> = predictions
+        .iter()
+        .map(|p| predictive_std.variance(p))
+        .collect();
+    data_variance
+        .iter()
+        .enumerate()
+        .map(|(i, row)| {
+            row.iter()
+                .zip(predictions.iter().zip(&reported))
+                .zip(&data.observations.values)
+                .map(|((s2, (p, v)), y)| {
+                    let computational = data
+                        .computational_error
+                        .variance(p.mean[i], v[i].sqrt(), *y)
+                        .unwrap_or(0.0);
+                    s2 + computational
+                })
+                .collect()
+        })
+        .collect()
+}
+
 /// The inputs of one round's scoring: the candidates θ, s²_ij, their log posterior densities
 /// (ℓ + ln π of the surrogate posterior), and how many posterior samples each stands for.
 struct Candidates {
@@ -425,7 +457,7 @@ mod f64_bits {
 
 /// Version of a round's measurement: raise it whenever the engine computes a measurement
 /// differently, so that measurements recorded by an earlier version are not read back.
-const MEASUREMENT_VERSION: u32 = 1;
+const MEASUREMENT_VERSION: u32 = 2;
 
 /// The digest (SHA-256, hex) of everything a round's measurement is computed from: the
 /// measurement's version, the priors, the `[likelihood]` and `[sampler]` sections, the data,
@@ -557,6 +589,12 @@ fn measure_round(
         predictions.push(gp.predict(&c.theta)?);
     }
     let likelihood_variance = likelihood_variances(data, &predictions, &c.variance);
+    let sampled_variance = sampled_likelihood_variances(
+        data,
+        &predictions,
+        surrogate.bank.predictive_std(),
+        &c.variance,
+    );
     let spread: Vec<f64> = (0..c.theta.len())
         .map(|i| {
             predictions
@@ -578,6 +616,7 @@ fn measure_round(
     // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
     let mut residuals = Vec::with_capacity(gps.len());
     let mut variances = Vec::with_capacity(gps.len());
+    let mut sampled_variances = Vec::with_capacity(gps.len());
     let mut covariances = Vec::with_capacity(gps.len());
     for (j, (gp, p)) in gps.iter().zip(&predictions).enumerate() {
         let y = data.observations.values[j];
@@ -588,12 +627,14 @@ fn measure_round(
                 .map(|v| v[j])
                 .collect::<Vec<f64>>(),
         );
+        sampled_variances.push(sampled_variance.iter().map(|v| v[j]).collect::<Vec<f64>>());
         covariances.push(gp.posterior_covariance(&c.theta, &c.theta)?);
     }
     let terms: Vec<MomentTerm<'_>> = (0..gps.len())
         .map(|j| MomentTerm {
             residual: &residuals[j],
             variance: &variances[j],
+            sampled_variance: &sampled_variances[j],
             covariance: &covariances[j],
         })
         .collect();

@@ -170,10 +170,13 @@ pub fn check_posterior(
             // The std the likelihood uses as the surrogate's computational std: with the
             // default bank, that of a new run (latent and noise), so the check asks whether the
             // runs scatter about the surrogate as the calibration assumed.
-            let std = match surrogate.bank.predictive_std() {
-                iuq_gp::PredictiveStd::WithNoise => prediction.std_with_noise(),
-                iuq_gp::PredictiveStd::Latent => prediction.std(),
-            };
+            let std: Vec<f64> = surrogate
+                .bank
+                .predictive_std()
+                .variance(prediction)
+                .into_iter()
+                .map(f64::sqrt)
+                .collect();
             let checked: Vec<CheckedRun> = group
                 .iter()
                 .enumerate()
