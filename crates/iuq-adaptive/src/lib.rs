@@ -9,7 +9,8 @@
 //!    the posterior lies — by how uncertain the surrogate leaves the posterior density there
 //!    ([`acquisition`]: the variance of the Gaussian log-likelihood under the GP, times the
 //!    squared relative density and the probability that the model answers there);
-//! 2. pick a batch greedily, conditioning the GPs on every pick before the next one
+//! 2. share the round's runs among the run groups by each group's part of the surrogate error
+//!    ([`allocation`]) and pick each group's batch greedily, conditioning the GPs on every pick before the next one
 //!    ("kriging believer"), so that a batch spreads out instead of piling up ([`batch`]);
 //! 3. stop when the posterior has stopped moving and the surrogate's uncertainty could not move
 //!    it either ([`convergence`], [`moment_error`]), and report how much
@@ -18,9 +19,10 @@
 //! | module | what |
 //! |---|---|
 //! | [`acquisition`] | the log-likelihood variance Var_f[ln N(y | f, s²)] of a GP prediction |
+//! | [`allocation`] | how many runs each run group gets in a round, by its part of ε |
 //! | [`batch`] | greedy batch selection with kriging-believer variance updates |
 //! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
-//! | [`moment_error`] | the first-order error of the posterior moments under the GPs' error |
+//! | [`moment_error`] | the error ε of the posterior moments under the GPs' error |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
 //! | [`error`] | the crate's error type [`AdaptiveError`] |
 //!
@@ -29,6 +31,7 @@
 #![warn(missing_docs)]
 
 pub mod acquisition;
+pub mod allocation;
 pub mod batch;
 pub mod convergence;
 pub mod error;
@@ -36,6 +39,7 @@ pub mod extrapolation;
 pub mod moment_error;
 
 pub use acquisition::{likelihood_weights, log_likelihood_variance};
+pub use allocation::group_batches;
 pub use batch::{LikelihoodTerm, Selection, select_batch};
 pub use convergence::{
     ConvergenceCriterion, NOISE_MULTIPLE, PosteriorMoments, RoundAssessment,

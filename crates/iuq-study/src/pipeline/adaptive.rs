@@ -38,7 +38,7 @@ use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::{
     ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
-    likelihood_weights, log_likelihood_variance, sampled_moment_error, select_batch,
+    group_batches, likelihood_weights, log_likelihood_variance, sampled_moment_error, select_batch,
     surrogate_log_likelihood_std,
 };
 
@@ -179,11 +179,15 @@ pub struct AdaptiveRound {
     pub shift_noise: Option<f64>,
     /// The surrogate's std of the log-likelihood, averaged over the posterior (nats).
     pub log_likelihood_std: f64,
-    /// ε: the largest first-order std of a posterior mean or std under the GPs' error, in
-    /// posterior stds (`iuq_adaptive::moment_error`).
+    /// ε: the largest typical change (68.3 % quantile of its absolute value over draws of the
+    /// GPs' error) of a posterior mean or std, in posterior stds (`iuq_adaptive::moment_error`).
     pub surrogate_error: f64,
-    /// The first-order std of the log evidence under the GPs' error (nats).
+    /// The typical change of the log evidence under the GPs' error (nats).
     pub log_evidence_error: f64,
+    /// ε_g per run group: the surrogate error its GPs alone leave, which shares out the next
+    /// round's runs (empty for rounds recorded before it was measured).
+    #[serde(default)]
+    pub group_surrogate_error: Vec<f64>,
     /// Share of posterior samples farther than one length scale from every training run of
     /// some data point's GP (the largest share over the GPs).
     pub extrapolation_share: f64,
@@ -397,6 +401,10 @@ struct RoundMeasurement {
     surrogate_error: f64,
     #[serde(with = "f64_bits")]
     log_evidence_error: f64,
+    /// ε_g per run group: the error its GPs alone leave (empty in rounds recorded before it
+    /// was measured; the round's runs are then shared alike).
+    #[serde(with = "f64_bits::vec", default)]
+    group_surrogate_error: Vec<f64>,
     #[serde(with = "f64_bits")]
     extrapolation_share: f64,
     #[serde(with = "f64_bits")]
@@ -646,6 +654,20 @@ fn measure_round(
         base_seed.wrapping_add(round as u64),
     )
     .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+    // ε_g: the same measure with only group g's likelihood terms (its share of the runs).
+    let mut group_surrogate_error = Vec::with_capacity(groups.len());
+    for g in 0..groups.len() {
+        let outputs = runs.group_outputs(g);
+        let error = sampled_moment_error(
+            &c.full,
+            &c.copies,
+            &terms[outputs],
+            SURROGATE_ERROR_DRAWS,
+            base_seed.wrapping_add(round as u64),
+        )
+        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+        group_surrogate_error.push(error.largest());
+    }
     drop(terms);
     drop(covariances);
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
@@ -692,6 +714,7 @@ fn measure_round(
         log_likelihood_std: u,
         surrogate_error: surrogate_error.largest(),
         log_evidence_error: surrogate_error.log_evidence,
+        group_surrogate_error,
         extrapolation_share: extrapolation,
         unsure_share,
         log_evidence: state.log_evidence,
@@ -837,6 +860,7 @@ pub(super) fn refine(
             log_likelihood_std: u,
             surrogate_error: measured.surrogate_error,
             log_evidence_error: measured.log_evidence_error,
+            group_surrogate_error: measured.group_surrogate_error.clone(),
             extrapolation_share: measured.extrapolation_share,
             unsure_share: measured.unsure_share,
             log_evidence: measured.log_evidence,
@@ -875,6 +899,12 @@ pub(super) fn refine(
             let boundary: &[(usize, usize)] = if boundary_due { boundary } else { &[] };
             let gps = surrogate.bank.gps();
             let remaining = settings.max_runs - made;
+            // Each group's share of the round's runs follows its share of ε².
+            let group_batch = if measured.group_surrogate_error.len() == groups.len() {
+                group_batches(settings.batch, &measured.group_surrogate_error)
+            } else {
+                vec![settings.batch; groups.len()]
+            };
             // (score, group, order within the group's batch, candidate index)
             let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();
             for g in 0..groups.len() {
@@ -896,7 +926,7 @@ pub(super) fn refine(
                     &terms,
                     &c.theta,
                     &weights,
-                    settings.batch.min(remaining),
+                    group_batch[g].min(remaining),
                     min_score,
                 )?;
                 for (order, (&i, &score)) in
@@ -913,7 +943,8 @@ pub(super) fn refine(
                 }
             }
             picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-            // At most `batch` per group: its boundary runs first, then its best acquisitions.
+            // At most `batch` per group: its boundary runs first, then its best acquisitions
+            // (at most its share of the runs, as selected above).
             let mut per_group = vec![0usize; groups.len()];
             picks.retain(|p| {
                 per_group[p.1] += 1;
