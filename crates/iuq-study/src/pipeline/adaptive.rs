@@ -267,23 +267,7 @@ fn likelihood_variances(
     predictions: &[iuq_gp::Prediction],
     data_variance: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
-    data_variance
-        .iter()
-        .enumerate()
-        .map(|(i, row)| {
-            row.iter()
-                .zip(predictions)
-                .zip(&data.observations.values)
-                .map(|((s2, p), y)| {
-                    let computational = data
-                        .computational_error
-                        .variance(p.mean[i], p.noise_variance.sqrt(), *y)
-                        .unwrap_or(0.0);
-                    s2 + computational
-                })
-                .collect()
-        })
-        .collect()
+    with_computational_error(data, predictions, data_variance, |p, _| p.noise_variance)
 }
 
 /// Σ_jj at each candidate as the surrogate's likelihood had it when the round's posterior was
@@ -295,21 +279,30 @@ fn sampled_likelihood_variances(
     predictive_std: iuq_gp::PredictiveStd,
     data_variance: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
-    let reported: Vec<Vec<f64>> = predictions
-        .iter()
-        .map(|p| predictive_std.variance(p))
-        .collect();
+    with_computational_error(data, predictions, data_variance, |p, i| {
+        p.variance[i] + predictive_std.added_noise_variance(p.noise_variance)
+    })
+}
+
+/// `data_variance[i][j]` plus the study's computational error term for a model std whose
+/// square is `model_variance(prediction_j, i)` at candidate i.
+fn with_computational_error(
+    data: &DataLikelihood,
+    predictions: &[iuq_gp::Prediction],
+    data_variance: &[Vec<f64>],
+    model_variance: impl Fn(&iuq_gp::Prediction, usize) -> f64,
+) -> Vec<Vec<f64>> {
     data_variance
         .iter()
         .enumerate()
         .map(|(i, row)| {
             row.iter()
-                .zip(predictions.iter().zip(&reported))
+                .zip(predictions)
                 .zip(&data.observations.values)
-                .map(|((s2, (p, v)), y)| {
+                .map(|((s2, p), y)| {
                     let computational = data
                         .computational_error
-                        .variance(p.mean[i], v[i].sqrt(), *y)
+                        .variance(p.mean[i], model_variance(p, i).sqrt(), *y)
                         .unwrap_or(0.0);
                     s2 + computational
                 })
@@ -1096,5 +1089,29 @@ mod tests {
         assert!((v[1][0] - (3e-4 + 0.01)).abs() < 1e-15);
         let v = likelihood_variances(&data(ComputationalError::None), &predictions(), &s2);
         assert_eq!(v, s2);
+    }
+
+    /// The variance the surrogate posterior was sampled under counts the GP's latent variance
+    /// too, and its noise where the bank reports a new run's std (the default).
+    #[test]
+    fn the_sampled_variance_holds_the_reported_std_as_the_surrogate_likelihood_did() {
+        let s2 = vec![vec![1e-4, 2e-4], vec![3e-4, 4e-4]];
+        let d = data(ComputationalError::Absolute);
+        let with_noise =
+            sampled_likelihood_variances(&d, &predictions(), iuq_gp::PredictiveStd::WithNoise, &s2);
+        let latent =
+            sampled_likelihood_variances(&d, &predictions(), iuq_gp::PredictiveStd::Latent, &s2);
+        let expected_with_noise = [
+            [1e-4 + 1e-6 + 0.01, 2e-4 + 1e-6],
+            [3e-4 + 1e-6 + 0.01, 4e-4 + 1e-6],
+        ];
+        let expected_latent = [[1e-4 + 1e-6, 2e-4 + 1e-6], [3e-4 + 1e-6, 4e-4 + 1e-6]];
+        for (v, expected) in [(with_noise, expected_with_noise), (latent, expected_latent)] {
+            for (row, want) in v.iter().zip(expected) {
+                for (got, want) in row.iter().zip(want) {
+                    assert!((got - want).abs() < 1e-15, "{got} vs {want}");
+                }
+            }
+        }
     }
 }
