@@ -7,6 +7,7 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 
+use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::{format_log_tick, format_tick};
@@ -94,7 +95,7 @@ impl ConvergenceChart<'_> {
                 if log_y {
                     format_log_tick(*v)
                 } else {
-                    format_tick(*v)
+                    linear_tick_label(*v, y_lo, y_hi)
                 }
             })
             .label_style((FONT, TICK_SIZE - 1))

@@ -5,10 +5,10 @@ use iuq_core::GaussianKde;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::axis::linear_tick_label;
 use crate::charts::contour::{contour_lines, level_for_mass};
 use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
-use crate::format::format_tick;
 use crate::model::StudyReport;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, FONT, TICK_SIZE, source_colour};
@@ -186,12 +186,14 @@ impl<'a> CornerChart<'a> {
             .x_label_area_size(if row == d - 1 { BOTTOM } else { 0 })
             .y_label_area_size(if col == 0 { LEFT } else { 0 })
             .build_cartesian_2d(x_lo..x_hi, y_lo..y_hi)?;
+        let x_label = |v: &f64| linear_tick_label(*v, x_lo, x_hi);
+        let y_label = |v: &f64| linear_tick_label(*v, y_lo, y_hi);
         let mut mesh = chart.configure_mesh();
         mesh.disable_mesh()
             .x_labels(4)
             .y_labels(if diagonal { 0 } else { 4 })
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&x_label)
+            .y_label_formatter(&y_label)
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE));
         if row == d - 1 {

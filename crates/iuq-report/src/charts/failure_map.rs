@@ -5,9 +5,9 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
-use crate::format::format_tick;
 use crate::model::FailureMapPanel;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, SURROGATE_COLOUR, TICK_SIZE};
@@ -101,8 +101,8 @@ impl FailureMapChart<'_> {
             .y_labels(5)
             .x_desc(panel.x_parameter.as_str())
             .y_desc(panel.y_parameter.as_str())
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| linear_tick_label(*v, x_lo, x_hi))
+            .y_label_formatter(&|v| linear_tick_label(*v, y_lo, y_hi))
             .label_style((FONT, TICK_SIZE - 1))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE - 2))
             .draw()?;

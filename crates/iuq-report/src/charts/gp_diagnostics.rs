@@ -5,9 +5,10 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
-use crate::format::{format_number, format_tick};
+use crate::format::format_number;
 use crate::model::GpDiagnostic;
 use crate::statistics::{extent, padded};
 use crate::style::{FONT, GRID_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
@@ -65,8 +66,8 @@ impl GpDiagnosticsChart<'_> {
             .y_labels(5)
             .x_desc("simulated")
             .y_desc("GP prediction")
-            .x_label_formatter(&|v| format_tick(*v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .x_label_formatter(&|v| linear_tick_label(*v, lo, hi))
+            .y_label_formatter(&|v| linear_tick_label(*v, lo, hi))
             .label_style((FONT, TICK_SIZE - 1))
             .axis_desc_style((FONT, TICK_SIZE))
             .bold_line_style(GRID_COLOUR)

@@ -4,7 +4,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::axis::{CategoryAxis, category_label};
+use crate::axis::{CategoryAxis, category_label, linear_tick_label};
 use crate::charts::{LegendMark, header};
 use crate::derived::DerivedResults;
 use crate::figure::{Chart, DrawResult};
@@ -72,7 +72,7 @@ impl Chart for MapErrorChart<'_> {
             .x_desc(data.x_label.as_str())
             .y_desc(format!("|MAP − data|, {}", data.y_label))
             .x_label_formatter(&|v| category_label(&labels, *v))
-            .y_label_formatter(&|v| format_tick(*v))
+            .y_label_formatter(&|v| linear_tick_label(*v, 0.0, y_hi))
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, AXIS_LABEL_SIZE))
             .bold_line_style(GRID_COLOUR)

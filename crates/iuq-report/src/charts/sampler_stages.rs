@@ -4,6 +4,7 @@
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
@@ -88,7 +89,7 @@ impl SamplerStagesChart<'_> {
                     String::new()
                 }
             })
-            .y_label_formatter(&|v| format_tick(*v))
+            .y_label_formatter(&|v| linear_tick_label(*v, y_lo, y_hi))
             .label_style((FONT, TICK_SIZE))
             .axis_desc_style((FONT, TICK_SIZE))
             .bold_line_style(GRID_COLOUR)
