@@ -138,7 +138,11 @@ fn assert_figures_well_formed(dir: &Path) {
         assert!(svg.contains(&format!("width=\"{}\"", figure.width)));
         // No tick reads a floating-point residue (3.469e-18 where an axis crosses zero).
         for residue in ["e-15", "e-16", "e-17", "e-18", "e-19"] {
-            assert!(!svg.contains(residue), "{} has a tick {residue}", figure.svg);
+            assert!(
+                !svg.contains(residue),
+                "{} has a tick {residue}",
+                figure.svg
+            );
         }
 
         let png = std::fs::read(dir.join(&figure.png)).unwrap();
