@@ -47,4 +47,7 @@ pub use convergence::{
 };
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
-pub use moment_error::{MomentError, MomentTerm, linearised_moment_error, sampled_moment_error};
+pub use moment_error::{
+    MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
+    sampled_moment_errors_by_group,
+};

@@ -296,28 +296,95 @@ pub fn sampled_moment_error(
     draws: usize,
     seed: u64,
 ) -> Result<MomentError> {
-    use rand::SeedableRng;
-    use rand_distr::{Distribution, StandardNormal};
     let w = checked_weights(samples, weights, terms)?;
+    check_draws(draws)?;
+    let factors = factorise(terms)?;
+    Ok(drawn_moment_error(
+        samples, &w, terms, &factors, draws, seed,
+    ))
+}
+
+/// [`sampled_moment_error`] of all `terms` together and of each group of them (`groups`, ranges
+/// of term indices), every one from the same `seed`, with each covariance factorised once: the
+/// error of the whole surrogate and the part each run group's GPs leave alone.
+///
+/// # Errors
+/// As [`sampled_moment_error`], or a group that is not a range of the terms.
+pub fn sampled_moment_errors_by_group(
+    samples: &[Vec<f64>],
+    weights: &[f64],
+    terms: &[MomentTerm<'_>],
+    groups: &[std::ops::Range<usize>],
+    draws: usize,
+    seed: u64,
+) -> Result<(MomentError, Vec<MomentError>)> {
+    let w = checked_weights(samples, weights, terms)?;
+    check_draws(draws)?;
+    if let Some(g) = groups
+        .iter()
+        .find(|g| g.start > g.end || g.end > terms.len())
+    {
+        return Err(AdaptiveError::InvalidParameter {
+            what: "group of likelihood terms",
+            reason: format!("{g:?} is not a range of the {} terms", terms.len()),
+        });
+    }
+    let factors = factorise(terms)?;
+    let all = drawn_moment_error(samples, &w, terms, &factors, draws, seed);
+    let per_group = groups
+        .iter()
+        .map(|g| {
+            drawn_moment_error(
+                samples,
+                &w,
+                &terms[g.clone()],
+                &factors[g.clone()],
+                draws,
+                seed,
+            )
+        })
+        .collect();
+    Ok((all, per_group))
+}
+
+fn check_draws(draws: usize) -> Result<()> {
     if draws < 2 {
         return Err(AdaptiveError::InvalidParameter {
             what: "draws of the GP error",
             reason: format!("{draws} is fewer than 2"),
         });
     }
-    let n = samples.len();
-    let d = samples[0].len();
-    let factors: Vec<Vec<Vec<f64>>> = terms
+    Ok(())
+}
+
+/// The Cholesky factor of each term's covariance.
+fn factorise(terms: &[MomentTerm<'_>]) -> Result<Vec<Vec<Vec<f64>>>> {
+    terms
         .iter()
         .map(|t| cholesky_with_jitter(t.covariance))
-        .collect::<Result<_>>()?;
-    let (mean0, std0, log_z0) = reweighted_moments(samples, &w, &vec![0.0; n]);
+        .collect()
+}
+
+/// The draws of [`sampled_moment_error`] with normalised weights `w` and the terms' factors.
+fn drawn_moment_error(
+    samples: &[Vec<f64>],
+    w: &[f64],
+    terms: &[MomentTerm<'_>],
+    factors: &[Vec<Vec<f64>>],
+    draws: usize,
+    seed: u64,
+) -> MomentError {
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+    let n = samples.len();
+    let d = samples[0].len();
+    let (mean0, std0, log_z0) = reweighted_moments(samples, w, &vec![0.0; n]);
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut changes: Vec<Vec<f64>> = Vec::with_capacity(draws);
     let mut z = vec![0.0; n];
     for _ in 0..draws {
         let mut dl = vec![0.0; n];
-        for (t, l) in terms.iter().zip(&factors) {
+        for (t, l) in terms.iter().zip(factors) {
             for v in z.iter_mut() {
                 *v = StandardNormal.sample(&mut rng);
             }
@@ -328,7 +395,7 @@ pub fn sampled_moment_error(
                     r * r / (2.0 * c2) - (r - dm) * (r - dm) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
             }
         }
-        let (mean, std, log_z) = reweighted_moments(samples, &w, &dl);
+        let (mean, std, log_z) = reweighted_moments(samples, w, &dl);
         let mut row = Vec::with_capacity(2 * d + 1);
         for k in 0..d {
             let scale = if std0[k] > 0.0 { std0[k] } else { 1.0 };
@@ -346,11 +413,11 @@ pub fn sampled_moment_error(
         column.sort_by(f64::total_cmp);
         quantile_sorted(&column, ONE_SIGMA_COVERAGE)
     };
-    Ok(MomentError {
+    MomentError {
         mean: (0..d).map(|k| spread(2 * k)).collect(),
         std: (0..d).map(|k| spread(2 * k + 1)).collect(),
         log_evidence: spread(2 * d),
-    })
+    }
 }
 
 #[cfg(test)]
@@ -609,6 +676,52 @@ mod tests {
         };
         let error = sampled_moment_error(&samples, &w, &[fixed], 400, 5).unwrap();
         assert!(error.largest() > 1.0, "{error:?}");
+    }
+
+    /// The grouped form factorises each covariance once and gives, bit for bit, what separate
+    /// calls give for all terms and for each group.
+    #[test]
+    fn grouped_errors_equal_separate_calls() {
+        let n = 30;
+        let samples: Vec<Vec<f64>> = (0..n).map(|i| vec![i as f64 / n as f64]).collect();
+        let w = vec![1.0; n];
+        let ones = vec![1.0; n];
+        let residuals: Vec<Vec<f64>> = (0..3)
+            .map(|t| {
+                (0..n)
+                    .map(|i| (i as f64 - 10.0 * t as f64) / n as f64)
+                    .collect()
+            })
+            .collect();
+        let cov: Vec<Vec<f64>> = (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| 0.01 * (-((i as f64 - j as f64) / 8.0).powi(2)).exp())
+                    .collect()
+            })
+            .collect();
+        let terms: Vec<MomentTerm<'_>> = residuals
+            .iter()
+            .map(|r| MomentTerm {
+                residual: r,
+                variance: &ones,
+                sampled_variance: &ones,
+                covariance: &cov,
+            })
+            .collect();
+        let groups = [0..1, 1..3];
+        let (all, per_group) =
+            sampled_moment_errors_by_group(&samples, &w, &terms, &groups, 20, 9).unwrap();
+        assert_eq!(
+            all,
+            sampled_moment_error(&samples, &w, &terms, 20, 9).unwrap()
+        );
+        for (g, error) in groups.iter().zip(&per_group) {
+            let alone = sampled_moment_error(&samples, &w, &terms[g.clone()], 20, 9).unwrap();
+            assert_eq!(*error, alone);
+        }
+        let beyond = vec![std::ops::Range { start: 2, end: 4 }];
+        assert!(sampled_moment_errors_by_group(&samples, &w, &terms, &beyond, 20, 9).is_err());
     }
 
     #[test]

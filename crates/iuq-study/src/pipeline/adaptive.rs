@@ -38,8 +38,8 @@ use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::{
     ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
-    group_batches, likelihood_weights, log_likelihood_variance, sampled_moment_error, select_batch,
-    surrogate_log_likelihood_std,
+    group_batches, likelihood_weights, log_likelihood_variance, sampled_moment_errors_by_group,
+    select_batch, surrogate_log_likelihood_std,
 };
 
 use super::Events;
@@ -639,28 +639,19 @@ fn measure_round(
             covariance: &covariances[j],
         })
         .collect();
-    let surrogate_error = sampled_moment_error(
+    // ε, and ε_g: the same measure with only group g's likelihood terms (its share of the runs).
+    let group_outputs: Vec<std::ops::Range<usize>> =
+        (0..groups.len()).map(|g| runs.group_outputs(g)).collect();
+    let (surrogate_error, group_errors) = sampled_moment_errors_by_group(
         &c.full,
         &c.copies,
         &terms,
+        &group_outputs,
         SURROGATE_ERROR_DRAWS,
         base_seed.wrapping_add(round as u64),
     )
     .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-    // ε_g: the same measure with only group g's likelihood terms (its share of the runs).
-    let mut group_surrogate_error = Vec::with_capacity(groups.len());
-    for g in 0..groups.len() {
-        let outputs = runs.group_outputs(g);
-        let error = sampled_moment_error(
-            &c.full,
-            &c.copies,
-            &terms[outputs],
-            SURROGATE_ERROR_DRAWS,
-            base_seed.wrapping_add(round as u64),
-        )
-        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-        group_surrogate_error.push(error.largest());
-    }
+    let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
     drop(terms);
     drop(covariances);
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
