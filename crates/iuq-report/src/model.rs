@@ -58,6 +58,9 @@ pub struct PosteriorCheckReport {
     pub diagnostic: Option<String>,
     /// One entry per data point.
     pub points: Vec<CheckedPoint>,
+    /// The check's test in words: its rule, and whether and where it failed (empty: not given).
+    #[serde(default)]
+    pub test: String,
 }
 
 /// The posterior check at one data point.
@@ -106,6 +109,10 @@ pub struct Convergence {
     pub parameters: Vec<String>,
     /// The rounds, in order.
     pub rounds: Vec<ConvergenceRound>,
+    /// Each posterior check that failed its test after the engine had stopped, in words: its
+    /// runs became training runs and the rounds went on.
+    #[serde(default)]
+    pub retrained_checks: Vec<String>,
 }
 
 /// One round of the adaptive engine.

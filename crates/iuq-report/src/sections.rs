@@ -320,8 +320,14 @@ pub(crate) fn build_sections(
             "posterior-check",
             "The model at the posterior",
             format!(
-                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std.",
-                check.source, check.samples
+                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std.{}",
+                check.source,
+                check.samples,
+                if check.test.is_empty() {
+                    String::new()
+                } else {
+                    format!(" {}", check.test)
+                }
             ),
         );
         section.figures.push(figure(
@@ -417,9 +423,14 @@ fn convergence_section(convergence: &Convergence, figures_dir: &Path) -> Result<
         "convergence",
         "Convergence of the adaptive design",
         format!(
-            "Round by round, the adaptive design adds model runs where the surrogate is least certain of the likelihood and recomputes the posterior. Stopping rule: {}. {outcome} Stopped because: {}.",
+            "Round by round, the adaptive design adds model runs where the surrogate is least certain of the likelihood and recomputes the posterior. Stopping rule: {}. {outcome} Stopped because: {}.{}",
             convergence.criterion.trim_end_matches('.'),
-            convergence.stop_reason.trim_end_matches('.')
+            convergence.stop_reason.trim_end_matches('.'),
+            convergence
+                .retrained_checks
+                .iter()
+                .map(|c| format!(" {c}"))
+                .collect::<String>()
         ),
     );
     if rounds > 0 {

@@ -230,6 +230,18 @@ fn bad_pipeline_settings_are_input_errors() {
             "surrogate.posterior_check.n",
         ),
         (
+            "[surrogate]\nposterior_check = { significance = 1.5 }\n",
+            "surrogate.posterior_check.significance",
+        ),
+        (
+            "[surrogate]\nposterior_check = { resolution = -0.1 }\n",
+            "surrogate.posterior_check.resolution",
+        ),
+        (
+            "[surrogate]\nposterior_check = { retrain = \"yes\" }\n",
+            "surrogate.posterior_check.retrain",
+        ),
+        (
             "[model]\nkind = \"rbc-shear\"\nwindow_factor = 0.9\n",
             "model.window_factor",
         ),

@@ -229,6 +229,7 @@ pub fn synthetic_report(
         source: "GP surrogate".to_string(),
         samples: 20,
         diagnostic: Some("EL drift over the window".to_string()),
+        test: "Test (family-wise significance 0.01): passed.".to_string(),
         points: stresses
             .iter()
             .zip(&y)
@@ -417,6 +418,7 @@ pub fn add_adaptive_results(report: &mut StudyReport, rounds: usize, panels: usi
         stop_reason: "the convergence rule was met".to_string(),
         parameters,
         rounds,
+        retrained_checks: vec!["After round 3 the model at the posterior (21 runs) failed the check's test at 6.19: its runs became training runs and the rounds went on.".to_string()],
     });
     report.failure_map = (0..panels)
         .map(|k| {

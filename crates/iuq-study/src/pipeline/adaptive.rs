@@ -44,6 +44,7 @@ use iuq_adaptive::{
 
 use super::Events;
 use super::model_runs::ModelRuns;
+use super::posterior_check::{CheckVerdict, POSTERIOR_CHECK_DESIGN, PosteriorCheck};
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::AdaptiveSettings;
 use super::surrogate::Surrogate;
@@ -218,6 +219,83 @@ pub struct AdaptiveOutcome {
     pub tolerance: f64,
     /// The criterion's log-likelihood part (nats).
     pub log_likelihood_tolerance: f64,
+    /// The posterior checks that failed their test and were trained on, in order.
+    pub retrained_checks: Vec<RetrainedCheck>,
+    /// The rows of `adaptive/runs.csv` so far.
+    #[serde(skip)]
+    run_rows: Vec<Vec<f64>>,
+}
+
+/// A posterior check that failed its test: its runs joined the training runs and the rounds went
+/// on from the round after `after_round`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RetrainedCheck {
+    /// The round after which the check was made (the engine had stopped there).
+    pub after_round: usize,
+    /// The check's runs, now training runs.
+    pub runs: usize,
+    /// The abscissae of the data points that failed the test.
+    pub failed_at: Vec<f64>,
+    /// Its test.
+    pub verdict: CheckVerdict,
+}
+
+impl AdaptiveOutcome {
+    /// The last round.
+    pub fn last_round(&self) -> usize {
+        self.rounds.last().map_or(0, |r| r.round)
+    }
+
+    /// Take the runs of the failed check `check` (made after the last round) as training runs:
+    /// they join `groups` and `adaptive/runs.csv` (as rows of the last round, a round that made
+    /// no runs of its own since the engine stopped there), and the next [`refine`] goes on
+    /// from the round after.
+    pub(super) fn retrain_on_check(
+        &mut self,
+        check: &PosteriorCheck,
+        verdict: CheckVerdict,
+        runs: &ModelRuns,
+        groups: &mut [GroupRuns],
+    ) -> Result<()> {
+        let round = self.last_round();
+        let points: Vec<Vec<f64>> = std::iter::once(check.map.clone())
+            .chain(check.samples.iter().cloned())
+            .collect();
+        let requests: Vec<(usize, Vec<f64>)> = (0..groups.len())
+            .flat_map(|g| points.iter().map(move |p| (g, p.clone())))
+            .collect();
+        // Every run is in the store already: this reads them back in the shape training takes.
+        let outcomes = runs.run(Some(POSTERIOR_CHECK_DESIGN), &requests)?;
+        for (g, (group, outcomes)) in groups
+            .iter_mut()
+            .zip(outcomes.chunks(points.len()))
+            .enumerate()
+        {
+            for (theta, outcome) in points.iter().zip(outcomes) {
+                let mut row = vec![round as f64, g as f64];
+                row.extend(theta);
+                row.push(if outcome.is_ok() { 0.0 } else { 1.0 });
+                self.run_rows.push(row);
+            }
+            group.extend(
+                RunOrigin::Check { round },
+                points.clone(),
+                outcomes.to_vec(),
+            );
+        }
+        self.retrained_checks.push(RetrainedCheck {
+            after_round: round,
+            runs: requests.len(),
+            failed_at: verdict
+                .failed_points
+                .iter()
+                .filter_map(|&j| check.points.get(j).map(|p| p.x))
+                .collect(),
+            verdict,
+        });
+        self.converged = false;
+        Ok(())
+    }
 }
 
 /// The distinct rows of `samples` (index of the first copy, number of copies), in order of
@@ -731,6 +809,7 @@ pub(super) fn refine(
     events: &Events,
     describe: &dyn Fn(usize) -> String,
     recompute: bool,
+    earlier: Option<AdaptiveOutcome>,
 ) -> Result<AdaptiveOutcome> {
     let file = study.path.display().to_string();
     let criterion = ConvergenceCriterion {
@@ -744,15 +823,28 @@ pub(super) fn refine(
     let dir = out.join("adaptive");
     std::fs::create_dir_all(&dir)
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
-    let mut rounds: Vec<AdaptiveRound> = Vec::new();
-    let mut previous: Option<PosteriorMoments> = None;
-    let mut round_samples = settings.samples;
+    // Going on after a failed check: from the round after the last, its moments the previous
+    // ones (the shift then measures what the check's runs changed).
+    let first_round = earlier.as_ref().map_or(1, |e| e.last_round() + 1);
+    let (mut rounds, retrained_checks, mut new_rows, mut parameters) = match earlier {
+        Some(e) => (e.rounds, e.retrained_checks, e.run_rows, e.parameters),
+        None => (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
+    };
+    if !new_rows.is_empty() {
+        write_runs_table(study, &dir, &new_rows)?;
+    }
+    let mut previous: Option<PosteriorMoments> = rounds.last().map(|r| PosteriorMoments {
+        mean: r.mean.clone(),
+        std: r.std.clone(),
+        mean_error: r.mean_error.clone(),
+        std_error: r.std_error.clone(),
+    });
+    let mut round_samples = rounds
+        .last()
+        .map_or(settings.samples, |r| r.samples / settings.replicates.max(1));
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
     let mut converged = false;
-    let mut parameters = Vec::new();
-    // Every adaptive run: round, group, θ, failed (written to `adaptive/runs.csv`).
-    let mut new_rows: Vec<Vec<f64>> = Vec::new();
-    for round in 1..=settings.max_rounds {
+    for round in first_round..=settings.max_rounds {
         let started = Instant::now();
         let made: usize = groups.iter().map(GroupRuns::len).sum();
         let label = format!("adaptive-round-{round}");
@@ -967,10 +1059,7 @@ pub(super) fn refine(
                 row.push(if outcome.is_ok() { 0.0 } else { 1.0 });
                 new_rows.push(row);
             }
-            let mut columns = vec!["round".to_string(), "group".to_string()];
-            columns.extend(study.space.names());
-            columns.push("failed".into());
-            write_numeric_csv(&dir.join("runs.csv"), &columns, &new_rows)?;
+            write_runs_table(study, &dir, &new_rows)?;
             let mut per_group: Vec<(Vec<Vec<f64>>, Vec<iuq_core::Outcome>)> =
                 vec![(Vec::new(), Vec::new()); groups.len()];
             for ((g, theta), outcome) in requests.into_iter().zip(outcomes) {
@@ -1013,7 +1102,17 @@ pub(super) fn refine(
         parameters,
         tolerance: settings.tolerance,
         log_likelihood_tolerance: settings.log_likelihood_tolerance,
+        retrained_checks,
+        run_rows: new_rows,
     })
+}
+
+/// `adaptive/runs.csv`: round, run group (from 0), θ, and 1 where the run failed.
+fn write_runs_table(study: &Study, dir: &Path, rows: &[Vec<f64>]) -> Result<()> {
+    let mut columns = vec!["round".to_string(), "group".to_string()];
+    columns.extend(study.space.names());
+    columns.push("failed".into());
+    write_numeric_csv(&dir.join("runs.csv"), &columns, rows)
 }
 
 fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {

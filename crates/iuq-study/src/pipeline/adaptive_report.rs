@@ -43,6 +43,24 @@ pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
                 extrapolation_share: r.extrapolation_share,
             })
             .collect(),
+        retrained_checks: outcome
+            .retrained_checks
+            .iter()
+            .map(|c| {
+                format!(
+                    "After round {} the model at the posterior ({} runs) failed the check's test at {} (largest |z| {:.2}, bound {:.2}): its runs became training runs and the rounds went on.",
+                    c.after_round,
+                    c.runs,
+                    c.failed_at
+                        .iter()
+                        .map(|x| x.to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    c.verdict.largest_z,
+                    c.verdict.z_bound
+                )
+            })
+            .collect(),
     }
 }
 
@@ -126,7 +144,7 @@ pub(super) fn failure_map(
             adaptive: group
                 .origins
                 .iter()
-                .map(|o| matches!(o, RunOrigin::Adaptive { .. }))
+                .map(|o| matches!(o, RunOrigin::Adaptive { .. } | RunOrigin::Check { .. }))
                 .collect(),
             failure_probability: probability,
             grid_size: (GRID, GRID),

@@ -512,40 +512,121 @@ fn run_stages(
     }
 
     // 2. The adaptive rounds.
-    let adaptive = match &settings.adaptive {
-        Some(adaptive_settings) => {
-            let stage = Instant::now();
-            let outcome = adaptive::refine(
+    let refine = |groups: &mut Vec<GroupRuns>, earlier: Option<adaptive::AdaptiveOutcome>| {
+        settings.adaptive.as_ref().map(|adaptive_settings| {
+            adaptive::refine(
                 study,
                 &data,
                 adaptive_settings,
                 settings.training_seed,
                 &model_runs,
-                &mut groups,
+                groups,
                 &out,
                 events,
                 &describe,
                 options.recompute_rounds,
-            )?;
-            stage_seconds.push(("adaptive rounds".into(), stage.elapsed().as_secs_f64()));
-            Some(outcome)
+                earlier,
+            )
+        })
+    };
+    let stage = Instant::now();
+    let mut adaptive = refine(&mut groups, None).transpose()?;
+    if adaptive.is_some() {
+        add_seconds(&mut stage_seconds, "adaptive rounds", stage);
+    }
+
+    // 3. The surrogate (one GP per data point, failure classifiers), BASIS on it, and the model
+    //    at its posterior: where that check fails its test after the engine stopped, its runs
+    //    become training runs and the rounds go on.
+    let (surrogate, gp_posterior, posterior_check) = loop {
+        let stage = Instant::now();
+        let surrogate = Surrogate::fit(
+            &groups,
+            &model_runs,
+            &study.space,
+            settings.training_seed,
+            describe,
+        )?;
+        add_seconds(&mut stage_seconds, "GP fits", stage);
+        let stage = Instant::now();
+        let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
+        let gp_posterior = events.sample(
+            "GP bank",
+            study,
+            &posterior,
+            sampler_settings,
+            &out.join("basis-gp"),
+            None,
+        )?;
+        add_seconds(&mut stage_seconds, "BASIS on the GP bank", stage);
+        let Some(check) = &settings.posterior_check else {
+            break (surrogate, gp_posterior, None);
+        };
+        let stage = Instant::now();
+        events.message(format!(
+            "the model at the posterior: the MAP and {} posterior samples, {} runs (results already stored are reused)",
+            check.samples,
+            (check.samples + 1) * group_count
+        ));
+        let checked = posterior_check::check_posterior(
+            &gp_posterior,
+            &surrogate,
+            &model_runs,
+            check,
+            data.observations.measurement_std.as_deref(),
+        )?;
+        write_atomically(
+            &out.join("posterior-check.json"),
+            serde_json::to_string_pretty(&checked)?.as_bytes(),
+        )?;
+        add_seconds(&mut stage_seconds, "model at the posterior", stage);
+        let made: usize = groups.iter().map(GroupRuns::len).sum();
+        let retrain = match (&adaptive, &settings.adaptive) {
+            (Some(outcome), Some(a)) => {
+                check.retrain
+                    && !checked.verdict.passed
+                    && outcome.converged
+                    && made < a.max_runs
+                    && outcome.last_round() < a.max_rounds
+            }
+            _ => false,
+        };
+        if !retrain {
+            break (surrogate, gp_posterior, Some(checked));
         }
-        None => None,
+        let Some(mut outcome) = adaptive.take() else {
+            break (surrogate, gp_posterior, Some(checked));
+        };
+        let failed_at: Vec<String> = checked
+            .verdict
+            .failed_points
+            .iter()
+            .map(|&j| format!("{}", checked.points[j].x))
+            .collect();
+        events.message(format!(
+            "the posterior check after round {} failed its test at {} (largest |z| {:.2}, bound {:.2}): its {} runs become training runs and the rounds go on",
+            outcome.last_round(),
+            failed_at.join(", "),
+            checked.verdict.largest_z,
+            checked.verdict.z_bound,
+            (check.samples + 1) * group_count
+        ));
+        write_atomically(
+            &out.join(format!(
+                "posterior-check-after-round-{}.json",
+                outcome.last_round()
+            )),
+            serde_json::to_string_pretty(&checked)?.as_bytes(),
+        )?;
+        outcome.retrain_on_check(&checked, checked.verdict.clone(), &model_runs, &mut groups)?;
+        let stage = Instant::now();
+        adaptive = refine(&mut groups, Some(outcome)).transpose()?;
+        add_seconds(&mut stage_seconds, "adaptive rounds", stage);
     };
     let point_runs = point_runs(&groups, &model_runs, &data);
     write_runs_csv(&out.join("model-runs.csv"), &names, &point_runs)?;
     let runs_made: usize = groups.iter().map(GroupRuns::len).sum();
     let failed: usize = groups.iter().map(|g| g.failure_reasons().len()).sum();
-
-    // 3. The surrogate: one GP per data point, failure classifiers.
-    let stage = Instant::now();
-    let surrogate = Surrogate::fit(
-        &groups,
-        &model_runs,
-        &study.space,
-        settings.training_seed,
-        describe,
-    )?;
     let mut gp_checks: Vec<(f64, f64)> = Vec::new();
     for (gp, r) in surrogate.bank.gps().iter().zip(&point_runs) {
         let q2 = if r.test_y.len() >= 2 {
@@ -557,7 +638,6 @@ fn run_stages(
     }
     let bank = surrogate.bank.clone();
     write_atomically(&out.join("gp-bank.json"), bank.to_json_string()?.as_bytes())?;
-    stage_seconds.push(("GP fits".into(), stage.elapsed().as_secs_f64()));
 
     // 4. Sobol' indices.
     let stage = Instant::now();
@@ -595,18 +675,7 @@ fn run_stages(
         None
     };
 
-    // 5. BASIS on the surrogate (and on the model).
-    let stage = Instant::now();
-    let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
-    let gp_posterior = events.sample(
-        "GP bank",
-        study,
-        &posterior,
-        sampler_settings,
-        &out.join("basis-gp"),
-        None,
-    )?;
-    stage_seconds.push(("BASIS on the GP bank".into(), stage.elapsed().as_secs_f64()));
+    // 5. BASIS on the model itself.
     let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
         Some(settings) => {
             let stage = Instant::now();
@@ -617,30 +686,6 @@ fn run_stages(
             let sampled = events.sample("model", study, &posterior, settings, &dir, checkpoint)?;
             stage_seconds.push(("BASIS on the model".into(), stage.elapsed().as_secs_f64()));
             Some(sampled)
-        }
-        None => None,
-    };
-
-    // 5b. The model at the surrogate posterior's MAP and samples.
-    let posterior_check = match &settings.posterior_check {
-        Some(check) => {
-            let stage = Instant::now();
-            events.message(format!(
-                "the model at the posterior: the MAP and {} posterior samples, {} runs (results already stored are reused)",
-                check.samples,
-                (check.samples + 1) * group_count
-            ));
-            let checked =
-                posterior_check::check_posterior(&gp_posterior, &surrogate, &model_runs, check)?;
-            write_atomically(
-                &out.join("posterior-check.json"),
-                serde_json::to_string_pretty(&checked)?.as_bytes(),
-            )?;
-            stage_seconds.push((
-                "model at the posterior".into(),
-                stage.elapsed().as_secs_f64(),
-            ));
-            Some(checked)
         }
         None => None,
     };
@@ -683,6 +728,16 @@ fn run_stages(
         stage_seconds,
         seconds: started.elapsed().as_secs_f64(),
     })
+}
+
+/// Add the time since `since` to the stage `label` (a stage repeated after a failed posterior
+/// check counts every pass).
+fn add_seconds(stage_seconds: &mut Vec<(String, f64)>, label: &str, since: Instant) {
+    let seconds = since.elapsed().as_secs_f64();
+    match stage_seconds.iter_mut().find(|(l, _)| l == label) {
+        Some((_, total)) => *total += seconds,
+        None => stage_seconds.push((label.to_string(), seconds)),
+    }
 }
 
 fn resume_checkpoint(dir: &Path, events: &Events) -> Result<Option<BasisState>> {

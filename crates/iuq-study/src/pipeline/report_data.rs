@@ -516,6 +516,37 @@ fn posterior_check_report(check: &PosteriorCheck, labels: &Labels) -> PosteriorC
         samples: check.samples.len(),
         diagnostic: labels.rbc.then(|| "EL drift over the window".to_string()),
         points,
+        test: check_test_sentence(check),
+    }
+}
+
+/// The check's test in words ([`super::posterior_check::CheckVerdict`]).
+fn check_test_sentence(check: &PosteriorCheck) -> String {
+    let v = &check.verdict;
+    let rule = format!(
+        "Test (family-wise significance {}): the largest |z| = |model − surrogate|/predictive std over all runs must stay below {:.2}, and no data point may have more runs outside 2σ than a binomial with the 4.55 % a right predictive std gives makes likely (p ≥ {:.2e}).",
+        v.significance,
+        v.z_bound,
+        v.significance / (2.0 * check.points.len().max(1) as f64)
+    );
+    if v.passed {
+        format!("{rule} Passed (largest |z| {:.2}).", v.largest_z)
+    } else {
+        let at: Vec<String> = v
+            .failed_points
+            .iter()
+            .map(|&j| {
+                format!(
+                    "{} ({} runs outside 2σ, p = {:.1e})",
+                    check.points[j].x, v.outside[j], v.tail_probability[j]
+                )
+            })
+            .collect();
+        format!(
+            "{rule} Failed at {} (largest |z| {:.2}).",
+            at.join(", "),
+            v.largest_z
+        )
     }
 }
 

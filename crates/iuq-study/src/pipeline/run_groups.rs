@@ -19,6 +19,12 @@ pub enum RunOrigin {
         /// The round, from 1.
         round: usize,
     },
+    /// A posterior check made after round `round` that failed its test, its runs taken as
+    /// training runs for the rounds that follow.
+    Check {
+        /// The round after which the check was made.
+        round: usize,
+    },
 }
 
 /// The successful runs of one output: inputs, outputs and computational stds.
@@ -84,7 +90,8 @@ impl GroupRuns {
         runs
     }
 
-    /// The successful training runs (initial and adaptive) of the group's output `output`.
+    /// The successful training runs (initial, adaptive and those of failed checks) of the
+    /// group's output `output`.
     pub fn training(&self, output: usize) -> OutputRuns {
         self.successes(output, |o| o != RunOrigin::Test)
     }
@@ -110,11 +117,11 @@ impl GroupRuns {
             .collect()
     }
 
-    /// Runs made by the adaptive engine.
+    /// Runs made by the adaptive engine (its rounds and the failed checks it trained on).
     pub fn adaptive_runs(&self) -> usize {
         self.origins
             .iter()
-            .filter(|o| matches!(o, RunOrigin::Adaptive { .. }))
+            .filter(|o| matches!(o, RunOrigin::Adaptive { .. } | RunOrigin::Check { .. }))
             .count()
     }
 }

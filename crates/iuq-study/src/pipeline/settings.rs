@@ -51,23 +51,60 @@ pub struct PipelineSettings {
     pub posterior_check: Option<PosteriorCheckSettings>,
 }
 
-/// `[surrogate] posterior_check = { samples, seed }`: the model itself run at the MAP of the
-/// surrogate's posterior and at `samples` of its samples, in every run group, and compared with
-/// the surrogate's prediction there — the surrogate checked where the calibration uses it.
+/// `[surrogate] posterior_check = { samples, seed, significance, retrain }`: the model itself
+/// run at the MAP of the surrogate's posterior and at `samples` of its samples, in every run
+/// group, and compared with the surrogate's prediction there — the surrogate checked where the
+/// calibration uses it.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct PosteriorCheckSettings {
     /// Posterior samples run besides the MAP (`samples`, default 20).
     pub samples: usize,
     /// Seed of their choice among the posterior's samples (`seed`, default 0).
     pub seed: u64,
+    /// The check's family-wise significance (`significance`, default 0.01): the chance that a
+    /// surrogate whose predictive stds are right fails it
+    /// ([`super::posterior_check::PosteriorCheck::verdict`]).
+    pub significance: f64,
+    /// With the adaptive engine: a check that fails joins the training runs and the rounds go
+    /// on, then the check is made again at the new posterior (`retrain`, default true).
+    pub retrain: bool,
+    /// The smallest error that counts, in measurement stds of the datum (`resolution`,
+    /// default 0.1): added in quadrature to each run's predictive std. At a typical residual
+    /// (about one measurement std) an error of 0.1 std moves the datum's log-likelihood term by
+    /// about 0.1 nats.
+    pub resolution: f64,
 }
 
 /// Read `[surrogate] posterior_check`.
 fn parse_posterior_check(mut s: StudySection<'_>) -> Result<PosteriorCheckSettings> {
     let samples = s.count("samples", 2)?.unwrap_or(20);
     let seed = s.seed("seed")?.unwrap_or(0);
+    let significance = s.positive("significance")?.unwrap_or(0.01);
+    if significance >= 1.0 {
+        return Err(s
+            .error(
+                "significance",
+                format!("must lie in (0, 1), got {significance}"),
+            )
+            .into());
+    }
+    let retrain = s.boolean("retrain")?.unwrap_or(true);
+    let resolution = match s.number("resolution")? {
+        Some(r) if !(r >= 0.0 && r.is_finite()) => {
+            return Err(s
+                .error("resolution", format!("must be finite and ≥ 0, got {r}"))
+                .into());
+        }
+        r => r.unwrap_or(0.1),
+    };
     s.finish()?;
-    Ok(PosteriorCheckSettings { samples, seed })
+    Ok(PosteriorCheckSettings {
+        samples,
+        seed,
+        significance,
+        retrain,
+        resolution,
+    })
 }
 
 /// `[surrogate] adaptive = { ... }`: rounds of new runs placed where the posterior lies.
