@@ -21,6 +21,7 @@
 //! | [`acquisition`] | the log-likelihood variance Var_f[ln N(y | f, s²)] of a GP prediction |
 //! | [`allocation`] | how many runs each run group gets in a round, by its part of ε |
 //! | [`batch`] | greedy batch selection with kriging-believer variance updates |
+//! | [`moment_acquisition`] | the batch that most shrinks the first-order error of the posterior moments |
 //! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
 //! | [`moment_error`] | the error ε of the posterior moments under the GPs' error |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
@@ -36,6 +37,7 @@ pub mod batch;
 pub mod convergence;
 pub mod error;
 pub mod extrapolation;
+pub mod moment_acquisition;
 pub mod moment_error;
 
 pub use acquisition::{likelihood_weights, log_likelihood_variance};
@@ -47,6 +49,7 @@ pub use convergence::{
 };
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
+pub use moment_acquisition::select_batch_for_moments;
 pub use moment_error::{
     MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
     sampled_moment_errors_by_group,

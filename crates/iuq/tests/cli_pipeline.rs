@@ -242,6 +242,10 @@ fn bad_pipeline_settings_are_input_errors() {
             "surrogate.posterior_check.retrain",
         ),
         (
+            "[surrogate]\nadaptive = { acquisition = \"random\" }\n",
+            "surrogate.adaptive.acquisition",
+        ),
+        (
             "[model]\nkind = \"rbc-shear\"\nwindow_factor = 0.9\n",
             "model.window_factor",
         ),

@@ -39,14 +39,14 @@ use serde::{Deserialize, Serialize};
 use iuq_adaptive::{
     ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
     group_batches, likelihood_weights, log_likelihood_variance, sampled_moment_errors_by_group,
-    select_batch, surrogate_log_likelihood_std,
+    select_batch, select_batch_for_moments, surrogate_log_likelihood_std,
 };
 
 use super::Events;
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, POSTERIOR_CHECK_DESIGN, PosteriorCheck};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::AdaptiveSettings;
+use super::settings::{Acquisition, AdaptiveSettings};
 use super::surrogate::Surrogate;
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
@@ -820,6 +820,9 @@ pub(super) fn refine(
     .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
     let base_seed = parse_sampler(study, &SamplerOverrides::default())?.seed;
     let min_score = (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64;
+    // A run must shrink the summed squared moment error by a hundredth of tolerance², shared
+    // among the run groups.
+    let min_moment_score = (settings.tolerance / 10.0).powi(2) / groups.len().max(1) as f64;
     let dir = out.join("adaptive");
     std::fs::create_dir_all(&dir)
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
@@ -997,14 +1000,24 @@ pub(super) fn refine(
                     .into_iter()
                     .map(|p| 1.0 - p)
                     .collect();
-                let weights = likelihood_weights(&c.log_density, &p_answer);
-                let selection = select_batch(
-                    &terms,
-                    &c.theta,
-                    &weights,
-                    group_batch[g].min(remaining),
-                    min_score,
-                )?;
+                let selection = match settings.acquisition {
+                    Acquisition::Density => select_batch(
+                        &terms,
+                        &c.theta,
+                        &likelihood_weights(&c.log_density, &p_answer),
+                        group_batch[g].min(remaining),
+                        min_score,
+                    )?,
+                    Acquisition::Moments => select_batch_for_moments(
+                        &terms,
+                        &c.theta,
+                        &c.full,
+                        &c.copies,
+                        &p_answer,
+                        group_batch[g].min(remaining),
+                        min_moment_score,
+                    )?,
+                };
                 for (order, (&i, &score)) in
                     selection.indices.iter().zip(&selection.scores).enumerate()
                 {

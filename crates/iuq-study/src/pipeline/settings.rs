@@ -135,6 +135,21 @@ pub struct AdaptiveSettings {
     pub max_rounds: usize,
     /// Distinct posterior samples scored as candidates for new runs (`candidates`, default 1000).
     pub candidates: usize,
+    /// How candidates are scored (`acquisition`, default `"density"`).
+    pub acquisition: Acquisition,
+}
+
+/// How the adaptive engine scores a candidate for a new run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Acquisition {
+    /// `"moments"`: by how much a run there shrinks the first-order error of every posterior
+    /// mean and std (`iuq_adaptive::moment_acquisition`), the quantity the stopping rule
+    /// measures.
+    Moments,
+    /// `"density"`: the variance of the log-likelihood there times the squared relative
+    /// posterior density (`iuq_adaptive::acquisition`, GPry's form).
+    Density,
 }
 
 /// Read `[surrogate] adaptive`.
@@ -150,6 +165,10 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         max_samples: s.count("max_samples", samples)?.unwrap_or(16 * samples),
         max_rounds: s.count("max_rounds", 1)?.unwrap_or(30),
         candidates: s.count("candidates", 1)?.unwrap_or(1000),
+        acquisition: match s.choice("acquisition", &["density", "moments"])? {
+            Some("moments") => Acquisition::Moments,
+            _ => Acquisition::Density,
+        },
     };
     s.finish()?;
     Ok(settings)
