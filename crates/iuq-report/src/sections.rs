@@ -320,7 +320,7 @@ pub(crate) fn build_sections(
             "posterior-check",
             "The model at the posterior",
             format!(
-                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std.{}",
+                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std and the check's resolution (a tenth of the datum's likelihood std by default).{}",
                 check.source,
                 check.samples,
                 if check.test.is_empty() {

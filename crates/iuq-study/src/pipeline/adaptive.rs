@@ -44,7 +44,7 @@ use iuq_adaptive::{
 
 use super::Events;
 use super::model_runs::ModelRuns;
-use super::posterior_check::{CheckVerdict, POSTERIOR_CHECK_DESIGN, PosteriorCheck};
+use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::{Acquisition, AdaptiveSettings};
 use super::surrogate::Surrogate;
@@ -264,8 +264,9 @@ impl AdaptiveOutcome {
         let requests: Vec<(usize, Vec<f64>)> = (0..groups.len())
             .flat_map(|g| points.iter().map(move |p| (g, p.clone())))
             .collect();
-        // Every run is in the store already: this reads them back in the shape training takes.
-        let outcomes = runs.run(Some(POSTERIOR_CHECK_DESIGN), &requests)?;
+        // Every run is in the store already: this reads them back in the shape training takes,
+        // and records the check as one trained on, for a replay to take its points from.
+        let outcomes = runs.run(Some(&retrained_check_label(round)), &requests)?;
         for (g, (group, outcomes)) in groups
             .iter_mut()
             .zip(outcomes.chunks(points.len()))
@@ -321,7 +322,7 @@ fn distinct(samples: &[Vec<f64>], limit: usize) -> Vec<(usize, usize)> {
 }
 
 /// s²_j at a posterior sample: the measurement variance (when used) plus (σ_m·y_j)².
-fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f64>) -> f64 {
+pub(super) fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f64>) -> f64 {
     let y = data.observations.values[j];
     let measurement = match (&data.observations.measurement_std, data.measurement_error) {
         (Some(e), true) => e[j] * e[j],

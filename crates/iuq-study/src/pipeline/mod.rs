@@ -563,17 +563,50 @@ fn run_stages(
             break (surrogate, gp_posterior, None);
         };
         let stage = Instant::now();
+        // A check an earlier run of the study trained on (recorded under its round's label) is
+        // replayed from the store, points and all, and trained on again.
+        let recorded = match adaptive.as_ref().filter(|o| o.converged) {
+            Some(outcome) => {
+                let label = posterior_check::retrained_check_label(outcome.last_round());
+                model_runs.recorded_requests(&label)?.map(|requests| {
+                    let points = requests
+                        .into_iter()
+                        .filter(|(g, _)| *g == 0)
+                        .map(|(_, p)| p)
+                        .collect();
+                    posterior_check::CheckPoints::Recorded { points, label }
+                })
+            }
+            None => None,
+        };
+        let replayed = recorded.is_some();
         events.message(format!(
-            "the model at the posterior: the MAP and {} posterior samples, {} runs (results already stored are reused)",
+            "the model at the posterior: the MAP and {} posterior samples{}, {} runs (results already stored are reused)",
             check.samples,
+            if replayed {
+                " (a check trained on, replayed from the store)"
+            } else {
+                ""
+            },
             (check.samples + 1) * group_count
         ));
+        // Each datum's likelihood std without the surrogate, at the MAP (σ_m where sampled).
+        let sigma_m = data.modelling_error.as_ref().and_then(|_| {
+            gp_posterior
+                .summary
+                .map
+                .get(study.space.dimension())
+                .copied()
+        });
+        let likelihood_std: Vec<f64> = (0..data.x.len())
+            .map(|j| adaptive::total_variance(&data, j, sigma_m).sqrt())
+            .collect();
         let checked = posterior_check::check_posterior(
-            &gp_posterior,
+            recorded.unwrap_or(posterior_check::CheckPoints::Posterior(&gp_posterior)),
             &surrogate,
             &model_runs,
             check,
-            data.observations.measurement_std.as_deref(),
+            &likelihood_std,
         )?;
         write_atomically(
             &out.join("posterior-check.json"),
@@ -583,11 +616,12 @@ fn run_stages(
         let made: usize = groups.iter().map(GroupRuns::len).sum();
         let retrain = match (&adaptive, &settings.adaptive) {
             (Some(outcome), Some(a)) => {
-                check.retrain
-                    && !checked.verdict.passed
-                    && outcome.converged
-                    && made < a.max_runs
-                    && outcome.last_round() < a.max_rounds
+                replayed
+                    || (check.retrain
+                        && !checked.verdict.passed
+                        && outcome.converged
+                        && made < a.max_runs
+                        && outcome.last_round() < a.max_rounds)
             }
             _ => false,
         };
@@ -609,7 +643,7 @@ fn run_stages(
             failed_at.join(", "),
             checked.verdict.largest_z,
             checked.verdict.z_bound,
-            (check.samples + 1) * group_count
+            (checked.samples.len() + 1) * group_count
         ));
         write_atomically(
             &out.join(format!(

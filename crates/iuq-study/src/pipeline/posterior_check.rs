@@ -18,6 +18,14 @@ use crate::posterior::SampledPosterior;
 /// Label of the check's runs in the campaign store.
 pub const POSTERIOR_CHECK_DESIGN: &str = "posterior-check";
 
+/// Label under which the runs of a check made after round `round` are recorded once they become
+/// training runs: a replay takes that check's points from the store, as it takes a round's, so
+/// that what the later rounds were trained on does not hang on the last bits of a resampled
+/// posterior.
+pub fn retrained_check_label(round: usize) -> String {
+    format!("posterior-check-after-round-{round}")
+}
+
 /// One model run of the check at one data point, beside the surrogate there.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct CheckedRun {
@@ -44,8 +52,9 @@ pub struct PointCheck {
     pub map: CheckedRun,
     /// The runs at the posterior samples.
     pub samples: Vec<CheckedRun>,
-    /// The smallest error that counts: `resolution` × the datum's measurement std (0 without
-    /// one), added in quadrature to each run's predictive std. A deterministic model's GP may be
+    /// The smallest error that counts: `resolution` × the datum's likelihood std without the
+    /// surrogate (measurement and modelling error, at the MAP), added in quadrature to each
+    /// run's predictive std. A deterministic model's GP may be
     /// sure to a thousandth of the measurement std, and an error ten times its std but a
     /// hundredth of the measurement's moves no likelihood term.
     pub resolution: f64,
@@ -255,26 +264,55 @@ fn chosen_samples(
     distinct
 }
 
-/// Run the model at the MAP of `posterior` and at `settings.samples` of its samples in every
-/// run group, and predict the same points with `surrogate`; `measurement_std` (per data point,
-/// when known) sets each point's resolution.
+/// Where a check's points come from.
+pub enum CheckPoints<'a> {
+    /// The MAP of the posterior and `samples` of its samples, the runs recorded as
+    /// [`POSTERIOR_CHECK_DESIGN`].
+    Posterior(&'a SampledPosterior),
+    /// The points (MAP first) of a check recorded under `label`, replayed.
+    Recorded {
+        /// The points, the MAP's first.
+        points: Vec<Vec<f64>>,
+        /// Their design's label.
+        label: String,
+    },
+}
+
+/// Run the model at the check's points (the MAP of a posterior and `settings.samples` of its
+/// samples, or a recorded check's) in every run group, and predict the same points with
+/// `surrogate`; `likelihood_std` (per data point: the likelihood's std without the surrogate,
+/// at the MAP) sets each point's resolution.
 pub fn check_posterior(
-    posterior: &SampledPosterior,
+    points: CheckPoints<'_>,
     surrogate: &Surrogate,
     runs: &ModelRuns,
     settings: &PosteriorCheckSettings,
-    measurement_std: Option<&[f64]>,
+    likelihood_std: &[f64],
 ) -> Result<PosteriorCheck> {
     let d = runs.parameters().len();
-    let map = posterior.summary.map[..d].to_vec();
-    let samples = chosen_samples(posterior, d, settings.samples, settings.seed);
+    let (map, samples, label) = match points {
+        CheckPoints::Posterior(posterior) => (
+            posterior.summary.map[..d].to_vec(),
+            chosen_samples(posterior, d, settings.samples, settings.seed),
+            POSTERIOR_CHECK_DESIGN.to_string(),
+        ),
+        CheckPoints::Recorded { mut points, label } => {
+            if points.is_empty() {
+                return Err(StudyError::Failure(format!(
+                    "the posterior check `{label}` recorded in the campaign store has no points"
+                )));
+            }
+            let map = points.remove(0);
+            (map, points, label)
+        }
+    };
     let points: Vec<Vec<f64>> = std::iter::once(map.clone())
         .chain(samples.iter().cloned())
         .collect();
     let requests: Vec<(usize, Vec<f64>)> = (0..runs.groups())
         .flat_map(|g| points.iter().map(move |p| (g, p.clone())))
         .collect();
-    let outcomes = runs.run_with_diagnostics(Some(POSTERIOR_CHECK_DESIGN), &requests)?;
+    let outcomes = runs.run_with_diagnostics(Some(&label), &requests)?;
     let predictions = surrogate.bank.predict(&points).map_err(|e| {
         StudyError::Failure(format!("predicting the posterior check's points: {e}"))
     })?;
@@ -307,11 +345,7 @@ pub fn check_posterior(
                 x: runs.abscissa_of_output(j),
                 map: map_run,
                 samples: checked.collect(),
-                resolution: settings.resolution
-                    * measurement_std
-                        .and_then(|s| s.get(j))
-                        .copied()
-                        .unwrap_or(0.0),
+                resolution: settings.resolution * likelihood_std.get(j).copied().unwrap_or(0.0),
             });
         }
     }
