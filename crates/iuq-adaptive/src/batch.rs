@@ -126,35 +126,10 @@ pub fn select_batch(
     let initial_scores: Vec<f64> = (0..m)
         .map(|i| score(terms, &means, &variances, weights, i))
         .collect();
-    let mut scores = initial_scores.clone();
     // Per term: the conditioned covariance columns of the picks so far, and their denominators.
     let mut columns: Vec<Vec<Vec<f64>>> = vec![Vec::new(); terms.len()];
     let mut denominators: Vec<Vec<f64>> = vec![Vec::new(); terms.len()];
-    let mut chosen = vec![false; m];
-    let mut selection = Selection {
-        indices: Vec::new(),
-        scores: Vec::new(),
-        initial_scores,
-    };
-    while selection.indices.len() < batch {
-        let mut best: Option<(usize, f64)> = None;
-        for (i, &s) in scores.iter().enumerate() {
-            if !chosen[i] && s.is_finite() && best.is_none_or(|(_, b)| s > b) {
-                best = Some((i, s));
-            }
-        }
-        let Some((pick, best_score)) = best else {
-            break;
-        };
-        if best_score <= min_score || best_score <= 0.0 {
-            break;
-        }
-        chosen[pick] = true;
-        selection.indices.push(pick);
-        selection.scores.push(best_score);
-        if selection.indices.len() == batch {
-            break;
-        }
+    greedy_selection(initial_scores, batch, min_score, |pick, chosen, scores| {
         let s = std::slice::from_ref(&candidates[pick]);
         for (t, term) in terms.iter().enumerate() {
             let prior: Vec<f64> = term
@@ -189,6 +164,46 @@ pub fn select_batch(
                 score(terms, &means, &variances, weights, i)
             };
         }
+        Ok(())
+    })
+}
+
+/// The greedy loop of both acquisitions: pick the best-scoring candidate not yet chosen (ties to
+/// the lower index), while its score is positive and above `min_score`, `batch` at most; after
+/// every pick but the last, `after_pick(pick, chosen, scores)` conditions on it and rescores.
+pub(crate) fn greedy_selection(
+    initial_scores: Vec<f64>,
+    batch: usize,
+    min_score: f64,
+    mut after_pick: impl FnMut(usize, &[bool], &mut [f64]) -> Result<()>,
+) -> Result<Selection> {
+    let mut scores = initial_scores.clone();
+    let mut chosen = vec![false; scores.len()];
+    let mut selection = Selection {
+        indices: Vec::new(),
+        scores: Vec::new(),
+        initial_scores,
+    };
+    while selection.indices.len() < batch {
+        let mut best: Option<(usize, f64)> = None;
+        for (i, &s) in scores.iter().enumerate() {
+            if !chosen[i] && s.is_finite() && best.is_none_or(|(_, b)| s > b) {
+                best = Some((i, s));
+            }
+        }
+        let Some((pick, best_score)) = best else {
+            break;
+        };
+        if best_score <= min_score || best_score <= 0.0 {
+            break;
+        }
+        chosen[pick] = true;
+        selection.indices.push(pick);
+        selection.scores.push(best_score);
+        if selection.indices.len() == batch {
+            break;
+        }
+        after_pick(pick, &chosen, &mut scores)?;
     }
     Ok(selection)
 }

@@ -31,7 +31,7 @@
 
 use iuq_gp::GaussianProcess;
 
-use crate::batch::{LikelihoodTerm, Selection};
+use crate::batch::{LikelihoodTerm, Selection, greedy_selection};
 use crate::error::{AdaptiveError, Result};
 
 /// The posterior's first-order moment sensitivities g_M (one row per moment: the mean, then the
@@ -226,40 +226,15 @@ pub fn select_batch_for_moments(
         answer[c] * states.iter().map(|s| s.reduction(c)).sum::<f64>()
     };
     let initial_scores: Vec<f64> = (0..m).map(|c| score(&states, c)).collect();
-    let mut scores = initial_scores.clone();
-    let mut chosen = vec![false; m];
-    let mut selection = Selection {
-        indices: Vec::new(),
-        scores: Vec::new(),
-        initial_scores,
-    };
-    while selection.indices.len() < batch {
-        let mut best: Option<(usize, f64)> = None;
-        for (i, &s) in scores.iter().enumerate() {
-            if !chosen[i] && s.is_finite() && best.is_none_or(|(_, b)| s > b) {
-                best = Some((i, s));
-            }
-        }
-        let Some((pick, best_score)) = best else {
-            break;
-        };
-        if best_score <= min_score || best_score <= 0.0 {
-            break;
-        }
-        chosen[pick] = true;
-        selection.indices.push(pick);
-        selection.scores.push(best_score);
-        if selection.indices.len() == batch {
-            break;
-        }
+    greedy_selection(initial_scores, batch, min_score, |pick, chosen, scores| {
         for state in &mut states {
             state.condition(pick);
         }
         for (c, s) in scores.iter_mut().enumerate() {
             *s = if chosen[c] { 0.0 } else { score(&states, c) };
         }
-    }
-    Ok(selection)
+        Ok(())
+    })
 }
 
 #[cfg(test)]
