@@ -98,6 +98,19 @@ fn adaptive_runs(out: &Path) -> Vec<(usize, [f64; 2], bool)> {
         .collect()
 }
 
+/// The cooling curve as an expression model per measurement time.
+const CURVE_EXPRESSION: &str =
+    "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }";
+
+/// `cooling-per-time.toml` of `dir` with its program replaced by the `[model]` lines `model`
+/// (an expression or a UM-Bridge model of the same curve).
+fn per_time_study_with_model(dir: &Path, model: impl AsRef<str>) -> String {
+    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml")).unwrap();
+    let program = "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }";
+    assert!(study.contains(program));
+    study.replace(program, model.as_ref())
+}
+
 fn pipeline(study: &Path, out: &Path) -> serde_json::Value {
     let output = iuq(&[
         "pipeline",
@@ -349,12 +362,7 @@ fn bad_adaptive_keys_exit_2_naming_the_file_and_key() {
 fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
     let dir = cooling("expression");
     let (_, exact) = exact_posterior(&dir);
-    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-        .unwrap()
-        .replace(
-            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-            "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
-        );
+    let study = per_time_study_with_model(&dir, CURVE_EXPRESSION);
     assert!(study.contains("kind = \"expression\""));
     let study = study.replace(
         "[surrogate]\n",
@@ -398,16 +406,10 @@ fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
 fn the_moment_acquisition_converges_to_the_exact_posterior() {
     let dir = cooling("moments");
     let (_, exact) = exact_posterior(&dir);
-    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-        .unwrap()
-        .replace(
-            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-            "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
-        )
-        .replace(
-            "tolerance = 0.1 }",
-            "tolerance = 0.1, acquisition = \"moments\" }",
-        );
+    let study = per_time_study_with_model(&dir, CURVE_EXPRESSION).replace(
+        "tolerance = 0.1 }",
+        "tolerance = 0.1, acquisition = \"moments\" }",
+    );
     assert!(study.contains("acquisition = \"moments\""));
     let path = dir.join("moments.toml");
     std::fs::write(&path, study).unwrap();
@@ -445,12 +447,7 @@ fn a_posterior_check_that_fails_becomes_training_runs_and_the_rounds_go_on() {
     std::fs::write(dir.join("cooling-exact.toml"), exact_study).unwrap();
     let (_, exact) = exact_posterior(&dir);
     let study = |retrain: bool| {
-        let text = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-            .unwrap()
-            .replace(
-                "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-                &format!("kind = \"expression\"\nabscissa = \"t\"\noutputs = {{ T = \"{BUMP}\" }}"),
-            )
+        let text = per_time_study_with_model(&dir, format!("kind = \"expression\"\nabscissa = \"t\"\noutputs = {{ T = \"{BUMP}\" }}"))
             .replace(
                 "adaptive = { batch = 2, max_runs = 160, tolerance = 0.1 }",
                 &format!(
@@ -565,12 +562,7 @@ fn rounds_without_times(out: &Path) -> Vec<serde_json::Value> {
 #[test]
 fn a_rerun_reads_each_rounds_measurement_back_from_the_store_and_recomputing_agrees() {
     let dir = cooling("measurements");
-    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-        .unwrap()
-        .replace(
-            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-            "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }",
-        );
+    let study = per_time_study_with_model(&dir, CURVE_EXPRESSION);
     let path = dir.join("expression.toml");
     std::fs::write(&path, &study).unwrap();
     let first = pipeline(&path, &dir.join("first"));
@@ -638,15 +630,13 @@ fn a_umbridge_model_with_an_abscissa_is_calibrated_through_its_server() {
         .as_str()
         .unwrap()
         .to_string();
-    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-        .unwrap()
-        .replace(
-            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-            &format!(
-                "kind = \"umbridge\"\nurl = \"{}\"\nname = \"{name}\"\nabscissa = \"t\"",
-                served.url()
-            ),
-        );
+    let study = per_time_study_with_model(
+        &dir,
+        format!(
+            "kind = \"umbridge\"\nurl = \"{}\"\nname = \"{name}\"\nabscissa = \"t\"",
+            served.url()
+        ),
+    );
     assert!(study.contains("kind = \"umbridge\""));
     let path = dir.join("umbridge.toml");
     std::fs::write(&path, study).unwrap();
@@ -682,12 +672,10 @@ fn a_minimal_study_needs_parameters_likelihood_model_and_a_design() {
 fn a_batch_command_model_runs_many_runs_per_process_and_converges() {
     let dir = cooling("batch");
     let (_, exact) = exact_posterior(&dir);
-    let study = std::fs::read_to_string(dir.join("cooling-per-time.toml"))
-        .unwrap()
-        .replace(
-            "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }",
-            "kind = \"batch-command\"\ncommand = [\"./cooling_model.py\", \"--batch\"]\nbatch_size = 4\nabscissa = \"t\"\noutputs = [\"T\"]",
-        );
+    let study = per_time_study_with_model(
+        &dir,
+        "kind = \"batch-command\"\ncommand = [\"./cooling_model.py\", \"--batch\"]\nbatch_size = 4\nabscissa = \"t\"\noutputs = [\"T\"]",
+    );
     assert!(study.contains("batch-command"));
     let path = dir.join("batch.toml");
     std::fs::write(&path, study).unwrap();
