@@ -278,7 +278,7 @@ pub fn synthetic_report(
             ("iuq version".to_string(), "0.1.0".to_string()),
             (
                 "command".to_string(),
-                "iuq pipeline examples/rbc-healthy.toml --out report".to_string(),
+                "iuq pipeline examples/rbc-healthy-hemocell.toml --out report".to_string(),
             ),
             ("seed".to_string(), seed.to_string()),
             ("date".to_string(), "2025-01-01T00:00:00Z".to_string()),
