@@ -425,7 +425,9 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     // The campaign commands read a pipeline study's store too.
     let status = json_of(&iuq(&[
         "status",
-        dir.join("examples/rbc-healthy-hemocell.toml").to_str().unwrap(),
+        dir.join("examples/rbc-healthy-hemocell.toml")
+            .to_str()
+            .unwrap(),
         "--json",
     ]));
     assert_eq!(status["study"], "rbc-healthy-hemocell");
