@@ -335,7 +335,7 @@ pub(crate) fn build_sections(
                 name: "posterior_check",
                 title: "Model − surrogate at the posterior",
                 caption: format!(
-                    "Model output minus surrogate mean at every data point ({}): posterior samples (blue), the MAP (red), and twice the surrogate's median predictive std (grey band). The MAP runs also appear in the first figure.",
+                    "Model output minus surrogate mean at every data point ({}): posterior samples (blue), the MAP (red), twice the surrogate's median predictive std (grey band), and at each sample twice its own predictive std with the run's frame std (grey line): a sample beyond its line is outside 2σ. The MAP runs also appear in the first figure.",
                     report.data.x_label
                 ),
                 size: posterior_check::SIZE,

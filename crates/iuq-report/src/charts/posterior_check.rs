@@ -1,6 +1,7 @@
 //! The posterior check: at every data point, the model's output minus the surrogate's mean at
-//! the MAP and at the posterior samples that were run, beside twice the surrogate's predictive
-//! std (the band within which the surrogate claims the model lies).
+//! the MAP and at the posterior samples that were run, beside twice the surrogate's median
+//! predictive std (a band) and twice each run's own predictive std (a line at the run): within
+//! it, the surrogate claims, the run lies.
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
@@ -9,7 +10,7 @@ use crate::axis::{CategoryAxis, category_label, linear_tick_label};
 use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::PosteriorCheckReport;
+use crate::model::{CheckedPoint, PosteriorCheckReport};
 use crate::statistics::{extent, padded, quantile_sorted};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE};
 
@@ -29,6 +30,19 @@ pub(crate) struct PosteriorCheckChart<'a> {
     pub check: &'a PosteriorCheckReport,
     /// Label of the data's control variable.
     pub x_label: &'a str,
+}
+
+/// Colour of each run's own ± 2σ line.
+const RUN_BAND_COLOUR: RGBColor = RGBColor(150, 150, 150);
+
+/// Twice each sample run's predictive std, √(surrogate std² + run std²): the half width within
+/// which the surrogate claims that run lies.
+fn run_half_widths(p: &CheckedPoint) -> Vec<f64> {
+    p.surrogate_std
+        .iter()
+        .zip(p.model_std.iter().chain(std::iter::repeat(&0.0)))
+        .map(|(s, m)| 2.0 * (s * s + m * m).sqrt())
+        .collect()
 }
 
 /// The median of the finite `values` (NaN when there are none).
@@ -54,6 +68,10 @@ impl Chart for PosteriorCheckChart<'_> {
                 LegendMark::Filled(RGBColor(200, 200, 200), 1.0),
                 "± 2 × surrogate std (median)".to_string(),
             ),
+            (
+                LegendMark::Whisker(RUN_BAND_COLOUR),
+                "± 2 × the run's predictive std".to_string(),
+            ),
         ];
         let body = header(area, "Model − surrogate at the posterior", &entries, 0)?;
         let bands: Vec<f64> = order
@@ -66,6 +84,7 @@ impl Chart for PosteriorCheckChart<'_> {
                 .iter()
                 .zip(&p.surrogate)
                 .map(|(m, s)| m - s)
+                .chain(run_half_widths(p).into_iter().flat_map(|w| [w, -w]))
                 .chain(p.map_model.map(|(m, _)| m - p.map_surrogate.0))
                 .chain([bands[c], -bands[c], 0.0])
                 .collect::<Vec<_>>()
@@ -108,12 +127,22 @@ impl Chart for PosteriorCheckChart<'_> {
         for (c, &i) in order.iter().enumerate() {
             let p = &points[i];
             let k = p.model.len().max(1) as f64;
+            // Spread over the category so that equal residuals stay visible.
+            let at = |j: usize| c as f64 - HALF_WIDTH + 2.0 * HALF_WIDTH * (j as f64 + 0.5) / k;
+            chart.draw_series(
+                run_half_widths(p)
+                    .into_iter()
+                    .enumerate()
+                    .filter(|(_, w)| w.is_finite())
+                    .map(|(j, w)| {
+                        PathElement::new(
+                            vec![(at(j), -w), (at(j), w)],
+                            RUN_BAND_COLOUR.stroke_width(1),
+                        )
+                    }),
+            )?;
             chart.draw_series(p.model.iter().zip(&p.surrogate).enumerate().map(
-                |(j, (m, s))| {
-                    // Spread over the category so that equal residuals stay visible.
-                    let x = c as f64 - HALF_WIDTH + 2.0 * HALF_WIDTH * (j as f64 + 0.5) / k;
-                    Circle::new((x, m - s), 3, SAMPLE_COLOUR.mix(0.8).filled())
-                },
+                |(j, (m, s))| Circle::new((at(j), m - s), 3, SAMPLE_COLOUR.mix(0.8).filled()),
             ))?;
             if let Some((m, _)) = p.map_model {
                 chart.draw_series(std::iter::once(Circle::new(
