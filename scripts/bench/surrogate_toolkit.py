@@ -6,6 +6,13 @@ Runs our kernels (through the `iuq` release binary, timed in-process) and the re
 timings with the ratio. Timings are medians of repeats; the machine is noisy, so read ratios.
 
 Usage: cargo build --release -p iuq && python3 scripts/bench/surrogate_toolkit.py [--quick]
+       [--record] [--compare]
+
+The performance record: `--record` appends this run's figures (date, commit, CPU, vector
+extension the kernels dispatch to, kernel, iuq's and the reference's seconds, ratio) to
+docs/benchmarks.csv; `--compare` sets each kernel's time beside the last recorded one on the same
+CPU and vector extension and flags any kernel more than 1.5× slower (exit status 1). Times from
+different machines are never compared. The record is for developers, not a timed test.
 """
 import argparse
 import json
@@ -14,6 +21,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 
 import numpy as np
 
@@ -38,8 +46,15 @@ def median_time(fn, repeats):
     return float(np.median(times)), result
 
 
+RECORD = os.path.join(ROOT, "docs", "benchmarks.csv")
+RECORD_COLUMNS = ["date", "commit", "cpu", "vector", "kernel", "iuq_seconds", "reference_seconds", "ratio"]
+SLOWER = 1.5
+RESULTS = []
+
+
 def row(name, ours, reference, target=None, extra=""):
     ratio = reference / ours if ours > 0 else float("inf")
+    RESULTS.append((name, ours, reference, ratio))
     goal = f" (target ≥ {target}×)" if target else ""
     print(f"{name:<34} iuq {ours:9.4f} s   reference {reference:9.4f} s   ratio {ratio:7.1f}×{goal}{extra}")
     return ratio
@@ -82,6 +97,39 @@ def bench_gp(work, repeats):
     sk_std_s, _ = median_time(lambda: sk.predict(points, return_std=True), max(1, repeats // 2))
     row("GP predict 100k, mean only", pred["seconds_mean_median"], sk_mean_s, 50)
     row("GP predict 100k, mean + std", pred["seconds_median"], sk_std_s, 50)
+
+
+def bench_gp_bank(work, repeats):
+    """The GP bank at the red-cell studies' size inside one BASIS stage: 8 GPs (one per shear
+    stress) of 136 runs in 3 parameters, mean and std at 10,000 samples; iuq's figure is the sum
+    of the 8 GPs' in-process medians, the reference's that of scikit-learn's predict."""
+    from sklearn.gaussian_process import GaussianProcessRegressor
+    from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+
+    rng = np.random.default_rng(2)
+    points = rng.random((10_000, 3))
+    pts_file = os.path.join(work, "bank_points.csv")
+    np.savetxt(pts_file, points, delimiter=",", header="x1,x2,x3", comments="")
+    ours_std = ours_mean = sk_std = sk_mean = 0.0
+    for g in range(8):
+        x = rng.random((136, 3))
+        y = np.tanh((1 + g) * x[:, 0]) * (1 - 0.3 * x[:, 1]) + 0.1 * x[:, 2] ** 2
+        train = os.path.join(work, f"bank{g}.csv")
+        np.savetxt(train, np.column_stack([x, y]), delimiter=",", header="x1,x2,x3,y", comments="")
+        gp_file = os.path.join(work, f"bank{g}.json")
+        iuq("gp", "fit", "--data", train, "--inputs", "x1,x2,x3", "--output", "y", "--restarts", 2,
+            "--seed", 0, "--out", gp_file)
+        pred = iuq("bench", "gp-predict", "--model", gp_file, "--points", pts_file, "--repeats", 5 * repeats)
+        ours_std += pred["seconds_median"]
+        ours_mean += pred["seconds_mean_median"]
+        kernel = ConstantKernel(1.0, (1e-2, 1e2)) * RBF([0.5] * 3, (1e-2, 1e2)) + WhiteKernel(1e-3, (1e-10, 1.0))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            sk = GaussianProcessRegressor(kernel, normalize_y=True, random_state=0).fit(x, y)
+        sk_mean += median_time(lambda: sk.predict(points), 5 * repeats)[0]
+        sk_std += median_time(lambda: sk.predict(points, return_std=True), 5 * repeats)[0]
+    row("GP bank 8x136, 10k points, mean", ours_mean, sk_mean)
+    row("GP bank 8x136, 10k points, mean+std", ours_std, sk_std)
 
 
 def bench_sobol(repeats):
@@ -150,9 +198,85 @@ def bench_lhs(work, repeats):
           f"100 tries {min_distance(design100):.4f} in {py100_seconds:.2f} s")
 
 
+def machine():
+    """The CPU's model name and the widest vector extension iuq's kernels dispatch to."""
+    cpu, flags = "unknown", set()
+    try:
+        with open("/proc/cpuinfo") as f:
+            for line in f:
+                if line.startswith("model name") and cpu == "unknown":
+                    cpu = line.split(":", 1)[1].strip()
+                elif line.startswith("flags"):
+                    flags = set(line.split(":", 1)[1].split())
+    except OSError:
+        pass
+    if {"avx512f", "avx2", "fma"} <= flags:
+        vector = "avx512"
+    elif {"avx2", "fma"} <= flags:
+        vector = "avx2"
+    else:
+        vector = "baseline"
+    return cpu, vector
+
+
+def commit():
+    out = subprocess.run(["git", "-C", ROOT, "rev-parse", "--short", "HEAD"], capture_output=True, text=True)
+    dirty = subprocess.run(["git", "-C", ROOT, "status", "--porcelain", "--untracked-files=no"],
+                           capture_output=True, text=True).stdout.strip()
+    return (out.stdout.strip() or "unknown") + ("+dirty" if dirty else "")
+
+
+def read_record():
+    import csv
+    if not os.path.exists(RECORD):
+        return []
+    with open(RECORD, newline="") as f:
+        return list(csv.DictReader(f))
+
+
+def compare_with_record(cpu, vector):
+    """Flag kernels more than SLOWER× slower than the last recorded run on this CPU."""
+    last = {}
+    for r in read_record():
+        if r["cpu"] == cpu and r["vector"] == vector:
+            last[r["kernel"]] = r
+    slower = []
+    print(f"\ncompared with {os.path.relpath(RECORD, ROOT)} (same CPU, {vector}):")
+    for name, ours, _, _ in RESULTS:
+        r = last.get(name)
+        if r is None:
+            print(f"  {name:<34} no earlier record")
+            continue
+        before = float(r["iuq_seconds"])
+        factor = ours / before if before > 0 else float("inf")
+        flag = "  SLOWER" if factor > SLOWER else ""
+        print(f"  {name:<34} {before:9.4f} s ({r['commit']}, {r['date']}) -> {ours:9.4f} s  ×{factor:.2f}{flag}")
+        if factor > SLOWER:
+            slower.append(name)
+    return slower
+
+
+def append_record(cpu, vector):
+    import csv
+    import datetime
+    new = not os.path.exists(RECORD)
+    date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
+    sha = commit()
+    with open(RECORD, "a", newline="") as f:
+        w = csv.writer(f)
+        if new:
+            w.writerow(RECORD_COLUMNS)
+        for name, ours, reference, ratio in RESULTS:
+            w.writerow([date, sha, cpu, vector, name, f"{ours:.6g}", f"{reference:.6g}", f"{ratio:.3g}"])
+    print(f"recorded {len(RESULTS)} kernels in {os.path.relpath(RECORD, ROOT)} at {sha}")
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__)
     parser.add_argument("--quick", action="store_true", help="fewer repeats")
+    parser.add_argument("--record", action="store_true", help="append the figures to docs/benchmarks.csv")
+    parser.add_argument("--compare", action="store_true",
+                        help=f"flag kernels more than {SLOWER}x slower than the last record on this CPU (exit 1)")
     args = parser.parse_args()
     repeats = 3 if args.quick else 5
     if not os.path.exists(IUQ):
@@ -160,9 +284,16 @@ def main():
     print(f"threads: {os.cpu_count()}; medians of {repeats} repeats; ratio = reference / iuq")
     with tempfile.TemporaryDirectory() as work:
         bench_gp(work, repeats)
+        bench_gp_bank(work, repeats)
         bench_sobol(repeats)
         bench_kde(work, repeats)
         bench_lhs(work, repeats)
+    cpu, vector = machine()
+    slower = compare_with_record(cpu, vector) if args.compare else []
+    if args.record:
+        append_record(cpu, vector)
+    if slower:
+        sys.exit(f"more than {SLOWER}x slower than recorded: {', '.join(slower)}")
 
 
 if __name__ == "__main__":

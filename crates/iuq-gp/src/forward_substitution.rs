@@ -17,9 +17,11 @@
 //! and ‖v‖² = Σ over panels (in order) of the panel's Σ_i v_i² (fused multiply-adds in
 //! increasing i). The result for a point does not depend on the other points of its group,
 //! on the batch or on the number of threads. The kernel is plain Rust on arrays of [`LANES`]
-//! lanes, compiled for AVX-512, for AVX2+FMA and for the baseline and chosen at run time
-//! (`vector_math::multiversion!`); every variant performs the same operations in the same
-//! order, so all agree bit for bit with an unvectorised reference (tested). With AVX-512 the
+//! lanes, compiled for AVX-512, for AVX2+FMA and for the baseline and chosen at run time; the
+//! variants hold as many rows of a tile in registers as the CPU's register file takes (24, 6
+//! and 3 rows: a 24-row tile on AVX2's 16 registers spilled and ran 3× slower, 0.90 s instead of
+//! 0.34 s for 100,000 points at n = 500). Every variant performs the same operations in the
+//! same order, so all agree bit for bit with an unvectorised reference (tested). With AVX-512 the
 //! tile is 24 vector registers and the update's inner loop is 24 fused multiply-adds with
 //! broadcast operands per row of v. On the 2-core development machine (quiet) it ran at
 //! 24.8 GFMA/s per core at n = 500, 74 % of the core's measured peak of 33.6, where faer's
@@ -36,8 +38,6 @@
 //! c ≈ 1e3, σ² = 1e−8 an f32 substitution gets it wrong by ≈ c itself (measured: errors of
 //! 5e2 on variances of 3e−9); the project's rule (f64 unless a test shows f32 is enough)
 //! keeps f64.
-
-use crate::vector_math::multiversion;
 
 /// Rows of L per panel (the height of the register tile).
 pub(crate) const ROWS: usize = 24;
@@ -134,7 +134,7 @@ impl PackedFactor {
                 let r0 = p * ROWS;
                 let (done, rest) = group.split_at_mut(r0 * LANES);
                 let tile = &mut rest[..ROWS * LANES];
-                update(a, done, tile);
+                update::<ROWS>(a, done, tile, 0);
                 let s = solve(diagonal, reciprocal, tile);
                 for (t, s) in total.iter_mut().zip(s) {
                     *t += s;
@@ -148,32 +148,77 @@ impl PackedFactor {
 /// half of a 48 KiB L1 data cache.
 const K_CHUNK: usize = 128;
 
-multiversion! {
-    /// [`PackedFactor::squared_norms`] (sizes checked by the caller).
-    fn blocked_squared_norms(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
-        let size = packed.padded_rows() * LANES;
-        for total in norms.iter_mut() {
-            *total = [0.0; LANES];
+/// [`PackedFactor::squared_norms`] (sizes checked by the caller), dispatched at run time to
+/// the variant compiled for the CPU. The variants differ only in how many rows of a tile
+/// the off-diagonal update holds in registers at once ([`blocked_squared_norms_with`]'s `SUB`):
+/// the whole tile (24 rows of 8 lanes: 24 of AVX-512's 32 vector registers), 6 rows with
+/// AVX2+FMA (12 of its 16 registers of 4 doubles; the whole tile would be 48 registers and
+/// spill to memory, which made AVX2 machines 3× slower), and 3 rows on the x86-64 baseline
+/// (SSE2, 16 registers of 2 doubles; 6 on other architectures, e.g. NEON's 32). Every variant
+/// performs the same operations on every value in the same order, so all agree bit for bit.
+fn blocked_squared_norms(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "avx512f,avx2,fma")]
+        unsafe fn v4(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+            blocked_squared_norms_with::<24>(packed, v, norms)
         }
-        for p in 0..packed.panels {
-            let (a, diagonal, reciprocal) = packed.panel(p);
-            let r0 = p * ROWS;
-            let mut k0 = 0;
-            while k0 < r0 {
-                let k1 = (k0 + K_CHUNK).min(r0);
-                let chunk = &a[k0 * ROWS..k1 * ROWS];
-                for group in v.chunks_exact_mut(size) {
-                    let (done, rest) = group.split_at_mut(r0 * LANES);
-                    update(chunk, &done[k0 * LANES..k1 * LANES], &mut rest[..ROWS * LANES]);
+        #[target_feature(enable = "avx2,fma")]
+        unsafe fn v3(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
+            blocked_squared_norms_with::<6>(packed, v, norms)
+        }
+        if std::arch::is_x86_feature_detected!("avx512f")
+            && std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU supports every feature `v4` is compiled for.
+            return unsafe { v4(packed, v, norms) };
+        }
+        if std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+        {
+            // SAFETY: the CPU supports every feature `v3` is compiled for.
+            return unsafe { v3(packed, v, norms) };
+        }
+        blocked_squared_norms_with::<3>(packed, v, norms)
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    blocked_squared_norms_with::<6>(packed, v, norms)
+}
+
+/// The packed substitution with the off-diagonal update done `SUB` rows of a tile at a time
+/// (`SUB` divides [`ROWS`]; see [`blocked_squared_norms`]).
+#[inline(always)]
+fn blocked_squared_norms_with<const SUB: usize>(
+    packed: &PackedFactor,
+    v: &mut [f64],
+    norms: &mut [[f64; LANES]],
+) {
+    const { assert!(SUB > 0 && ROWS % SUB == 0) };
+    let size = packed.padded_rows() * LANES;
+    for total in norms.iter_mut() {
+        *total = [0.0; LANES];
+    }
+    for p in 0..packed.panels {
+        let (a, diagonal, reciprocal) = packed.panel(p);
+        let r0 = p * ROWS;
+        let mut k0 = 0;
+        while k0 < r0 {
+            let k1 = (k0 + K_CHUNK).min(r0);
+            let chunk = &a[k0 * ROWS..k1 * ROWS];
+            for group in v.chunks_exact_mut(size) {
+                let (done, rest) = group.split_at_mut(r0 * LANES);
+                let done = &done[k0 * LANES..k1 * LANES];
+                for first in (0..ROWS).step_by(SUB) {
+                    update::<SUB>(chunk, done, &mut rest[..ROWS * LANES], first);
                 }
-                k0 = k1;
             }
-            for (group, total) in v.chunks_exact_mut(size).zip(norms.iter_mut()) {
-                let tile = &mut group[r0 * LANES..(r0 + ROWS) * LANES];
-                let s = solve(diagonal, reciprocal, tile);
-                for (t, s) in total.iter_mut().zip(s) {
-                    *t += s;
-                }
+            k0 = k1;
+        }
+        for (group, total) in v.chunks_exact_mut(size).zip(norms.iter_mut()) {
+            let tile = &mut group[r0 * LANES..(r0 + ROWS) * LANES];
+            let s = solve(diagonal, reciprocal, tile);
+            for (t, s) in total.iter_mut().zip(s) {
+                *t += s;
             }
         }
     }
@@ -199,19 +244,23 @@ macro_rules! for_each_row {
     };
 }
 
-/// The off-diagonal update of one tile: tile_i = fma(−L_ik, v_k, tile_i) for the columns k
-/// of `a` (ROWS negated values per column) and the rows of `v` (LANES values per row), in
-/// order. The ROWS × LANES tile is held in registers (24 vectors of 8 with AVX-512).
+/// The off-diagonal update of rows `first..first + SUB` of one tile:
+/// tile_i = fma(−L_ik, v_k, tile_i) for the columns k of `a` (ROWS negated values per column)
+/// and the rows of `v` (LANES values per row), in order. The SUB × LANES values are held in
+/// registers (one vector per row with AVX-512, two with AVX2).
 #[inline(always)]
-fn update(a: &[f64], v: &[f64], tile: &mut [f64]) {
-    let mut acc = [[0.0f64; LANES]; ROWS];
+fn update<const SUB: usize>(a: &[f64], v: &[f64], tile: &mut [f64], first: usize) {
+    let tile = &mut tile[first * LANES..(first + SUB) * LANES];
+    let mut acc = [[0.0f64; LANES]; SUB];
     for (row, t) in acc.iter_mut().zip(tile.chunks_exact(LANES)) {
         row.copy_from_slice(t);
     }
     for (vk, ak) in v.chunks_exact(LANES).zip(a.chunks_exact(ROWS)) {
         let vk: [f64; LANES] = vk.try_into().expect("LANES values");
-        let ak: &[f64; ROWS] = ak.try_into().expect("ROWS values");
-        for_each_row!(I => fma_lanes(ak[I], &vk, &mut acc[I]));
+        let ak: &[f64; SUB] = ak[first..first + SUB].try_into().expect("SUB values");
+        for_each_row!(I => if I < SUB {
+            fma_lanes(ak[I], &vk, &mut acc[I])
+        });
     }
     for (row, t) in acc.iter().zip(tile.chunks_exact_mut(LANES)) {
         t.copy_from_slice(row);
@@ -345,6 +394,27 @@ mod tests {
                         assert_eq!(a[g * size + k * LANES + t], 0.0);
                     }
                 }
+            }
+            // Every sub-tile height (AVX-512's 24 rows, AVX2's 6, the baseline's 3, and 1)
+            // gives the reference's results bit for bit, whichever variant this CPU runs.
+            for (sub, run) in [
+                (
+                    24,
+                    blocked_squared_norms_with::<24>
+                        as fn(&PackedFactor, &mut [f64], &mut [[f64; LANES]]),
+                ),
+                (6, blocked_squared_norms_with::<6>),
+                (3, blocked_squared_norms_with::<3>),
+                (1, blocked_squared_norms_with::<1>),
+            ] {
+                let mut c = rhs.clone();
+                let mut norms_sub = [[0.0; LANES]; GROUPS];
+                run(&packed, &mut c, &mut norms_sub);
+                assert_eq!(c, b, "n = {n}: sub-tiles of {sub} rows differ");
+                assert_eq!(
+                    norms_sub, norms_portable,
+                    "n = {n}: sub-tiles of {sub} rows"
+                );
             }
             // A column's result does not depend on its neighbours or on the other groups.
             let mut single = vec![0.0; size];
