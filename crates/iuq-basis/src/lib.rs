@@ -12,7 +12,10 @@
 //! - [`annealing`], [`proposal`], [`resampling`]: the steps of a stage;
 //! - [`sampler`]: the sampler ([`Basis`]), its state, observers and stop reasons;
 //! - [`checkpoint`]: the state as self-describing JSON, for bit-identical resumption;
-//! - [`summary`]: MAP, mean, std, quantiles and KDE marginals.
+//! - [`summary`]: MAP, mean, std, quantiles and KDE marginals;
+//! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
+//! - [`model_posterior`]: from a surrogate's posterior to the model's, by importance stages
+//!   and delayed-acceptance moves, certified by k̂.
 //!
 //! ```
 //! use iuq_basis::{Basis, BasisSettings, FnLikelihood, Silent};
@@ -42,8 +45,11 @@ pub mod curve_model;
 pub mod diagnostics;
 pub mod error;
 pub mod likelihood;
+pub mod model_posterior;
+pub mod pareto_smoothing;
 pub mod prediction_error;
 pub mod proposal;
+pub mod quadratic_regression;
 pub mod resampling;
 pub mod sampler;
 pub mod settings;
@@ -53,6 +59,13 @@ pub use curve_model::CurveModel;
 pub use diagnostics::StageDiagnostics;
 pub use error::{BasisError, Result};
 pub use likelihood::{FnLikelihood, LogDensityLikelihood, LogLikelihood, PointLogLikelihood};
+pub use model_posterior::{
+    ModelPosterior, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
+    SurrogatePopulation, model_posterior,
+};
+pub use pareto_smoothing::{
+    ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
+};
 pub use prediction_error::{
     ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, ErrorModel, MODELLING_ERROR_NAME,
     Observations, PredictionErrorLikelihood,

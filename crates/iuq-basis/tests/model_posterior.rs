@@ -1,0 +1,300 @@
+//! The model posterior from a surrogate's (`iuq_basis::model_posterior`) on problems whose
+//! model posterior is known exactly: Gaussian likelihoods on a wide uniform prior (the
+//! truncation is below 1e-20), surrogates that are biased, too narrow, or that ignore where the
+//! model fails.
+//!
+//! The surrogate population is an exact i.i.d. sample of the surrogate's posterior (drawn
+//! directly, so that the test measures this method, not the sampler that produced it).
+//!
+//! Tolerances: each posterior mean and std is held to 4 of its own Monte Carlo standard errors
+//! (the estimator's spread; 4σ keeps the family of 2–4 parameters × 2 statistics per test below
+//! a 1e-3 chance of a false failure), and the MCSE itself must be small against the posterior
+//! std, so that the test can fail.
+
+use iuq_basis::{
+    FnLikelihood, LogLikelihood, ModelPosterior, ModelPosteriorSettings, ModelPosteriorStop,
+    SurrogatePopulation, model_posterior,
+};
+use iuq_core::random::stream;
+use iuq_core::{Parameter, ParameterSpace, Prior};
+use rand_distr::{Distribution, StandardNormal};
+
+fn space(d: usize) -> ParameterSpace {
+    ParameterSpace::new(
+        (0..d)
+            .map(|k| Parameter {
+                name: format!("x{k}"),
+                prior: Prior::Uniform(-10.0, 10.0),
+            })
+            .collect(),
+    )
+    .unwrap()
+}
+
+/// ln N(x; mean, diag(std²)) up to a constant.
+fn gaussian(mean: Vec<f64>, std: Vec<f64>) -> impl Fn(&[f64]) -> f64 + Send + Sync {
+    move |x: &[f64]| {
+        -0.5 * x
+            .iter()
+            .zip(&mean)
+            .zip(&std)
+            .map(|((x, m), s)| ((x - m) / s).powi(2))
+            .sum::<f64>()
+    }
+}
+
+/// `n` exact draws of N(mean, diag(std²)) with their log-likelihood under `surrogate`.
+fn population(
+    n: usize,
+    mean: &[f64],
+    std: &[f64],
+    surrogate: &dyn LogLikelihood,
+    space: &ParameterSpace,
+) -> (Vec<Vec<f64>>, Vec<f64>, Vec<f64>) {
+    let mut rng = stream(7, 1, 0);
+    let samples: Vec<Vec<f64>> = (0..n)
+        .map(|_| {
+            mean.iter()
+                .zip(std)
+                .map(|(m, s)| {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    m + s * z
+                })
+                .collect()
+        })
+        .collect();
+    let ll = surrogate
+        .log_likelihood_batch(&samples)
+        .unwrap()
+        .into_iter()
+        .map(|v| v.unwrap())
+        .collect();
+    let lp = samples
+        .iter()
+        .map(|s| space.log_prior(s).unwrap())
+        .collect();
+    (samples, ll, lp)
+}
+
+fn run(
+    d: usize,
+    surrogate_mean: &[f64],
+    surrogate_std: &[f64],
+    model: &dyn LogLikelihood,
+    settings: &ModelPosteriorSettings,
+) -> ModelPosterior {
+    let space = space(d);
+    let surrogate = FnLikelihood::new(d, gaussian(surrogate_mean.to_vec(), surrogate_std.to_vec()));
+    let (samples, ll, lp) = population(4000, surrogate_mean, surrogate_std, &surrogate, &space);
+    let population = SurrogatePopulation {
+        samples: &samples,
+        log_likelihood: &ll,
+        log_prior: &lp,
+    };
+    let mut stages = Vec::new();
+    let result = model_posterior(&space, population, &surrogate, model, settings, &mut |s| {
+        stages.push(s.clone())
+    })
+    .unwrap();
+    assert_eq!(stages, result.stages, "every stage is reported as it ends");
+    result
+}
+
+fn assert_matches(result: &ModelPosterior, mean: &[f64], std: &[f64], what: &str) {
+    for k in 0..mean.len() {
+        let (m, s) = (result.mean[k], result.std[k]);
+        let (em, es) = (result.mcse_mean[k], result.mcse_std[k]);
+        println!(
+            "{what}: x{k} mean {m:.4} ± {em:.4} (exact {:.4}), std {s:.4} ± {es:.4} (exact {:.4})",
+            mean[k], std[k]
+        );
+        assert!(
+            em < 0.15 * std[k] && es < 0.15 * std[k],
+            "{what}: MCSE too large to test"
+        );
+        assert!((m - mean[k]).abs() <= 4.0 * em, "{what}: mean of x{k}");
+        assert!((s - std[k]).abs() <= 4.0 * es, "{what}: std of x{k}");
+    }
+}
+
+#[test]
+fn a_biased_but_wider_surrogate_is_corrected_in_one_certified_stage() {
+    let (mean, std) = (vec![1.0, -2.0, 0.5], vec![0.5, 1.0, 2.0]);
+    let model = FnLikelihood::new(3, gaussian(mean.clone(), std.clone()));
+    // The surrogate's posterior: shifted by a third of a std, 30 % wider.
+    let s_mean: Vec<f64> = mean.iter().zip(&std).map(|(m, s)| m + s / 3.0).collect();
+    let s_std: Vec<f64> = std.iter().map(|s| 1.3 * s).collect();
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        ..Default::default()
+    };
+    let result = run(3, &s_mean, &s_std, &model, &settings);
+    assert_eq!(result.stop, ModelPosteriorStop::Certified);
+    assert_eq!(result.stages.len(), 1);
+    assert_eq!(result.model_evaluations, 400);
+    assert!(result.pareto_k < result.pareto_k_threshold);
+    assert!(result.effective_sample_size > 100.0);
+    assert_matches(&result, &mean, &std, "biased surrogate");
+    // Without the correction, the surrogate's own mean is 0.33 std off: the test can tell.
+    assert!((s_mean[0] - mean[0]).abs() > 4.0 * result.mcse_mean[0]);
+}
+
+#[test]
+fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
+    let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let model = FnLikelihood::new(2, {
+        let f = gaussian(mean.clone(), std.clone());
+        let calls = &calls;
+        move |x: &[f64]| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            f(x)
+        }
+    });
+    // Half as wide as the model's posterior: the weights exp(1.5 z²) have no finite variance.
+    let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
+    let env = |k: &str, d: usize| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        moves: env("MOVES", 3),
+        subchain: env("SUB", 5),
+        seed: env("SEED", 1) as u64,
+        cv_target: env("CV10", 10) as f64 / 10.0,
+        ..Default::default()
+    };
+    // One step all the way would not hold: k̂ of the full step's weights.
+    let space = space(2);
+    let surrogate = FnLikelihood::new(2, gaussian(mean.clone(), s_std.clone()));
+    let (samples, ll, _) = population(4000, &mean, &s_std, &surrogate, &space);
+    let full: Vec<f64> = samples[..400]
+        .iter()
+        .zip(&ll)
+        .map(|(x, l)| gaussian(mean.clone(), std.clone())(x) - l)
+        .collect();
+    let k_full = iuq_basis::pareto_smooth(&full).pareto_k;
+    assert!(k_full > iuq_basis::pareto_k_threshold(400), "k̂ {k_full}");
+
+    let result = run(2, &mean, &s_std, &model, &settings);
+    println!("{:#?}", result.stages);
+    assert_eq!(result.stop, ModelPosteriorStop::Certified);
+    assert!(result.stages.len() > 1, "bridged");
+    assert!(result.stages[0].pareto_k <= result.pareto_k_threshold);
+    for stage in &result.stages[1..] {
+        let (screen, confirm) = (
+            stage.screen_acceptance.unwrap(),
+            stage.confirm_acceptance.unwrap(),
+        );
+        assert!(screen > 0.05 && confirm > 0.05, "{stage:?}");
+    }
+    // Every model evaluation is counted.
+    assert_eq!(
+        result.model_evaluations,
+        calls.load(std::sync::atomic::Ordering::Relaxed)
+    );
+    assert_matches(&result, &mean, &std, "narrow surrogate");
+}
+
+#[test]
+fn where_the_model_fails_the_posterior_is_cut_and_the_failures_counted() {
+    // The model fails for x0 > 0.5; its posterior is N(0, 1) cut there (x1 unaffected).
+    let model = FnLikelihood::new(2, |x: &[f64]| {
+        if x[0] > 0.5 {
+            f64::NAN
+        } else {
+            -0.5 * (x[0] * x[0] + x[1] * x[1])
+        }
+    });
+    let settings = ModelPosteriorSettings {
+        samples: 600,
+        ..Default::default()
+    };
+    let result = run(2, &[0.0, 0.0], &[1.0, 1.0], &model, &settings);
+    assert!(result.failures > 100, "{}", result.failures);
+    assert!(result.certified(), "{}", result.stop);
+    // Truncated standard normal on (−∞, 0.5]: mean −φ(a)/Φ(a), var 1 − a·φ/Φ − (φ/Φ)².
+    let a = 0.5f64;
+    let phi = (-0.5 * a * a).exp() / (2.0 * std::f64::consts::PI).sqrt();
+    let cdf = 0.691_462_461_274_013_1; // Φ(0.5)
+    let lambda = phi / cdf;
+    let exact_mean = -lambda;
+    let exact_std = (1.0 - a * lambda - lambda * lambda).sqrt();
+    assert_matches(
+        &result,
+        &[exact_mean, 0.0],
+        &[exact_std, 1.0],
+        "failing region",
+    );
+    assert!(
+        result
+            .samples
+            .iter()
+            .zip(result.weights())
+            .all(|(x, w)| x[0] <= 0.5 || w == 0.0)
+    );
+}
+
+#[test]
+fn the_result_does_not_depend_on_the_thread_count_and_bad_settings_are_refused() {
+    let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
+    let model = FnLikelihood::new(2, gaussian(mean.clone(), std.clone()));
+    let s_std: Vec<f64> = std.iter().map(|s| 0.6 * s).collect();
+    let settings = ModelPosteriorSettings {
+        samples: 100,
+        ..Default::default()
+    };
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| run(2, &mean, &s_std, &model, &settings));
+    let three = rayon::ThreadPoolBuilder::new()
+        .num_threads(3)
+        .build()
+        .unwrap()
+        .install(|| run(2, &mean, &s_std, &model, &settings));
+    assert_eq!(one, three);
+    for bad in [
+        ModelPosteriorSettings {
+            samples: 5,
+            ..Default::default()
+        },
+        ModelPosteriorSettings {
+            moves: 0,
+            ..Default::default()
+        },
+        ModelPosteriorSettings {
+            min_step: 1.5,
+            ..Default::default()
+        },
+    ] {
+        assert!(bad.check().is_err());
+    }
+}
+
+#[test]
+fn a_gaussian_surrogate_of_a_curved_six_parameter_posterior_is_corrected() {
+    // x1 | x0 ~ N(b·x0², 1), x0 ~ N(0, 1), x2..x5 ~ N(0, 1): E x1 = b, sd x1 = √(1 + 2b²).
+    let b = 0.5f64;
+    let model = FnLikelihood::new(6, move |x: &[f64]| {
+        -0.5 * (x[0] * x[0] + (x[1] - b * x[0] * x[0]).powi(2))
+            - 0.5 * x[2..].iter().map(|v| v * v).sum::<f64>()
+    });
+    let sd1 = (1.0 + 2.0 * b * b).sqrt();
+    let mean = [0.0, b, 0.0, 0.0, 0.0, 0.0];
+    let std = [1.0, sd1, 1.0, 1.0, 1.0, 1.0];
+    // The surrogate: independent Gaussians with the right means, 25 % wider.
+    let s_std: Vec<f64> = std.iter().map(|s| 1.25 * s).collect();
+    let settings = ModelPosteriorSettings {
+        samples: 800,
+        ..Default::default()
+    };
+    let result = run(6, &mean, &s_std, &model, &settings);
+    println!("{}", result.stop);
+    assert!(result.certified());
+    assert_matches(&result, &mean, &std, "curved, d = 6");
+}
