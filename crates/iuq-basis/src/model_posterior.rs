@@ -50,7 +50,7 @@ use iuq_core::ParameterSpace;
 use iuq_core::random::{StreamRng, stream};
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
-use crate::annealing::next_step;
+use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
@@ -271,6 +271,10 @@ pub struct ModelPosterior {
     pub map_log_likelihood: f64,
     /// ln π there.
     pub map_log_prior: f64,
+    /// ln(Z_model/Z_surrogate) = Σ_k ln mean_i exp(Δβ_k·r_i) over the stages (the evidence
+    /// increments of the tempering, as BASIS accumulates them): the model's log-evidence is the
+    /// surrogate's plus this.
+    pub log_evidence_ratio: f64,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.
@@ -381,6 +385,7 @@ pub fn model_posterior(
     let mut stage_evaluations = (s, failures);
     let mut bridge_rates: (Option<f64>, Option<f64>) = (None, None);
     let mut beta = 0.0;
+    let mut log_evidence_ratio = 0.0;
     let mut stages = Vec::new();
     let threshold = pareto_k_threshold(s);
     let (raw, smoothed, pareto_k, stop) = loop {
@@ -431,6 +436,7 @@ pub fn model_posterior(
         stages.push(record);
         let certified_step = smoothing.pareto_k <= threshold;
         if reaches_one && certified_step {
+            log_evidence_ratio += log_evidence_increment(&r, step, max_r);
             break (
                 raw,
                 smoothing.log_weights,
@@ -441,6 +447,7 @@ pub fn model_posterior(
         if !certified_step || stages.len() >= settings.max_stages {
             // The rest of the way in one step, uncertified.
             let rest = scaled(1.0 - beta);
+            log_evidence_ratio += log_evidence_increment(&r, 1.0 - beta, max_r);
             let last = pareto_smooth(&rest);
             let stop = if certified_step {
                 ModelPosteriorStop::MaxStages { beta: next_beta }
@@ -449,6 +456,7 @@ pub fn model_posterior(
             };
             break (rest, last.log_weights, last.pareto_k, stop);
         }
+        log_evidence_ratio += log_evidence_increment(&r, step, max_r);
         beta = next_beta;
 
         // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
@@ -630,6 +638,7 @@ pub fn model_posterior(
         map,
         map_log_likelihood,
         map_log_prior,
+        log_evidence_ratio,
         model_evaluations: evaluations,
         failures,
     })

@@ -135,6 +135,14 @@ fn a_biased_but_wider_surrogate_is_corrected_in_one_certified_stage() {
     assert!(result.pareto_k < result.pareto_k_threshold);
     assert!(result.effective_sample_size > 100.0);
     assert_matches(&result, &mean, &std, "biased surrogate");
+    // Both likelihoods are unnormalised Gaussians: Z_m/Z_s = Π s_k/(1.3 s_k) = 1.3⁻³. The
+    // estimate ln mean exp(r) has sd ≈ CV/√S ≈ 0.5/20 = 0.025: 4 of those.
+    let exact_ratio = -3.0 * 1.3f64.ln();
+    println!(
+        "ln Z ratio {} (exact {exact_ratio})",
+        result.log_evidence_ratio
+    );
+    assert!((result.log_evidence_ratio - exact_ratio).abs() < 0.1);
     // Without the correction, the surrogate's own mean is 0.33 std off: the test can tell.
     assert!((s_mean[0] - mean[0]).abs() > 4.0 * result.mcse_mean[0]);
 }

@@ -53,7 +53,7 @@ use crate::study_section::StudySection;
 use crate::template::Template;
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
-pub const TOP_LEVEL_KEYS: [&str; 11] = [
+pub const TOP_LEVEL_KEYS: [&str; 12] = [
     "name",
     "description",
     "parameters",
@@ -63,6 +63,7 @@ pub const TOP_LEVEL_KEYS: [&str; 11] = [
     "sensitivity",
     "sampler",
     "model_sampler",
+    "model_posterior",
     "executor",
     "design",
 ];

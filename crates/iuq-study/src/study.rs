@@ -1,6 +1,7 @@
 //! Study files (TOML): the study's `name`, its `[parameters]` with their priors, the `[model]`
 //! (expression, rbc-shear, umbridge) and `[sensitivity]`. The sections of the other stages
-//! (`[likelihood]`, `[sampler]`, `[surrogate]`, `[model_sampler]`, `[executor]`, `[design]`) are
+//! (`[likelihood]`, `[sampler]`, `[surrogate]`, `[model_sampler]`, `[model_posterior]`,
+//! `[executor]`, `[design]`) are
 //! kept as written and validated by the code that uses them ([`crate::likelihood_section`],
 //! [`crate::sampler_section`], [`crate::pipeline`], campaigns).
 //!
@@ -201,6 +202,9 @@ pub struct Study {
     pub surrogate: Option<toml::Table>,
     /// The `[model_sampler]` section as written: BASIS directly on the model in `iuq pipeline`.
     pub model_sampler: Option<toml::Table>,
+    /// The `[model_posterior]` section as written: how `iuq pipeline --model-posterior` samples
+    /// the model's own posterior.
+    pub model_posterior: Option<toml::Table>,
     /// The `[executor]` section as written (campaigns of model runs).
     pub executor: Option<toml::Table>,
 }
@@ -266,6 +270,7 @@ impl Study {
         let surrogate = top.sub_table("surrogate")?.cloned();
         let sampler = top.sub_table("sampler")?.cloned();
         let model_sampler = top.sub_table("model_sampler")?.cloned();
+        let model_posterior = top.sub_table("model_posterior")?.cloned();
         let executor = top.sub_table("executor")?.cloned();
         top.sub_table("design")?;
         top.finish()?;
@@ -280,6 +285,7 @@ impl Study {
             sampler,
             surrogate,
             model_sampler,
+            model_posterior,
             executor,
         };
         if let ModelSection::Expression { .. } = study.model {

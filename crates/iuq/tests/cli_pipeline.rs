@@ -45,6 +45,8 @@ seed = 1
 [model_sampler]
 samples = 8
 seed = 2
+[model_posterior]
+method = "basis"
 [executor]
 kind = "local"
 max_parallel = 2

@@ -6,8 +6,10 @@
 //! 2. one GP per stress, validated by Q2 on the test runs (and leave-one-out Q2);
 //! 3. Sobol' indices per stress from the surrogate and, with `[sensitivity] model_n`, from model
 //!    runs;
-//! 4. BASIS on the GP bank and, with [`PipelineOptions::model_posterior`], directly on the cell
-//!    model through the campaign (`[model_sampler]`, chains of one step, no burn-in, resumable);
+//! 4. BASIS on the GP bank and, with [`PipelineOptions::model_posterior`], the model's own
+//!    posterior from it through the campaign ([`model_posterior`]: certified importance stages,
+//!    `[model_posterior]`; or plain BASIS on the model, `method = "basis"` with
+//!    `[model_sampler]`);
 //! 5. posterior summaries and the propagation of the posterior to the outputs;
 //! 6. the report: `DIR/report.html` with every figure as SVG and PNG and every table as CSV/JSON.
 //!
@@ -23,12 +25,14 @@
 //! | [`run_groups`] | the runs made, by run group and origin (initial, test, adaptive round) |
 //! | [`surrogate`] | GPs per data point and failure classifiers, as a model for BASIS |
 //! | [`adaptive`] | the adaptive engine: new runs where the posterior lies, until it converges |
+//! | [`model_posterior`] | the model's own posterior from the surrogate's |
 //! | [`settings`] | the pipeline's settings from `[surrogate]` and `[sensitivity]` |
 //! | [`report_data`] | from the results to the report and `pipeline.json` |
 
 pub mod adaptive;
 mod adaptive_report;
 pub mod cell_model_campaign;
+pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;
 pub mod report_data;
@@ -71,8 +75,10 @@ pub struct PipelineOptions {
     /// Model runs at once (overrides `executor.max_parallel`; `None`: the number of cores; 0 is
     /// an input error).
     pub max_parallel: Option<usize>,
-    /// Also sample the posterior directly on the cell model through the campaign, with
-    /// `[model_sampler]` (expensive: samples × stages × stresses runs).
+    /// Also give the model's own posterior, through the campaign: from the surrogate's by
+    /// certified importance stages (`[model_posterior]`, a few hundred runs per run group), or
+    /// with `[model_posterior] method = "basis"` by BASIS on the model (`[model_sampler]`:
+    /// samples × stages runs per run group).
     pub model_posterior: bool,
     /// Recompute every model run: move the campaign directory aside (to `<dir>.previous-N`)
     /// instead of reusing the results it holds.
@@ -141,6 +147,9 @@ pub struct PipelineOutcome {
     pub q2: Vec<f64>,
     /// The posterior tables as JSON (as in `pipeline.json`; `null` with `runs_only`).
     pub posterior: Value,
+    /// The model's posterior from the surrogate's (summaries, k̂, ESS, MCSE, runs), with
+    /// `--model-posterior`.
+    pub model_posterior: Option<Value>,
     /// The adaptive engine's rounds, when `[surrogate] adaptive` is given.
     pub adaptive: Option<AdaptiveOutcome>,
     /// The model run at the posterior, when `[surrogate] posterior_check` is given.
@@ -179,6 +188,7 @@ impl PipelineOutcome {
                 "adaptive": self.adaptive,
                 "q2": self.q2,
                 "posterior": self.posterior,
+                "model_posterior": self.model_posterior,
                 // Per data point: the model at the posterior against the surrogate.
                 "posterior_check": self.posterior_check.as_ref().map(|c| c.point_summaries()),
                 "stage_seconds": self
@@ -419,18 +429,23 @@ fn run_stages(
     let data = study_data(study)?;
     let settings = parse_pipeline_settings(study)?;
     let sampler_settings = parse_sampler(study, &SamplerOverrides::default())?;
-    let model_sampler_settings = if options.model_posterior {
-        Some(parse_model_sampler(
-            study,
-            &SamplerOverrides {
-                burn: Some(0),
-                max_chain: Some(1),
-                ..Default::default()
-            },
-        )?)
-    } else {
-        None
-    };
+    let model_posterior_method = options
+        .model_posterior
+        .then(|| model_posterior::parse_model_posterior(study))
+        .transpose()?;
+    let model_sampler_settings =
+        if model_posterior_method == Some(model_posterior::ModelPosteriorMethod::Basis) {
+            Some(parse_model_sampler(
+                study,
+                &SamplerOverrides {
+                    burn: Some(0),
+                    max_chain: Some(1),
+                    ..Default::default()
+                },
+            )?)
+        } else {
+            None
+        };
     let out = options.out.clone();
     std::fs::create_dir_all(&out)
         .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
@@ -504,6 +519,7 @@ fn run_stages(
             failed: groups.iter().map(|g| g.failure_reasons().len()).sum(),
             q2: Vec::new(),
             posterior: Value::Null,
+            model_posterior: None,
             adaptive: None,
             posterior_check: None,
             stage_seconds,
@@ -709,7 +725,40 @@ fn run_stages(
         None
     };
 
-    // 5. BASIS on the model itself.
+    // 5. The model's own posterior: from the surrogate's, or BASIS on the model.
+    let reweighted = match &model_posterior_method {
+        Some(model_posterior::ModelPosteriorMethod::Reweight(settings)) => {
+            let stage = Instant::now();
+            events.message(format!(
+                "the model's posterior from the surrogate's: {} samples, {} runs at first (results already stored are reused)",
+                settings.samples,
+                settings.samples * group_count
+            ));
+            let outcome = model_posterior::reweight_to_model(
+                study,
+                &gp_posterior,
+                &surrogate,
+                &model_runs,
+                settings,
+                &out,
+                &mut |line| events.message(line),
+            )?;
+            events.message(format!(
+                "the model's posterior: {} (k̂ {:.3}, threshold {:.3}; ESS {:.0}; {} model runs)",
+                outcome.posterior.stop,
+                outcome.posterior.pareto_k,
+                outcome.posterior.pareto_k_threshold,
+                outcome.posterior.effective_sample_size,
+                outcome.model_runs
+            ));
+            stage_seconds.push((
+                "the model's posterior".into(),
+                stage.elapsed().as_secs_f64(),
+            ));
+            Some(outcome)
+        }
+        _ => None,
+    };
     let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
         Some(settings) => {
             let stage = Instant::now();
@@ -737,6 +786,7 @@ fn run_stages(
         model_sobol: model_sobol.as_ref(),
         gp_posterior: &gp_posterior,
         model_posterior: model_posterior.as_ref(),
+        reweighted: reweighted.as_ref(),
         campaign_runs: model_runs
             .campaign()
             .run_statistics()
@@ -757,6 +807,7 @@ fn run_stages(
         failed,
         q2: gp_checks.iter().map(|c| c.0).collect(),
         posterior: summary,
+        model_posterior: reweighted.as_ref().map(|r| r.to_json()),
         adaptive,
         posterior_check,
         stage_seconds,

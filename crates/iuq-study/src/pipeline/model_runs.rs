@@ -495,6 +495,21 @@ impl Model for ModelAtData {
     }
 
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        self.evaluate(None, points)
+    }
+}
+
+impl ModelAtData {
+    /// [`Model::evaluate_batch`] with the runs recorded in the campaign store under `label`.
+    pub fn evaluate_labelled(
+        &self,
+        label: &str,
+        points: &[Vec<f64>],
+    ) -> iuq_core::Result<Vec<Outcome>> {
+        self.evaluate(Some(label), points)
+    }
+
+    fn evaluate(&self, label: Option<&str>, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
         let groups = self.runs.groups();
         let requests: Vec<(usize, Vec<f64>)> = points
             .iter()
@@ -502,7 +517,7 @@ impl Model for ModelAtData {
             .collect();
         let outcomes = self
             .runs
-            .run(None, &requests)
+            .run(label, &requests)
             .map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
         Ok(outcomes
             .chunks(groups.max(1))

@@ -21,6 +21,7 @@ use crate::error::{Context, Result};
 use crate::likelihood_section::DataLikelihood;
 use crate::pipeline::adaptive::AdaptiveOutcome;
 use crate::pipeline::adaptive_report;
+use crate::pipeline::model_posterior::ModelPosteriorOutcome;
 use crate::pipeline::model_runs::ModelRuns;
 use crate::pipeline::posterior_check::{CheckedRun, PosteriorCheck};
 use crate::pipeline::run_groups::GroupRuns;
@@ -73,8 +74,10 @@ pub struct PipelineResults<'a> {
     pub model_sobol: Option<&'a SensitivityReport>,
     /// The posterior on the GP bank.
     pub gp_posterior: &'a SampledPosterior,
-    /// The posterior on the cell model.
+    /// The posterior on the cell model (BASIS on the model).
     pub model_posterior: Option<&'a SampledPosterior>,
+    /// The model's posterior from the surrogate's (certified importance stages).
+    pub reweighted: Option<&'a ModelPosteriorOutcome>,
     /// The campaign store's runs by status and the reasons of its failed runs.
     pub campaign_runs: (StatusCounts, Vec<String>),
     /// The adaptive engine's rounds, when it ran.
@@ -143,6 +146,70 @@ impl Labels {
 /// The model parameters' part of posterior samples (σ_m, when estimated, is the last column).
 fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
     samples.iter().map(|s| s[..d].to_vec()).collect()
+}
+
+/// The model's weighted posterior as a report source: its weighted summary, and as samples an
+/// equally weighted systematic resample (u_k = (k + ½)/S, no random draw) of its population for
+/// the density plots and the propagation through the surrogate.
+fn reweighted_result(
+    source: &str,
+    outcome: &ModelPosteriorOutcome,
+    bank: &GpBank,
+    stresses: &[f64],
+    d: usize,
+) -> Result<PosteriorResult> {
+    let p = &outcome.posterior;
+    let weights = p.weights();
+    let n = p.samples.len();
+    let mut samples = Vec::with_capacity(n);
+    let mut cumulative = 0.0;
+    let mut i = 0;
+    for k in 0..n {
+        let u = (k as f64 + 0.5) / n as f64;
+        while i + 1 < n && cumulative + weights[i] < u {
+            cumulative += weights[i];
+            i += 1;
+        }
+        samples.push(p.samples[i].clone());
+    }
+    let quantile = |k: usize, q: f64| {
+        let column: Vec<f64> = p.samples.iter().map(|s| s[k]).collect();
+        iuq_core::weighted_statistics::weighted_quantiles(&column, &weights, &[q])
+            .map(|v| v[0])
+            .unwrap_or(f64::NAN)
+    };
+    let summary = p
+        .names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| ParameterSummary {
+            name: name.clone(),
+            map: p.map[k],
+            mean: p.mean[k],
+            std: p.std[k],
+            q05: quantile(k, 0.05),
+            q50: quantile(k, 0.5),
+            q95: quantile(k, 0.95),
+        })
+        .collect();
+    let theta = model_part(&samples, d);
+    let map = vec![p.map[..d].to_vec()];
+    let mut propagated = Vec::with_capacity(stresses.len());
+    for (gp, s) in bank.gps().iter().zip(stresses) {
+        propagated.push(PropagatedOutput {
+            x: *s,
+            samples: gp.predict_mean(&theta)?,
+            map_prediction: gp.predict_mean(&map)?[0],
+        });
+    }
+    Ok(PosteriorResult {
+        source: source.into(),
+        summary,
+        log_evidence: outcome.log_evidence,
+        samples,
+        stages: Vec::new(),
+        propagated,
+    })
 }
 
 fn posterior_result(
@@ -270,6 +337,15 @@ pub fn write_pipeline_report(
     )?];
     if let Some(m) = results.model_posterior {
         posteriors.push(posterior_result(
+            labels.model_source,
+            m,
+            results.bank,
+            &stresses,
+            d,
+        )?);
+    }
+    if let Some(m) = results.reweighted {
+        posteriors.push(reweighted_result(
             labels.model_source,
             m,
             results.bank,
@@ -422,6 +498,7 @@ pub fn write_pipeline_report(
         "posterior_check": results.posterior_check.map(PosteriorCheck::point_summaries),
         "sensitivity": sobol_json(results.surrogate_sobol),
         "model_sensitivity": results.model_sobol.map(sobol_json),
+        "model_posterior": results.reweighted.map(ModelPosteriorOutcome::to_json),
     });
     write_atomically(
         &out.join("pipeline.json"),

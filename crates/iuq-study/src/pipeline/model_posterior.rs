@@ -1,0 +1,299 @@
+//! The model's own posterior, beside the surrogate's (`iuq pipeline --model-posterior`).
+//!
+//! By default (`[model_posterior] method = "reweight"`) the surrogate posterior's population is
+//! moved to the model's with the model's own outputs ([`iuq_basis::model_posterior`]):
+//! `samples` members run through the model in one campaign batch, importance stages certified by
+//! Pareto-smoothed k̂, and delayed-acceptance bridges where one stage does not hold. Every model
+//! evaluation is a campaign run recorded under `model-posterior-<k>` (its k-th batch): runs the
+//! store already holds are reused, so a rerun after an interruption (even `kill -9`) requests
+//! the same points in the same order and makes only the runs that were missing.
+//! `method = "basis"` keeps plain BASIS on the model (`[model_sampler]`, chains of one step
+//! without burn-in, as the published study).
+//!
+//! Results in `DIR/model-posterior/`: `summary.json` (everything below), `samples.csv` (the
+//! population with its weights and both log-likelihoods) and `stages.csv`.
+
+use std::path::Path;
+use std::sync::Mutex;
+
+use serde_json::{Value, json};
+
+use iuq_basis::{ModelPosterior, ModelPosteriorSettings, SurrogatePopulation, model_posterior};
+use iuq_campaign::study_section::StudySection;
+use iuq_core::{Model, Outcome};
+
+use super::model_runs::ModelRuns;
+use super::surrogate::Surrogate;
+use crate::error::{Context, Result, StudyError};
+use crate::posterior::{SampledPosterior, build_posterior_with};
+use crate::study::Study;
+use crate::table_io::{write_atomically, write_numeric_csv};
+
+/// Label prefix of the method's model runs in the campaign store.
+pub const MODEL_POSTERIOR_DESIGN: &str = "model-posterior";
+
+/// How `--model-posterior` samples the model's posterior (`[model_posterior] method`).
+#[derive(Debug, Clone, PartialEq)]
+pub enum ModelPosteriorMethod {
+    /// From the surrogate's posterior by certified importance stages (the default).
+    Reweight(ModelPosteriorSettings),
+    /// Plain BASIS on the model with `[model_sampler]`.
+    Basis,
+}
+
+/// Read `[model_posterior]` (defaults when absent): `method` ("reweight" or "basis"), and for
+/// "reweight" `samples` (300), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
+/// `max_stages` (6), `moves` (3), `subchain` (5), `scale` (0.4), `min_step` (1e-4).
+pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
+    let file = study.path.display().to_string();
+    let mut s = StudySection::optional(study.model_posterior.as_ref(), "model_posterior", &file);
+    let method = s.choice("method", &["reweight", "basis"])?;
+    if method == Some("basis") {
+        s.finish_with_hint("with method = \"basis\" the sampler's keys go in `[model_sampler]`")?;
+        return Ok(ModelPosteriorMethod::Basis);
+    }
+    let d = ModelPosteriorSettings::default();
+    let settings = ModelPosteriorSettings {
+        samples: s.count("samples", 10)?.unwrap_or(d.samples),
+        seed: s.seed("seed")?.unwrap_or(d.seed),
+        cv_target: s.positive("cv_target")?.unwrap_or(d.cv_target),
+        bridge_cv_target: s
+            .positive("bridge_cv_target")?
+            .unwrap_or(d.bridge_cv_target),
+        max_stages: s.count("max_stages", 1)?.unwrap_or(d.max_stages),
+        moves: s.count("moves", 1)?.unwrap_or(d.moves),
+        subchain: s.count("subchain", 1)?.unwrap_or(d.subchain),
+        scale: s.positive("scale")?.unwrap_or(d.scale),
+        min_step: s.positive("min_step")?.unwrap_or(d.min_step),
+        probabilities: d.probabilities,
+    };
+    s.finish()?;
+    if let Err(iuq_basis::BasisError::InvalidSettings { setting, reason }) = settings.check() {
+        return Err(s.error(setting, reason).into());
+    }
+    Ok(ModelPosteriorMethod::Reweight(settings))
+}
+
+/// The model at the data with every batch recorded as `model-posterior-<k>`.
+struct LabelledModel {
+    runs: ModelRuns,
+    batches: Mutex<usize>,
+}
+
+impl Model for LabelledModel {
+    fn input_names(&self) -> &[String] {
+        self.runs.parameters()
+    }
+
+    fn output_names(&self) -> &[String] {
+        self.runs.output_names()
+    }
+
+    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        let k = {
+            let mut batches = self.batches.lock().map_err(|_| {
+                iuq_core::CoreError::ModelUnavailable("the batch counter's lock is poisoned".into())
+            })?;
+            *batches += 1;
+            *batches
+        };
+        self.runs
+            .model_at_data()
+            .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-{k}"), points)
+    }
+}
+
+/// The model's posterior and what it cost.
+pub struct ModelPosteriorOutcome {
+    /// The weighted population and its diagnostics.
+    pub posterior: ModelPosterior,
+    /// The surrogate posterior's log-evidence plus the stages' ratio.
+    pub log_evidence: f64,
+    /// Model runs the method asked for (evaluations × run groups; stored runs included).
+    pub model_runs: usize,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+}
+
+impl ModelPosteriorOutcome {
+    /// The summary `pipeline.json` and `iuq pipeline --json` carry.
+    pub fn to_json(&self) -> Value {
+        let p = &self.posterior;
+        let by_name = |v: &[f64]| crate::posterior::by_name(&p.names, v);
+        let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+        json!({
+            "method": "reweight",
+            "certified": p.certified(),
+            "stop": p.stop.to_string(),
+            "samples": p.samples.len(),
+            "pareto_k": finite(p.pareto_k),
+            "pareto_k_threshold": p.pareto_k_threshold,
+            "effective_sample_size": p.effective_sample_size,
+            "map": by_name(&p.map),
+            "mean": by_name(&p.mean),
+            "std": by_name(&p.std),
+            "mcse_mean": by_name(&p.mcse_mean),
+            "mcse_std": by_name(&p.mcse_std),
+            "log_evidence": finite(self.log_evidence),
+            "log_evidence_ratio": finite(p.log_evidence_ratio),
+            "model_evaluations": p.model_evaluations,
+            "model_runs": self.model_runs,
+            "failures": p.failures,
+            "stages": p.stages.iter().map(|s| json!({
+                "stage": s.stage,
+                "beta": s.beta,
+                "step": s.step,
+                "cv": s.cv,
+                "pareto_k": finite(s.pareto_k),
+                "effective_sample_size": s.effective_sample_size,
+                "model_evaluations": s.model_evaluations,
+                "failures": s.failures,
+                "screen_acceptance": s.screen_acceptance,
+                "confirm_acceptance": s.confirm_acceptance,
+            })).collect::<Vec<_>>(),
+            "seconds": self.seconds,
+        })
+    }
+}
+
+/// The model's posterior from the surrogate's `gp_posterior` (`settings`), through the campaign
+/// of `model_runs`; writes `out/model-posterior/`; `message` receives a line per stage.
+pub fn reweight_to_model(
+    study: &Study,
+    gp_posterior: &SampledPosterior,
+    surrogate: &Surrogate,
+    model_runs: &ModelRuns,
+    settings: &ModelPosteriorSettings,
+    out: &Path,
+    message: &mut dyn FnMut(String),
+) -> Result<ModelPosteriorOutcome> {
+    let started = std::time::Instant::now();
+    let surrogate_posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
+    let model = LabelledModel {
+        runs: model_runs.clone(),
+        batches: Mutex::new(0),
+    };
+    let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
+    let state = &gp_posterior.run.state;
+    let population = SurrogatePopulation {
+        samples: &state.samples,
+        log_likelihood: &state.log_likelihood,
+        log_prior: &state.log_prior,
+    };
+    let groups = model_runs.groups();
+    let posterior = model_posterior(
+        &surrogate_posterior.space,
+        population,
+        surrogate_posterior.likelihood.as_ref(),
+        model_posterior_likelihood.likelihood.as_ref(),
+        settings,
+        &mut |stage| {
+            message(format!(
+                "model posterior, stage {}: β = {:.4} (step {:.4}), k̂ = {:.3}, ESS {:.0}, {} model evaluations ({} runs){}",
+                stage.stage,
+                stage.beta,
+                stage.step,
+                stage.pareto_k,
+                stage.effective_sample_size,
+                stage.model_evaluations,
+                stage.model_evaluations * groups,
+                match (stage.screen_acceptance, stage.confirm_acceptance) {
+                    (Some(a), Some(b)) => format!(
+                        "; bridge acceptance: surrogate {:.2}, model {:.2}",
+                        a, b
+                    ),
+                    _ => String::new(),
+                }
+            ))
+        },
+    )
+    .map_err(|e| match e {
+        iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
+            "the model posterior: the model could not evaluate a batch: {reason}"
+        )),
+        e => StudyError::Failure(format!("the model posterior: {e}")),
+    })?;
+    let outcome = ModelPosteriorOutcome {
+        log_evidence: state.log_evidence + posterior.log_evidence_ratio,
+        model_runs: posterior.model_evaluations * groups,
+        seconds: started.elapsed().as_secs_f64(),
+        posterior,
+    };
+    write_results(&outcome, &out.join("model-posterior"))?;
+    Ok(outcome)
+}
+
+fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let p = &outcome.posterior;
+    let mut summary = outcome.to_json();
+    summary["quantiles"] = json!({
+        "probabilities": p.probabilities,
+        "values": p.names.iter().zip(&p.quantiles).map(|(n, q)| (n.clone(), json!(q))).collect::<serde_json::Map<String, Value>>(),
+    });
+    write_atomically(
+        &dir.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    let mut columns = p.names.clone();
+    columns.extend(
+        [
+            "weight",
+            "log_weight",
+            "raw_log_weight",
+            "ll_model",
+            "ll_surrogate",
+            "lp",
+        ]
+        .map(String::from),
+    );
+    let weights = p.weights();
+    let rows: Vec<Vec<f64>> = (0..p.samples.len())
+        .map(|i| {
+            let mut row = p.samples[i].clone();
+            row.extend([
+                weights[i],
+                p.log_weights[i],
+                p.raw_log_weights[i],
+                p.model_log_likelihood[i],
+                p.surrogate_log_likelihood[i],
+                p.log_prior[i],
+            ]);
+            row
+        })
+        .collect();
+    write_numeric_csv(&dir.join("samples.csv"), &columns, &rows)?;
+    let columns: Vec<String> = [
+        "stage",
+        "beta",
+        "step",
+        "cv",
+        "pareto_k",
+        "effective_sample_size",
+        "model_evaluations",
+        "failures",
+        "screen_acceptance",
+        "confirm_acceptance",
+    ]
+    .map(String::from)
+    .to_vec();
+    let rows: Vec<Vec<f64>> = p
+        .stages
+        .iter()
+        .map(|s| {
+            vec![
+                s.stage as f64,
+                s.beta,
+                s.step,
+                s.cv,
+                s.pareto_k,
+                s.effective_sample_size,
+                s.model_evaluations as f64,
+                s.failures as f64,
+                s.screen_acceptance.unwrap_or(f64::NAN),
+                s.confirm_acceptance.unwrap_or(f64::NAN),
+            ]
+        })
+        .collect();
+    write_numeric_csv(&dir.join("stages.csv"), &columns, &rows)
+}

@@ -1,0 +1,308 @@
+//! `iuq pipeline --model-posterior`: the model's own posterior from the surrogate's
+//! (`[model_posterior]`), end to end on the cooling example (`examples/cooling`).
+//!
+//! The reference is the exact posterior: BASIS on the closed-form curve (`cooling-exact.toml`,
+//! N = 20,000; its own Monte Carlo error on a mean is about std/√(N/4) ≈ 0.014 std). The
+//! surrogate is deliberately poor (a one-shot design of 6 runs per time), so that its posterior
+//! is off and the model posterior has to correct it. Tolerances: 4 Monte Carlo standard errors of
+//! the model posterior (as it reports them) plus 4 of the reference's.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use common::{iuq, json_of, scratch, stderr_of};
+
+fn cooling(suite_name: &str) -> PathBuf {
+    let dir = scratch("model-posterior", suite_name);
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/cooling");
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    dir
+}
+
+/// The cooling study per measurement time with the closed-form curve as an expression model, a
+/// 6-run one-shot design and `[model_posterior]` lines `extra`.
+fn expression_study(dir: &Path, extra: &str) -> PathBuf {
+    let text = format!(
+        r#"name = "cooling-model-posterior"
+[parameters]
+k = {{ uniform = [0.05, 0.8] }}
+T0 = {{ uniform = [60, 100] }}
+[likelihood]
+data = {{ file = "cooling.csv", x = "t_min", y = "temperature_c", y_err = "temperature_err_c" }}
+modelling_error = false
+[model]
+kind = "expression"
+abscissa = "t"
+outputs = {{ T = "20 + (T0 - 20) * exp(-k * t)" }}
+[surrogate]
+design = {{ kind = "lhs", n = 6, seed = 1 }}
+test = {{ kind = "sobol", n = 0 }}
+[sampler]
+samples = 4000
+burn = 10
+seed = 1
+[model_posterior]
+{extra}
+"#
+    );
+    let path = dir.join("study.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn pipeline(study: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    let mut args = vec![
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--model-posterior",
+        "--json",
+    ];
+    args.extend(extra);
+    let output = iuq(&args);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    json_of(&output)
+}
+
+#[test]
+fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
+    let dir = cooling("exact");
+    let study = expression_study(&dir, "samples = 300\nseed = 4");
+    let out = dir.join("report");
+    let v = pipeline(&study, &out, &[]);
+    let m = &v["model_posterior"];
+    assert_eq!(m["certified"], true, "{m}");
+    assert_eq!(m["samples"], 300);
+    assert!(m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap());
+    // Every evaluation is a run at each of the 8 times.
+    assert_eq!(
+        m["model_runs"].as_u64().unwrap(),
+        8 * m["model_evaluations"].as_u64().unwrap()
+    );
+    let exact = iuq(&[
+        "basis",
+        dir.join("cooling-exact.toml").to_str().unwrap(),
+        "--out",
+        dir.join("exact").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(exact.status.success());
+    let exact = json_of(&exact);
+    let surrogate = &v["posterior"][0]["parameters"];
+    let mut surrogate_off = 0.0f64;
+    for p in ["k", "T0"] {
+        let (em, es) = (
+            exact["mean"][p].as_f64().unwrap(),
+            exact["std"][p].as_f64().unwrap(),
+        );
+        let reference = 0.014 * es;
+        let (mean, std) = (
+            m["mean"][p].as_f64().unwrap(),
+            m["std"][p].as_f64().unwrap(),
+        );
+        let (mcse_mean, mcse_std) = (
+            m["mcse_mean"][p].as_f64().unwrap(),
+            m["mcse_std"][p].as_f64().unwrap(),
+        );
+        println!(
+            "{p}: model posterior {mean} ± {mcse_mean}, std {std} ± {mcse_std}; exact {em}, {es}"
+        );
+        assert!(mcse_mean < 0.15 * es && mcse_std < 0.15 * es);
+        assert!(
+            (mean - em).abs() <= 4.0 * (mcse_mean + reference),
+            "{p} mean"
+        );
+        assert!((std - es).abs() <= 4.0 * (mcse_std + reference), "{p} std");
+        let row = surrogate
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|r| r["parameter"] == p)
+            .unwrap();
+        surrogate_off = surrogate_off
+            .max((row["mean"].as_f64().unwrap() - em).abs() / es)
+            .max((row["std"].as_f64().unwrap() / es - 1.0).abs());
+    }
+    // The surrogate's own posterior is visibly off: there was something to correct.
+    assert!(surrogate_off > 0.2, "surrogate off by {surrogate_off}");
+    // The files, and the report's second source.
+    for file in [
+        "model-posterior/summary.json",
+        "model-posterior/samples.csv",
+        "model-posterior/stages.csv",
+    ] {
+        assert!(out.join(file).is_file(), "{file}");
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["report"]["posteriors"].as_array().unwrap().len(), 2);
+    assert_eq!(report["report"]["posteriors"][1]["source"], "model");
+
+    // A rerun reuses every stored run and gives the same posterior, bit for bit.
+    let again = pipeline(&study, &dir.join("again"), &[]);
+    assert_eq!(again["model_posterior"]["mean"], m["mean"]);
+    assert_eq!(again["model_posterior"]["std"], m["std"]);
+
+    // Plain BASIS on the model stays available.
+    let basis = expression_study(
+        &dir,
+        "method = \"basis\"\n[model_sampler]\nsamples = 100\nseed = 2",
+    );
+    let out = dir.join("basis");
+    let v = pipeline(&basis, &out, &[]);
+    assert!(v["model_posterior"].is_null());
+    assert!(out.join("basis-model/summary.json").is_file());
+}
+
+#[test]
+fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
+    let dir = cooling("resume");
+    let log = dir.join("finished-runs.jsonl");
+    // The program of the curve, one run per parameter vector; each run takes 0.2 s.
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "[surrogate]",
+            &format!(
+                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\" }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\nsamples = 24\nmax_stages = 1\n\n[surrogate]",
+                log.display()
+            ),
+        )
+        .replace(
+            "adaptive = { batch = 3, max_runs = 60, tolerance = 0.1 }",
+            "test = { kind = \"sobol\", n = 0 }",
+        );
+    let path = dir.join("resume.toml");
+    std::fs::write(&path, &study).unwrap();
+    let out = dir.join("report");
+    // The surrogate's runs first (8, of which those with k above the program's stability limit
+    // fail and are not logged), so that the kill falls in the model posterior's batch.
+    let output = iuq(&[
+        "pipeline",
+        path.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let design_runs = std::fs::read_to_string(&log).unwrap().lines().count();
+    assert!((3..=8).contains(&design_runs), "{design_runs}");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args([
+            "pipeline",
+            path.to_str().unwrap(),
+            "--model-posterior",
+            "--out",
+        ])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while std::fs::read_to_string(&log).unwrap().lines().count() < design_runs + 6 {
+        assert!(started.elapsed() < Duration::from_secs(120), "no model run");
+        assert!(child.try_wait().unwrap().is_none(), "finished too early");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    child.kill().unwrap(); // SIGKILL
+    child.wait().unwrap();
+    // The runs in flight outlive their coordinator (0.2 s each); the campaign declares them lost
+    // and makes them again. What must not be repeated is a run the store had finished.
+    std::thread::sleep(Duration::from_millis(600));
+    let db = dir.join("resume.campaign/campaign.sqlite");
+    let succeeded = |store: &iuq_campaign::CampaignStore| -> Vec<(i64, i64)> {
+        store
+            .connection()
+            .prepare("SELECT r.id, (SELECT COUNT(*) FROM attempts a WHERE a.run_id = r.id AND a.outcome_kind = 'succeeded') FROM runs r ORDER BY r.id")
+            .unwrap()
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap()
+    };
+    let finished_before: Vec<i64> = {
+        let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
+        succeeded(&store)
+            .into_iter()
+            .filter(|(_, n)| *n > 0)
+            .map(|(id, _)| id)
+            .collect()
+    };
+    assert!(
+        finished_before.len() > design_runs && finished_before.len() < design_runs + 24,
+        "killed after {} stored runs",
+        finished_before.len()
+    );
+    let v = pipeline(&path, &out, &[]);
+    let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
+    assert_eq!(store.integrity_check().unwrap(), "ok");
+    let per_run = succeeded(&store);
+    assert!(
+        per_run.iter().all(|(_, n)| *n <= 1),
+        "a run has two successful executions: {per_run:?}"
+    );
+    drop(store);
+    // The program ran each run the store had finished before the kill exactly once.
+    let text = std::fs::read_to_string(&log).unwrap();
+    for id in &finished_before {
+        let needle = format!("\"run_id\": {id}}}");
+        assert_eq!(text.matches(&needle).count(), 1, "run {id} was repeated");
+    }
+    // The same result as an uninterrupted run.
+    let clean_dir = cooling("resume-clean");
+    let clean_study = study.replace(
+        &log.display().to_string(),
+        &clean_dir.join("log.jsonl").display().to_string(),
+    );
+    let clean_path = clean_dir.join("resume.toml");
+    std::fs::write(&clean_path, clean_study).unwrap();
+    let clean = pipeline(&clean_path, &clean_dir.join("report"), &[]);
+    for key in ["mean", "std", "pareto_k", "model_evaluations"] {
+        assert_eq!(
+            v["model_posterior"][key], clean["model_posterior"][key],
+            "{key}"
+        );
+    }
+}
+
+#[test]
+fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
+    let dir = cooling("bad-keys");
+    for (lines, key) in [
+        ("samples = 3", "model_posterior.samples"),
+        ("smaples = 300", "model_posterior.smaples"),
+        ("method = \"mcmc\"", "model_posterior.method"),
+        ("cv_target = -1", "model_posterior.cv_target"),
+        ("min_step = 2.0", "model_posterior.min_step"),
+        (
+            "method = \"basis\"\nsamples = 300",
+            "model_posterior.samples",
+        ),
+    ] {
+        let study = expression_study(&dir, lines);
+        let output = iuq(&[
+            "pipeline",
+            study.to_str().unwrap(),
+            "--out",
+            dir.join("out").to_str().unwrap(),
+            "--model-posterior",
+        ]);
+        let stderr = stderr_of(&output);
+        assert_eq!(output.status.code(), Some(2), "{lines}: {stderr}");
+        assert!(
+            stderr.contains("study.toml") && stderr.contains(key),
+            "{lines}: {stderr}"
+        );
+        // Nothing was run: the key is checked before the first model run.
+        assert!(!dir.join("out/model-runs.csv").exists(), "{lines}");
+    }
+}
