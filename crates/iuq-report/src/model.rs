@@ -42,6 +42,93 @@ pub struct StudyReport {
     /// The model run at the posterior beside the surrogate; `None` omits the section.
     #[serde(default)]
     pub posterior_check: Option<PosteriorCheckReport>,
+    /// The model's own posterior from the surrogate's (Table 2 of a study with both columns,
+    /// the importance weights' diagnostics, the model at both MAPs); `None` omits the section.
+    #[serde(default)]
+    pub model_posterior: Option<ModelPosteriorReport>,
+}
+
+/// The model's own posterior beside the surrogate's: the published study's Table 2 layout (MAP,
+/// mean and std from each, with their relative differences), how far the importance weights
+/// can be trusted, and the model run at both MAPs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelPosteriorReport {
+    /// The surrogate's source name, e.g. "GP surrogate".
+    pub surrogate_source: String,
+    /// The model's source name, e.g. "cell model".
+    pub model_source: String,
+    /// Every stage's k̂ below its threshold and the posterior reached.
+    pub certified: bool,
+    /// Why the method stopped, in words.
+    pub stop: String,
+    /// The population's size S.
+    pub samples: usize,
+    /// k̂ of the final weights.
+    pub pareto_k: f64,
+    /// Its threshold min(1 − 1/log₁₀ S, 0.7).
+    pub pareto_k_threshold: f64,
+    /// Effective sample size of the final weights.
+    pub effective_sample_size: f64,
+    /// Model runs the method asked for (stored runs included).
+    pub model_runs: usize,
+    /// Failed model evaluations.
+    pub failures: usize,
+    /// One row per parameter.
+    pub parameters: Vec<ComparedParameter>,
+    /// The final stage's log-weights Δβ·(ℓ_model − ℓ_surrogate) of the members whose model run
+    /// succeeded (their histogram).
+    pub log_weights: Vec<f64>,
+    /// The stages.
+    pub stages: Vec<ModelPosteriorStageRow>,
+    /// The model at both MAPs, one entry per data point.
+    pub map_runs: Vec<MapRunsAtPoint>,
+}
+
+/// One parameter in the surrogate's and the model's posterior.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ComparedParameter {
+    /// The parameter's name.
+    pub name: String,
+    /// MAP, mean and std of the surrogate's posterior.
+    pub surrogate: (f64, f64, f64),
+    /// MAP, mean and std of the model's posterior.
+    pub model: (f64, f64, f64),
+    /// (model − surrogate)/|surrogate| of MAP, mean and std.
+    pub relative_difference: (f64, f64, f64),
+    /// Monte Carlo standard errors of the model posterior's mean and std.
+    pub mcse: (f64, f64),
+}
+
+/// One stage of the model posterior.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ModelPosteriorStageRow {
+    /// 1, 2, …
+    pub stage: usize,
+    /// The tempering exponent after it.
+    pub beta: f64,
+    /// CV of its weights.
+    pub cv: f64,
+    /// k̂ of its weights.
+    pub pareto_k: f64,
+    /// ESS of its weights.
+    pub effective_sample_size: f64,
+    /// Model evaluations before its weights.
+    pub model_evaluations: usize,
+    /// Acceptance of the bridge's surrogate and model steps (none for the first stage).
+    pub acceptance: Option<(f64, f64)>,
+}
+
+/// The model run at both MAPs at one data point.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MapRunsAtPoint {
+    /// The data point's control value.
+    pub x: f64,
+    /// The measurement and its std.
+    pub datum: (f64, f64),
+    /// The model at the surrogate posterior's MAP (`None`: the run failed).
+    pub at_surrogate_map: Option<f64>,
+    /// The model at the model posterior's MAP.
+    pub at_model_map: Option<f64>,
 }
 
 /// The model itself run at the MAP of the surrogate's posterior and at posterior samples, beside

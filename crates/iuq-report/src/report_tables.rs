@@ -4,7 +4,9 @@
 
 use crate::charts::sensitivity::informative;
 use crate::derived::DerivedResults;
-use crate::model::{Convergence, DataSeries, PosteriorCheckReport, StudyReport};
+use crate::model::{
+    Convergence, DataSeries, ModelPosteriorReport, PosteriorCheckReport, StudyReport,
+};
 use crate::tables::{Cell, Column, Table};
 
 /// The leading columns of the tables per data point: the abscissa, the measurement, its std.
@@ -564,6 +566,152 @@ pub(crate) fn posterior_check(report: &StudyReport, check: &PosteriorCheckReport
     Table {
         name: "posterior_check".into(),
         title: "The model at the posterior, beside the surrogate".into(),
+        columns,
+        rows,
+    }
+}
+
+/// Table 2 of a study with both posteriors: MAP, mean and std of each parameter from the
+/// surrogate and from the model, with the relative differences and the model posterior's Monte
+/// Carlo standard errors.
+pub(crate) fn model_posterior_comparison(m: &ModelPosteriorReport) -> Table {
+    let mut columns = vec![Column::plain("parameter")];
+    for group in [&m.surrogate_source, &m.model_source] {
+        for header in ["MAP", "mean", "std"] {
+            columns.push(Column::grouped(group.clone(), header));
+        }
+    }
+    for header in ["MAP", "mean", "std"] {
+        columns.push(Column::grouped("relative difference", header));
+    }
+    for header in ["MCSE mean", "MCSE std"] {
+        columns.push(Column::grouped(m.model_source.clone(), header));
+    }
+    let rows = m
+        .parameters
+        .iter()
+        .enumerate()
+        .map(|(p, c)| {
+            let at = |field: &str| format!("/report/model_posterior/parameters/{p}/{field}");
+            vec![
+                Cell::text(c.name.clone()),
+                Cell::number(c.surrogate.0, at("surrogate/0")),
+                Cell::number(c.surrogate.1, at("surrogate/1")),
+                Cell::number(c.surrogate.2, at("surrogate/2")),
+                Cell::number(c.model.0, at("model/0")),
+                Cell::number(c.model.1, at("model/1")),
+                Cell::number(c.model.2, at("model/2")),
+                Cell::number(c.relative_difference.0, at("relative_difference/0")),
+                Cell::number(c.relative_difference.1, at("relative_difference/1")),
+                Cell::number(c.relative_difference.2, at("relative_difference/2")),
+                Cell::number(c.mcse.0, at("mcse/0")),
+                Cell::number(c.mcse.1, at("mcse/1")),
+            ]
+        })
+        .collect();
+    Table {
+        name: "model_posterior".into(),
+        title: "The surrogate's and the model's posterior".into(),
+        columns,
+        rows,
+    }
+}
+
+/// The model posterior's stages: exponent, CV, k̂, ESS, model evaluations and the bridges'
+/// acceptance rates.
+pub(crate) fn model_posterior_stages(m: &ModelPosteriorReport) -> Table {
+    let columns = [
+        "stage",
+        "β",
+        "CV",
+        "k̂",
+        "ESS",
+        "model evaluations",
+        "surrogate acceptance",
+        "model acceptance",
+    ]
+    .into_iter()
+    .map(Column::plain)
+    .collect();
+    let rows = m
+        .stages
+        .iter()
+        .enumerate()
+        .map(|(k, s)| {
+            let at = |field: &str| format!("/report/model_posterior/stages/{k}/{field}");
+            let mut row = vec![
+                Cell::count(s.stage, at("stage")),
+                Cell::number(s.beta, at("beta")),
+                Cell::number(s.cv, at("cv")),
+                Cell::number(s.pareto_k, at("pareto_k")),
+                Cell::number(s.effective_sample_size, at("effective_sample_size")),
+                Cell::count(s.model_evaluations, at("model_evaluations")),
+            ];
+            match s.acceptance {
+                Some((a, b)) => {
+                    row.push(Cell::number(a, at("acceptance/0")));
+                    row.push(Cell::number(b, at("acceptance/1")));
+                }
+                None => {
+                    row.push(Cell::text("–"));
+                    row.push(Cell::text("–"));
+                }
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "model_posterior_stages".into(),
+        title: "Stages of the model posterior".into(),
+        columns,
+        rows,
+    }
+}
+
+/// The model run at both MAPs at every data point, with the absolute errors against the
+/// measurement.
+pub(crate) fn model_posterior_map_runs(report: &StudyReport, m: &ModelPosteriorReport) -> Table {
+    let columns = vec![
+        Column::plain(report.data.x_label.clone()),
+        Column::plain("measurement"),
+        Column::plain("std"),
+        Column::grouped(format!("at the {} MAP", m.surrogate_source), "model"),
+        Column::grouped(format!("at the {} MAP", m.surrogate_source), "|error|"),
+        Column::grouped(format!("at the {} MAP", m.model_source), "model"),
+        Column::grouped(format!("at the {} MAP", m.model_source), "|error|"),
+    ];
+    let rows = m
+        .map_runs
+        .iter()
+        .enumerate()
+        .map(|(i, p)| {
+            let at = |field: &str| format!("/report/model_posterior/map_runs/{i}/{field}");
+            let mut row = vec![
+                Cell::number(p.x, at("x")),
+                Cell::number(p.datum.0, at("datum/0")),
+                Cell::number(p.datum.1, at("datum/1")),
+            ];
+            for (value, field) in [
+                (p.at_surrogate_map, "at_surrogate_map"),
+                (p.at_model_map, "at_model_map"),
+            ] {
+                match value {
+                    Some(v) => {
+                        row.push(Cell::number(v, at(field)));
+                        row.push(Cell::text(format!("{:.4}", (v - p.datum.0).abs())));
+                    }
+                    None => {
+                        row.push(Cell::text("failed"));
+                        row.push(Cell::text("–"));
+                    }
+                }
+            }
+            row
+        })
+        .collect();
+    Table {
+        name: "model_posterior_map_runs".into(),
+        title: "The model at both MAPs".into(),
         columns,
         rows,
     }

@@ -9,6 +9,7 @@ use crate::charts::data_fit::DataFitChart;
 use crate::charts::failure_map::{self, FailureMapChart};
 use crate::charts::gp_diagnostics::GpDiagnosticsChart;
 use crate::charts::map_error::MapErrorChart;
+use crate::charts::model_posterior::{LogWeightsChart, MapRunsChart};
 use crate::charts::posterior_check::{self, PosteriorCheckChart};
 use crate::charts::sampler_stages::{self, SamplerStagesChart};
 use crate::charts::sensitivity::{DISPLAY_RANGE, SensitivityChart};
@@ -348,6 +349,55 @@ pub(crate) fn build_sections(
             figures_dir,
         )?);
         section.tables.push(build::posterior_check(report, check));
+        sections.push(section);
+    }
+
+    if let Some(m) = &report.model_posterior {
+        let mut section = Section::new(
+            "model-posterior",
+            "The model's own posterior",
+            format!(
+                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next. {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
+                model = m.model_source,
+                surrogate = m.surrogate_source,
+                samples = m.samples,
+                runs = m.model_runs,
+                stop = m.stop,
+            ),
+        );
+        section.tables.push(build::model_posterior_comparison(m));
+        section.figures.push(figure(
+            FigureSpec {
+                name: "model_posterior_map_runs",
+                title: "The model at both MAPs",
+                caption: format!(
+                    "The {} run at the MAP of the {} posterior (crosses) and at the MAP of its own posterior (dots), beside the measurements (± one std); the table gives the absolute errors.",
+                    m.model_source, m.surrogate_source
+                ),
+                size: (920, 520),
+                tables: &["model_posterior_map_runs"],
+            },
+            &MapRunsChart {
+                report: m,
+                data: &report.data,
+            },
+            figures_dir,
+        )?);
+        section
+            .tables
+            .push(build::model_posterior_map_runs(report, m));
+        section.figures.push(figure(
+            FigureSpec {
+                name: "model_posterior_weights",
+                title: "Importance log-weights",
+                caption: "Histogram of the final stage's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded: a long right tail means a few members carry the estimate (k̂ measures it).".to_string(),
+                size: (920, 460),
+                tables: &["model_posterior_stages"],
+            },
+            &LogWeightsChart { report: m },
+            figures_dir,
+        )?);
+        section.tables.push(build::model_posterior_stages(m));
         sections.push(section);
     }
 

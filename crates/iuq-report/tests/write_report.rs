@@ -38,7 +38,7 @@ fn fresh_dir(name: &str) -> Scratch {
     Scratch(dir)
 }
 
-const FIGURES: [&str; 8] = [
+const FIGURES: [&str; 10] = [
     "data_fit",
     "sensitivity",
     "corner",
@@ -47,9 +47,11 @@ const FIGURES: [&str; 8] = [
     "gp_diagnostics",
     "sampler_stages",
     "posterior_check",
+    "model_posterior_map_runs",
+    "model_posterior_weights",
 ];
 
-const TABLES: [&str; 14] = [
+const TABLES: [&str; 17] = [
     "propagated",
     "posterior_summary",
     "posterior_evidence",
@@ -64,6 +66,9 @@ const TABLES: [&str; 14] = [
     "failures_by_reason",
     "stage_times",
     "posterior_check",
+    "model_posterior",
+    "model_posterior_stages",
+    "model_posterior_map_runs",
 ];
 
 fn read_document(dir: &Path) -> (ReportDocument, Value) {

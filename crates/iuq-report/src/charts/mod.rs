@@ -8,6 +8,7 @@ pub(crate) mod data_fit;
 pub(crate) mod failure_map;
 pub(crate) mod gp_diagnostics;
 pub(crate) mod map_error;
+pub(crate) mod model_posterior;
 pub(crate) mod posterior_check;
 pub(crate) mod sampler_stages;
 pub(crate) mod sensitivity;

@@ -3,9 +3,10 @@
 //! samples from a seeded random generator, one or two sources.
 
 use iuq_report::{
-    CheckedPoint, Convergence, ConvergenceRound, DataSeries, FailureMapPanel, GpDiagnostic,
-    ParameterSummary, PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics,
-    RunsAtPoint, SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+    CheckedPoint, ComparedParameter, Convergence, ConvergenceRound, DataSeries, FailureMapPanel,
+    GpDiagnostic, MapRunsAtPoint, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
+    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -296,7 +297,7 @@ pub fn synthetic_report(
             x_label: "shear stress (Pa)".to_string(),
             y_label: "elongation index EL (–)".to_string(),
             x: stresses.to_vec(),
-            y,
+            y: y.clone(),
             y_err,
         },
         posteriors,
@@ -319,6 +320,57 @@ pub fn synthetic_report(
         failure_map: Vec::new(),
         runs_per_point: Vec::new(),
         posterior_check: Some(posterior_check),
+        model_posterior: Some(ModelPosteriorReport {
+            surrogate_source: "GP surrogate".to_string(),
+            model_source: "cell model".to_string(),
+            certified: true,
+            stop: "certified: every stage's k̂ is below its threshold".to_string(),
+            samples: 200,
+            pareto_k: 0.31,
+            pareto_k_threshold: 0.565,
+            effective_sample_size: 151.5,
+            model_runs: 1600,
+            failures: 2,
+            parameters: ["kLink", "kBend", "sigma_m"]
+                .iter()
+                .enumerate()
+                .map(|(k, name)| {
+                    let s = (10.0 + k as f64, 12.0 + k as f64, 2.0);
+                    let m = (11.0 + k as f64, 12.5 + k as f64, 2.5);
+                    ComparedParameter {
+                        name: name.to_string(),
+                        surrogate: s,
+                        model: m,
+                        relative_difference: (
+                            (m.0 - s.0) / s.0,
+                            (m.1 - s.1) / s.1,
+                            (m.2 - s.2) / s.2,
+                        ),
+                        mcse: (0.2, 0.15),
+                    }
+                })
+                .collect(),
+            log_weights: (0..198).map(|i| -0.5 * (i as f64 / 40.0).powi(2)).collect(),
+            stages: vec![ModelPosteriorStageRow {
+                stage: 1,
+                beta: 1.0,
+                cv: 0.4,
+                pareto_k: 0.31,
+                effective_sample_size: 151.5,
+                model_evaluations: 200,
+                acceptance: None,
+            }],
+            map_runs: stresses
+                .iter()
+                .zip(&y)
+                .map(|(&x, &el)| MapRunsAtPoint {
+                    x,
+                    datum: (el, 0.01),
+                    at_surrogate_map: Some(el + 0.01),
+                    at_model_map: Some(el - 0.003),
+                })
+                .collect(),
+        }),
     }
 }
 

@@ -111,6 +111,11 @@ pub struct ModelPosteriorOutcome {
     pub log_evidence: f64,
     /// Model runs the method asked for (evaluations × run groups; stored runs included).
     pub model_runs: usize,
+    /// Per data point, the model's output at the surrogate posterior's MAP and at the model
+    /// posterior's MAP (`None`: a run failed).
+    pub map_runs: Vec<(Option<f64>, Option<f64>)>,
+    /// The surrogate posterior's MAP (model parameters).
+    pub surrogate_map: Vec<f64>,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -138,6 +143,7 @@ impl ModelPosteriorOutcome {
             "log_evidence_ratio": finite(p.log_evidence_ratio),
             "model_evaluations": p.model_evaluations,
             "model_runs": self.model_runs,
+            "map_runs": self.map_runs.iter().map(|(s, m)| json!({"at_surrogate_map": s, "at_model_map": m})).collect::<Vec<_>>(),
             "failures": p.failures,
             "stages": p.stages.iter().map(|s| json!({
                 "stage": s.stage,
@@ -213,7 +219,31 @@ pub fn reweight_to_model(
         )),
         e => StudyError::Failure(format!("the model posterior: {e}")),
     })?;
+    // The model at both MAPs (the surrogate's is usually stored by the posterior check, the
+    // model's by the stages).
+    let d = model_runs.parameters().len();
+    let surrogate_map = gp_posterior.summary.map[..d].to_vec();
+    let maps = [surrogate_map.clone(), posterior.map[..d].to_vec()];
+    let at_maps = model_runs
+        .model_at_data()
+        .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-maps"), &maps)
+        .map_err(|e| StudyError::Failure(format!("the model at both MAPs: {e}")))?;
+    let outputs: Vec<Option<Vec<f64>>> = at_maps
+        .into_iter()
+        .map(|o| o.ok().map(|e| e.outputs))
+        .collect();
+    let points = model_runs.output_names().len();
+    let map_runs = (0..points)
+        .map(|j| {
+            (
+                outputs[0].as_ref().and_then(|v| v.get(j).copied()),
+                outputs[1].as_ref().and_then(|v| v.get(j).copied()),
+            )
+        })
+        .collect();
     let outcome = ModelPosteriorOutcome {
+        map_runs,
+        surrogate_map,
         log_evidence: state.log_evidence + posterior.log_evidence_ratio,
         model_runs: posterior.model_evaluations * groups,
         seconds: started.elapsed().as_secs_f64(),

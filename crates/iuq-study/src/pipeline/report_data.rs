@@ -11,7 +11,8 @@ use serde_json::{Value, json};
 use iuq_campaign::StatusCounts;
 use iuq_gp::GpBank;
 use iuq_report::{
-    CheckedPoint, DataSeries, GpDiagnostic, ParameterSummary, PosteriorCheckReport,
+    CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic, MapRunsAtPoint,
+    ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport,
     PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage, SensitivityIndex,
     SensitivityResult, StudyReport, write_report,
 };
@@ -210,6 +211,81 @@ fn reweighted_result(
         stages: Vec::new(),
         propagated,
     })
+}
+
+/// The model posterior's section of the report: Table 2 (from the GP posterior's summary and
+/// the model posterior's weighted one), the weights, the stages and the model at both MAPs.
+fn model_posterior_report(
+    outcome: &ModelPosteriorOutcome,
+    gp: &SampledPosterior,
+    data: &DataLikelihood,
+    labels: &Labels,
+) -> ModelPosteriorReport {
+    let p = &outcome.posterior;
+    let relative = |m: f64, s: f64| (m - s) / s.abs();
+    let parameters = p
+        .names
+        .iter()
+        .enumerate()
+        .map(|(k, name)| {
+            let s = (gp.summary.map[k], gp.summary.mean[k], gp.summary.std[k]);
+            let m = (p.map[k], p.mean[k], p.std[k]);
+            ComparedParameter {
+                name: name.clone(),
+                surrogate: s,
+                model: m,
+                relative_difference: (relative(m.0, s.0), relative(m.1, s.1), relative(m.2, s.2)),
+                mcse: (p.mcse_mean[k], p.mcse_std[k]),
+            }
+        })
+        .collect();
+    let measurement_std = data.observations.measurement_std.clone();
+    ModelPosteriorReport {
+        surrogate_source: "GP surrogate".into(),
+        model_source: labels.model_source.into(),
+        certified: p.certified(),
+        stop: p.stop.to_string(),
+        samples: p.samples.len(),
+        pareto_k: p.pareto_k,
+        pareto_k_threshold: p.pareto_k_threshold,
+        effective_sample_size: p.effective_sample_size,
+        model_runs: outcome.model_runs,
+        failures: p.failures,
+        parameters,
+        log_weights: p
+            .raw_log_weights
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .collect(),
+        stages: p
+            .stages
+            .iter()
+            .map(|s| ModelPosteriorStageRow {
+                stage: s.stage,
+                beta: s.beta,
+                cv: s.cv,
+                pareto_k: s.pareto_k,
+                effective_sample_size: s.effective_sample_size,
+                model_evaluations: s.model_evaluations,
+                acceptance: s.screen_acceptance.zip(s.confirm_acceptance),
+            })
+            .collect(),
+        map_runs: outcome
+            .map_runs
+            .iter()
+            .enumerate()
+            .map(|(j, (at_s, at_m))| MapRunsAtPoint {
+                x: data.x[j],
+                datum: (
+                    data.observations.values[j],
+                    measurement_std.as_ref().map_or(0.0, |s| s[j]),
+                ),
+                at_surrogate_map: *at_s,
+                at_model_map: *at_m,
+            })
+            .collect(),
+    }
 }
 
 fn posterior_result(
@@ -482,6 +558,9 @@ pub fn write_pipeline_report(
         posterior_check: results
             .posterior_check
             .map(|c| posterior_check_report(c, &labels)),
+        model_posterior: results
+            .reweighted
+            .map(|m| model_posterior_report(m, results.gp_posterior, data, &labels)),
         run_statistics: RunStatistics {
             runs,
             succeeded: counts.succeeded as usize,
