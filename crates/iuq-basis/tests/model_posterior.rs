@@ -161,18 +161,8 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
     });
     // Half as wide as the model's posterior: the weights exp(1.5 z²) have no finite variance.
     let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
-    let env = |k: &str, d: usize| {
-        std::env::var(k)
-            .ok()
-            .and_then(|v| v.parse().ok())
-            .unwrap_or(d)
-    };
     let settings = ModelPosteriorSettings {
         samples: 400,
-        moves: env("MOVES", 3),
-        subchain: env("SUB", 5),
-        seed: env("SEED", 1) as u64,
-        cv_target: env("CV10", 10) as f64 / 10.0,
         ..Default::default()
     };
     // One step all the way would not hold: k̂ of the full step's weights.
