@@ -31,7 +31,11 @@ class PipelineResult:
     model runs over the initial, test and adaptive designs; ``adaptive`` holds the adaptive
     engine's rounds and stopping decision (``None`` without ``[surrogate] adaptive``); ``q2``
     the test-set Q2 of each surrogate; ``posterior`` the posterior tables (as in
-    ``pipeline.json``); ``posterior_check`` the model at the posterior per data point.
+    ``pipeline.json``); ``posterior_check`` the model at the posterior per data point;
+    ``model_posterior`` (with ``model_posterior=True``) the model's own posterior from the
+    surrogate's: ``mean``, ``std``, ``mcse_mean``, ``mcse_std``, ``map`` by parameter,
+    ``pareto_k`` with its threshold, ``effective_sample_size``, ``certified``, the ``stages`` and
+    the ``model_runs`` it asked for.
     """
 
     study: str
@@ -45,6 +49,7 @@ class PipelineResult:
     q2: np.ndarray
     posterior: Any
     posterior_check: Any
+    model_posterior: Optional[Dict[str, Any]]
     stage_seconds: Dict[str, float]
     seconds: float
     raw: Dict[str, Any] = field(repr=False, default_factory=dict)
@@ -122,7 +127,8 @@ class Study:
         """Run the calibration pipeline into ``out`` (default ``<study stem>-report``).
 
         ``max_parallel`` model runs at once (default: the executor's setting, else the cores);
-        ``model_posterior`` also samples on the model itself; ``fresh`` moves the campaign aside
+        ``model_posterior`` also gives the model's own posterior (``[model_posterior]``: from
+        the surrogate's by certified importance stages, or ``method = "basis"``); ``fresh`` moves the campaign aside
         and recomputes every run; ``runs_only`` stops after the training and test runs;
         ``recompute_rounds`` recomputes each adaptive round's measurement instead of reading
         back the one the campaign store recorded for the same runs and settings.
@@ -167,6 +173,7 @@ class Study:
             q2=np.asarray(raw.get("q2", []), dtype=np.float64),
             posterior=raw.get("posterior"),
             posterior_check=raw.get("posterior_check"),
+            model_posterior=raw.get("model_posterior"),
             stage_seconds={s["stage"]: s["seconds"] for s in raw.get("stage_seconds", [])},
             seconds=raw["seconds"],
             raw=raw,

@@ -117,3 +117,24 @@ def test_study_basis_equals_iuq_basis(cli, tmp_path):
     assert ours.n_stages == summary["stages"]
     assert list(ours.mean) == [summary["mean"][k] for k in ours.names]
     assert (tmp_path / "py" / "samples.csv").read_bytes() == (tmp_path / "cli" / "samples.csv").read_bytes()
+
+
+def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
+    """`Study.run(model_posterior=True)` gives the model posterior the CLI gives, certified."""
+    folder = copy_cooling(tmp_path, "cooling")
+    text = (folder / "cooling-per-time.toml").read_text()
+    program = ('kind = "command"\ncommand = ["./cooling_model.py"]\nabscissa = "t"\noutputs = ["T"]\n'
+               'output = { file = "result.json", format = "json" }')
+    assert program in text
+    expression = 'kind = "expression"\nabscissa = "t"\noutputs = { T = "20 + (T0 - 20) * exp(-k * t)" }'
+    study_file = folder / "expression.toml"
+    study_file.write_text(text.replace(program, expression)
+                          + "\n[model_posterior]\nsamples = 100\nseed = 2\n")
+    study = iuq.Study.load(study_file)
+    result = study.run(tmp_path / "py", model_posterior=True)
+    m = result.model_posterior
+    assert m is not None and m["samples"] == 100
+    assert m["pareto_k"] <= m["pareto_k_threshold"] and m["certified"]
+    assert set(m["mean"]) == {"k", "T0"}
+    expected = cli("pipeline", study_file, "--model-posterior", "--out", tmp_path / "cli")
+    assert without_timings(result.raw["model_posterior"]) == without_timings(expected["model_posterior"])
