@@ -7,25 +7,34 @@
 //!
 //! 1. `samples` members of the surrogate population (uniformly, without replacement) are run
 //!    through the model in one batch: ℓ_m, hence r (a failed run: r = −∞, weight 0).
-//! 2. Stage k from β: the step Δβ by the coefficient-of-variation rule of BASIS (CV of
+//! 2. **Correction.** Where those weights would not hold in one stage (the CV rule does not
+//!    reach β = 1 or k̂ exceeds its threshold), the surrogate is corrected: ℓ_s + r̂, with r̂ a
+//!    quadratic least-squares fit of r over the batch ([`crate::quadratic_regression`]; a
+//!    surrogate posterior that is shifted, too wide or too narrow differs from the model's by
+//!    exactly such an r), the corrected surrogate's posterior is sampled by BASIS (surrogate
+//!    evaluations only), and a new batch of `samples` members of it is run through the model;
+//!    from here on the corrected surrogate is the surrogate (r becomes r − r̂). At most
+//!    `corrections` times (0 or 1): this costs one batch where a bridge costs one per stage.
+//! 3. Stage k from β: the step Δβ by the coefficient-of-variation rule of BASIS (CV of
 //!    exp(Δβ·r) equal to `cv_target`, `bridge_cv_target` after a bridge, or the whole 1 − β
-//!    when it stays within it; Wu et al. 2017), then, while the Pareto-smoothed weights' k̂ (Vehtari et al. 2024) exceeds its
-//!    threshold min(1 − 1/log₁₀ S, 0.7), the step is halved (down to `min_step`): every stage's
-//!    incremental weights are certified by k̂. One stage when the surrogate is good.
-//! 3. When β reaches 1 the population with its smoothed weights is the model's posterior.
+//!    when it stays within it; Wu et al. 2017), then, while the Pareto-smoothed weights' k̂
+//!    (Vehtari et al. 2024) exceeds its threshold min(1 − 1/log₁₀ S, 0.7), the step is halved
+//!    (down to `min_step`): every stage's incremental weights are certified by k̂. One stage
+//!    when the surrogate is good.
+//! 4. When β reaches 1 the population with its smoothed weights is the model's posterior.
 //!    Otherwise the population is resampled by the weights and every copy makes `moves`
 //!    delayed-acceptance moves at β (Christen & Fox 2005; with a surrogate subchain as the
 //!    proposal, Lykkegaard et al. 2023, MLDA): `subchain` random-walk Metropolis steps
 //!    (covariance `scale`²·Cov_w(θ), as BASIS's proposal) on the screening density
 //!    π̃_β = π·L_s·exp(β·r̂), where r̂ is a quadratic least-squares fit of r over the population
-//!    ([`crate::quadratic_regression`]; the surrogate corrected by what the model's runs have
-//!    shown so far, without which a surrogate posterior narrower than the model's keeps the
-//!    chains from its tails); the subchain's end θ* is then run through the model and accepted
-//!    with ln u < β·((r − r̂)(θ*) − (r − r̂)(θ)) = ln[π_β(θ*)·π̃_β(θ) / (π_β(θ)·π̃_β(θ*))], which
+//!    (the surrogate corrected by what the model's runs have shown so far, without which a
+//!    surrogate posterior narrower than the model's keeps the chains from its tails); the
+//!    subchain's end θ* is then run through the model and accepted with
+//!    ln u < β·((r − r̂)(θ*) − (r − r̂)(θ)) = ln[π_β(θ*)·π̃_β(θ) / (π_β(θ)·π̃_β(θ*))], which
 //!    makes the move reversible with respect to π_β (π̃_β's subchain is reversible with respect
 //!    to π̃_β). Only the proposals the surrogate lets through cost a model run; both acceptance
 //!    rates are reported. Then the next stage.
-//! 4. After `max_stages` stages without reaching β = 1 (or a step below `min_step`) the run
+//! 5. After `max_stages` stages without reaching β = 1 (or a step below `min_step`) the run
 //!    stops uncertified, with the weights of the remaining step and their k̂.
 //!
 //! The final population is summarised with its normalised smoothed weights w̄: mean
@@ -52,11 +61,13 @@ use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
-use crate::likelihood::LogLikelihood;
+use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
 use crate::proposal::Proposal;
 use crate::quadratic_regression::QuadraticFit;
 use crate::resampling::resample;
+use crate::sampler::{Basis, Silent};
+use crate::settings::BasisSettings;
 use crate::settings::Resampling;
 
 /// First stream stage of the model-posterior sampler (stage k uses `STREAM_BASE + k`; the
@@ -80,6 +91,10 @@ pub struct ModelPosteriorSettings {
     pub bridge_cv_target: f64,
     /// Largest number of stages (each after the first costs a bridge of model runs).
     pub max_stages: usize,
+    /// Corrections of the surrogate, 0 or 1 (one costs `samples` model evaluations): where the
+    /// first batch's weights do not hold in one stage, the surrogate's log-likelihood is
+    /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew.
+    pub corrections: usize,
     /// Delayed-acceptance moves per member after a bridging stage.
     pub moves: usize,
     /// Surrogate Metropolis steps in each move's subchain.
@@ -100,6 +115,7 @@ impl Default for ModelPosteriorSettings {
             cv_target: 1.0,
             bridge_cv_target: 0.5,
             max_stages: 6,
+            corrections: 1,
             moves: 1,
             subchain: 20,
             scale: 0.4,
@@ -133,6 +149,9 @@ impl ModelPosteriorSettings {
         if self.max_stages == 0 {
             return bad("max_stages", "must be at least 1");
         }
+        if self.corrections > 1 {
+            return bad("corrections", "must be 0 or 1");
+        }
         if self.moves == 0 {
             return bad("moves", "must be at least 1");
         }
@@ -162,6 +181,8 @@ pub struct SurrogatePopulation<'a> {
     pub log_likelihood: &'a [f64],
     /// ln π(θ_i).
     pub log_prior: &'a [f64],
+    /// The surrogate posterior's log-evidence ln Z_s.
+    pub log_evidence: f64,
 }
 
 /// One stage of [`model_posterior`].
@@ -190,6 +211,43 @@ pub struct ModelPosteriorStage {
     pub screen_acceptance: Option<f64>,
     /// Share of the bridge's model confirmations accepted (none for stage 1).
     pub confirm_acceptance: Option<f64>,
+}
+
+/// A correction of the surrogate: the first batch's weights would not hold in one stage, so
+/// the surrogate's log-likelihood became ℓ_s + r̂ (r̂ a quadratic fit of the batch's r) and a new
+/// batch was drawn from the corrected surrogate's posterior.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SurrogateCorrection {
+    /// k̂ of the batch's full-step weights before the correction.
+    pub pareto_k_before: f64,
+    /// CV of those weights.
+    pub cv_before: f64,
+    /// Model evaluations of the batch the correction was fitted on.
+    pub model_evaluations: usize,
+    /// Whether the fit had quadratic terms (else linear).
+    pub quadratic: bool,
+}
+
+/// ℓ_s + r̂: the surrogate corrected by a fit of the model–surrogate difference.
+struct CorrectedLikelihood<'a> {
+    base: &'a dyn LogLikelihood,
+    fit: QuadraticFit,
+}
+
+impl LogLikelihood for CorrectedLikelihood<'_> {
+    fn parameter_count(&self) -> usize {
+        self.base.parameter_count()
+    }
+
+    fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>> {
+        Ok(self
+            .base
+            .log_likelihood_batch(points)?
+            .into_iter()
+            .zip(points)
+            .map(|(v, x)| v.map(|v| v + self.fit.predict(x)))
+            .collect())
+    }
 }
 
 /// Why [`model_posterior`] stopped.
@@ -271,10 +329,13 @@ pub struct ModelPosterior {
     pub map_log_likelihood: f64,
     /// ln π there.
     pub map_log_prior: f64,
-    /// ln(Z_model/Z_surrogate) = Σ_k ln mean_i exp(Δβ_k·r_i) over the stages (the evidence
-    /// increments of the tempering, as BASIS accumulates them): the model's log-evidence is the
+    /// ln(Z_model/Z_surrogate): Σ_k ln mean_i exp(Δβ_k·r_i) over the stages (the evidence
+    /// increments of the tempering, as BASIS accumulates them), plus ln(Z_corrected/Z_s) after a
+    /// correction (from the corrected surrogate's BASIS run): the model's log-evidence is the
     /// surrogate's plus this.
     pub log_evidence_ratio: f64,
+    /// The corrections of the surrogate made (see [`ModelPosteriorSettings::corrections`]).
+    pub corrections: Vec<SurrogateCorrection>,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.
@@ -388,6 +449,65 @@ pub fn model_posterior(
     let mut log_evidence_ratio = 0.0;
     let mut stages = Vec::new();
     let threshold = pareto_k_threshold(s);
+    let mut corrections = Vec::new();
+    let corrected_holder: CorrectedLikelihood;
+    let mut surrogate = surrogate;
+    if settings.corrections > 0 {
+        let r: Vec<f64> = lm.iter().zip(&ls).map(|(m, s)| m - s).collect();
+        let max_r = r
+            .iter()
+            .copied()
+            .filter(|v| v.is_finite())
+            .fold(f64::NEG_INFINITY, f64::max);
+        let one_stage = max_r.is_finite() && {
+            let rule = next_step(&r, 0.0, settings.cv_target, max_r);
+            rule.reaches_one && pareto_smooth(&r).pareto_k <= threshold
+        };
+        let fit = if one_stage {
+            None
+        } else {
+            QuadraticFit::fit(&theta, &r)
+        };
+        if let Some(fit) = fit {
+            corrections.push(SurrogateCorrection {
+                pareto_k_before: pareto_smooth(&r).pareto_k,
+                cv_before: coefficient_of_variation(&r),
+                model_evaluations: s,
+                quadratic: fit.is_quadratic(),
+            });
+            corrected_holder = CorrectedLikelihood {
+                base: surrogate,
+                fit,
+            };
+            surrogate = &corrected_holder;
+            let basis_settings = BasisSettings {
+                samples: n.max(s),
+                burn_in: 10,
+                seed: settings.seed,
+                ..Default::default()
+            }
+            .check()?;
+            let run = Basis::new(space, surrogate, basis_settings)?.run(&mut Silent)?;
+            let state = run.state;
+            log_evidence_ratio += state.log_evidence - population.log_evidence;
+            let mut rng = stream(settings.seed, STREAM_BASE, 1);
+            let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
+            chosen.sort_unstable();
+            theta = chosen.iter().map(|&i| state.samples[i].clone()).collect();
+            ls = chosen.iter().map(|&i| state.log_likelihood[i]).collect();
+            lp = chosen.iter().map(|&i| state.log_prior[i]).collect();
+            lm = evaluate(
+                model,
+                &theta,
+                "the model at the corrected surrogate's posterior samples",
+            )?;
+            evaluations += s;
+            let batch_failures = lm.iter().filter(|v| !v.is_finite()).count();
+            failures += batch_failures;
+            best.offer(&theta, &lm, &lp);
+            stage_evaluations = (s, batch_failures);
+        }
+    }
     let (raw, smoothed, pareto_k, stop) = loop {
         let r: Vec<f64> = lm.iter().zip(&ls).map(|(m, s)| m - s).collect();
         let max_r = r
@@ -639,6 +759,7 @@ pub fn model_posterior(
         map_log_likelihood,
         map_log_prior,
         log_evidence_ratio,
+        corrections,
         model_evaluations: evaluations,
         failures,
     })

@@ -73,6 +73,10 @@ pub struct ModelPosteriorReport {
     pub model_runs: usize,
     /// Failed model evaluations.
     pub failures: usize,
+    /// Times the surrogate was corrected by a fit of the model–surrogate difference before the
+    /// stages (each a batch of `samples` evaluations).
+    #[serde(default)]
+    pub corrections: usize,
     /// One row per parameter.
     pub parameters: Vec<ComparedParameter>,
     /// The final stage's log-weights Δβ·(ℓ_model − ℓ_surrogate) of the members whose model run

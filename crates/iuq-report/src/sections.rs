@@ -357,12 +357,20 @@ pub(crate) fn build_sections(
             "model-posterior",
             "The model's own posterior",
             format!(
-                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next. {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
+                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
                 model = m.model_source,
                 surrogate = m.surrogate_source,
                 samples = m.samples,
                 runs = m.model_runs,
                 stop = m.stop,
+                corrected = if m.corrections > 0 {
+                    format!(
+                        " The first batch's weights did not hold in one stage, so the {surrogate} was corrected by a quadratic fit of the difference of the two log-likelihoods and a new batch drawn from the corrected {surrogate}'s posterior.",
+                        surrogate = m.surrogate_source
+                    )
+                } else {
+                    String::new()
+                },
             ),
         );
         section.tables.push(build::model_posterior_comparison(m));

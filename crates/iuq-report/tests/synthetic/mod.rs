@@ -331,6 +331,7 @@ pub fn synthetic_report(
             effective_sample_size: 151.5,
             model_runs: 1600,
             failures: 2,
+            corrections: 0,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()
                 .enumerate()

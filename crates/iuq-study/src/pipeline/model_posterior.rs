@@ -43,7 +43,8 @@ pub enum ModelPosteriorMethod {
 
 /// Read `[model_posterior]` (defaults when absent): `method` ("reweight" or "basis"), and for
 /// "reweight" `samples` (300), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
-/// `max_stages` (6), `moves` (3), `subchain` (5), `scale` (0.4), `min_step` (1e-4).
+/// `max_stages` (6), `corrections` (1), `moves` (1), `subchain` (20), `scale` (0.4), `min_step`
+/// (1e-4).
 pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     let file = study.path.display().to_string();
     let mut s = StudySection::optional(study.model_posterior.as_ref(), "model_posterior", &file);
@@ -61,6 +62,7 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
             .positive("bridge_cv_target")?
             .unwrap_or(d.bridge_cv_target),
         max_stages: s.count("max_stages", 1)?.unwrap_or(d.max_stages),
+        corrections: s.count("corrections", 0)?.unwrap_or(d.corrections),
         moves: s.count("moves", 1)?.unwrap_or(d.moves),
         subchain: s.count("subchain", 1)?.unwrap_or(d.subchain),
         scale: s.positive("scale")?.unwrap_or(d.scale),
@@ -145,6 +147,7 @@ impl ModelPosteriorOutcome {
             "model_runs": self.model_runs,
             "map_runs": self.map_runs.iter().map(|(s, m)| json!({"at_surrogate_map": s, "at_model_map": m})).collect::<Vec<_>>(),
             "failures": p.failures,
+            "corrections": p.corrections,
             "stages": p.stages.iter().map(|s| json!({
                 "stage": s.stage,
                 "beta": s.beta,
@@ -185,6 +188,7 @@ pub fn reweight_to_model(
         samples: &state.samples,
         log_likelihood: &state.log_likelihood,
         log_prior: &state.log_prior,
+        log_evidence: state.log_evidence,
     };
     let groups = model_runs.groups();
     let posterior = model_posterior(

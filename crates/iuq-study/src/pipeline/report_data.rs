@@ -251,6 +251,7 @@ fn model_posterior_report(
         effective_sample_size: p.effective_sample_size,
         model_runs: outcome.model_runs,
         failures: p.failures,
+        corrections: p.corrections.len(),
         parameters,
         log_weights: p
             .raw_log_weights
