@@ -19,8 +19,9 @@
 //!    exp(Δβ·r) equal to `cv_target`, `bridge_cv_target` after a bridge, or the whole 1 − β
 //!    when it stays within it; Wu et al. 2017), then, while the Pareto-smoothed weights' k̂
 //!    (Vehtari et al. 2024) exceeds its threshold min(1 − 1/log₁₀ S, 0.7), the step is halved
-//!    (down to `min_step`): every stage's incremental weights are certified by k̂. One stage
-//!    when the surrogate is good.
+//!    (down to `min_step`) until k̂ holds or the weights are nearly equal (CV ≤
+//!    [`NEARLY_EQUAL_CV`]): every stage's incremental weights are certified. One stage when the
+//!    surrogate is good.
 //! 4. When β reaches 1 the population with its smoothed weights is the model's posterior.
 //!    Otherwise the population is resampled by the weights and every copy makes `moves`
 //!    delayed-acceptance moves at β (Christen & Fox 2005; with a surrogate subchain as the
@@ -69,6 +70,12 @@ use crate::resampling::resample;
 use crate::sampler::{Basis, Silent};
 use crate::settings::BasisSettings;
 use crate::settings::Resampling;
+
+/// A stage's weights whose CV is at most this are certified whatever their k̂: so nearly equal
+/// (ESS/S ≥ 0.99) that their tail cannot carry the estimate. k̂ is a shape, blind to the
+/// weights' spread: for a small step the weights exp(Δβ·r) ≈ 1 + Δβ·r keep the tail shape of r
+/// itself, and a few members with a large r would hold k̂ up however small the step.
+pub const NEARLY_EQUAL_CV: f64 = 0.1;
 
 /// First stream stage of the model-posterior sampler (stage k uses `STREAM_BASE + k`; the
 /// selection of the surrogate members uses `STREAM_BASE`).
@@ -271,7 +278,10 @@ pub enum ModelPosteriorStop {
 impl std::fmt::Display for ModelPosteriorStop {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::Certified => write!(f, "certified: every stage's k̂ is below its threshold"),
+            Self::Certified => write!(
+                f,
+                "certified: every stage's k̂ is below its threshold (or its weights nearly equal)"
+            ),
             Self::MaxStages { beta } => write!(
                 f,
                 "not certified: max_stages stages reached β = {beta:.4} (raise max_stages, moves or samples)"
@@ -530,7 +540,11 @@ pub fn model_posterior(
         let mut step = rule.step;
         let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
         let mut smoothing = pareto_smooth(&scaled(step));
-        while smoothing.pareto_k > threshold && step / 2.0 >= settings.min_step {
+        let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
+            smoothing.pareto_k <= threshold
+                || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV
+        };
+        while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
             step /= 2.0;
             smoothing = pareto_smooth(&scaled(step));
         }
@@ -554,7 +568,7 @@ pub fn model_posterior(
         };
         on_stage(&record);
         stages.push(record);
-        let certified_step = smoothing.pareto_k <= threshold;
+        let certified_step = holds(&smoothing, step);
         if reaches_one && certified_step {
             log_evidence_ratio += log_evidence_increment(&r, step, max_r);
             break (

@@ -470,10 +470,28 @@ pub fn shear_cell(experiment: &ShearExperiment, setup: &ShearSetup) -> Result<Ce
 /// Fails with the reason when the mesh breaks, a value becomes non-finite, the cell leaves the
 /// channel or a recorded contour admits no ellipse.
 pub fn run_shear(experiment: &ShearExperiment) -> Result<ShearResult> {
-    on_pool_worker(|| run_shear_on_worker(experiment))
+    on_pool_worker(|| run_shear_on_worker(experiment, None))
 }
 
-fn run_shear_on_worker(experiment: &ShearExperiment) -> Result<ShearResult> {
+/// What [`run_shear_observed`] hands each shape to: the step and the vertices (HemoCell's
+/// frame).
+pub(crate) type ShapeObserver<'a> = &'a mut (dyn FnMut(u64, &[[f64; 3]]) + Send);
+
+/// [`run_shear`], also handing the shape (HemoCell's frame) to `observe` every `every` steps
+/// (`crate::shear_trace` records the elongation over the whole run this way). The run and its
+/// result are those of [`run_shear`]: the observer only reads the positions.
+pub(crate) fn run_shear_observed(
+    experiment: &ShearExperiment,
+    every: u64,
+    observe: ShapeObserver<'_>,
+) -> Result<ShearResult> {
+    on_pool_worker(|| run_shear_on_worker(experiment, Some((every.max(1), observe))))
+}
+
+fn run_shear_on_worker(
+    experiment: &ShearExperiment,
+    mut observer: Option<(u64, ShapeObserver<'_>)>,
+) -> Result<ShearResult> {
     experiment.validate()?;
     let setup = experiment.setup();
     let started = Instant::now();
@@ -482,6 +500,16 @@ fn run_shear_on_worker(experiment: &ShearExperiment) -> Result<ShearResult> {
     let mut next = 0;
     while cell.steps() < setup.t_max {
         cell.step()?;
+        if let Some((every, observe)) = observer.as_mut()
+            && cell.steps() % *every == 0
+        {
+            let vertices: Vec<[f64; 3]> = cell
+                .positions()
+                .iter()
+                .map(|&p| to_hemocell_frame(p))
+                .collect();
+            observe(cell.steps(), &vertices);
+        }
         while next < setup.frames.len() && setup.frames[next] == cell.steps() {
             let vertices: Vec<[f64; 3]> = cell
                 .positions()

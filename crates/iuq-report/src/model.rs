@@ -46,6 +46,39 @@ pub struct StudyReport {
     /// the importance weights' diagnostics, the model at both MAPs); `None` omits the section.
     #[serde(default)]
     pub model_posterior: Option<ModelPosteriorReport>,
+    /// The cell at a MAP at every stress, in pictures (cell-model studies); `None` omits them.
+    #[serde(default)]
+    pub cell_portraits: Option<CellPortraits>,
+}
+
+/// The cell model run at a MAP at every stress, told in pictures: its final shape in the shear
+/// plane with the fitted ellipse and from the side, and its elongation index against strain
+/// through the whole run with the measuring window.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellPortraits {
+    /// Whose MAP, e.g. "the cell model posterior's MAP".
+    pub source: String,
+    /// One per stress, in increasing stress.
+    pub portraits: Vec<CellPortrait>,
+}
+
+/// One stress of [`CellPortraits`] (lengths in µm, centred on the shape's centroid).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CellPortrait {
+    /// The shear stress in Pa.
+    pub x: f64,
+    /// The run's elongation index over the measuring window, and its std.
+    pub elongation_index: (f64, f64),
+    /// (strain, elongation index) through the run.
+    pub trace: Vec<(f64, f64)>,
+    /// The measuring window in strain (start, end).
+    pub window: (f64, f64),
+    /// The final shape's contour in the shear plane (flow, gradient).
+    pub outline: Vec<[f64; 2]>,
+    /// Its fitted ellipse: centre x, centre y, semi-major, semi-minor, angle (radians).
+    pub ellipse: [f64; 5],
+    /// The final shape's contour from the side (flow, vorticity).
+    pub side: Vec<[f64; 2]>,
 }
 
 /// The model's own posterior beside the surrogate's: the published study's Table 2 layout (MAP,

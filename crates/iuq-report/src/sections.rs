@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use crate::charts::cell_portraits::{CellShapesChart, ElongationTraceChart};
 use crate::charts::convergence::ConvergenceChart;
 use crate::charts::corner::CornerChart;
 use crate::charts::data_fit::DataFitChart;
@@ -406,6 +407,41 @@ pub(crate) fn build_sections(
             figures_dir,
         )?);
         section.tables.push(build::model_posterior_stages(m));
+        sections.push(section);
+    }
+
+    if let Some(portraits) = &report.cell_portraits {
+        let mut section = Section::new(
+            "cell-shapes",
+            "The cell at the MAP",
+            format!(
+                "The cell model run at {} at every stress: the final shape in the shear plane, whose contour (per bin along the flow, the outermost vertices across it) the elongation index is measured on with its fitted ellipse, and from the side; and the elongation index through the whole run, from the cell at rest to the end of the measuring window (shaded), whose frames give the measured value.",
+                portraits.source
+            ),
+        );
+        let chart = CellShapesChart { portraits };
+        section.figures.push(figure(
+            FigureSpec {
+                name: "cell_shapes",
+                title: "The cell's shape at every stress",
+                caption: "Each panel: the last frame's contour in the shear plane (orange dots; flow to the right, gradient up) with its fitted ellipse (black), and below it the same shape seen from the side (blue; flow to the right, vorticity up). Lengths in µm, centred on the cell's centroid; every panel at the same scale.".to_string(),
+                size: chart.size(),
+                tables: &[],
+            },
+            &chart,
+            figures_dir,
+        )?);
+        section.figures.push(figure(
+            FigureSpec {
+                name: "elongation_trace",
+                title: "Elongation index against strain",
+                caption: "The elongation index of the shear-plane contour through each run (one line per stress, darker for higher stress); shaded, the measuring window whose frames give the run's value.".to_string(),
+                size: (920, 520),
+                tables: &[],
+            },
+            &ElongationTraceChart { portraits },
+            figures_dir,
+        )?);
         sections.push(section);
     }
 

@@ -38,7 +38,7 @@ fn fresh_dir(name: &str) -> Scratch {
     Scratch(dir)
 }
 
-const FIGURES: [&str; 10] = [
+const FIGURES: [&str; 12] = [
     "data_fit",
     "sensitivity",
     "corner",
@@ -49,6 +49,8 @@ const FIGURES: [&str; 10] = [
     "posterior_check",
     "model_posterior_map_runs",
     "model_posterior_weights",
+    "cell_shapes",
+    "elongation_trace",
 ];
 
 const TABLES: [&str; 17] = [

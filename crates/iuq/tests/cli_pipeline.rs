@@ -434,7 +434,19 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     ]));
     assert_eq!(status["study"], "rbc-healthy-hemocell");
     assert_eq!(status["counts"]["failed"], 0, "{status}");
-    assert_eq!(status["counts"]["succeeded"], status["total"], "{status}");
+    // Every run the study's replay uses has succeeded; while the model posterior's batch
+    // (`[model_posterior]`, several sessions of cell-model runs) is being made, its remaining
+    // runs wait as pending in the shipped store.
+    assert_eq!(
+        status["counts"]["succeeded"].as_u64().unwrap()
+            + status["counts"]["pending"].as_u64().unwrap(),
+        status["total"].as_u64().unwrap(),
+        "{status}"
+    );
+    assert!(
+        status["counts"]["succeeded"].as_u64().unwrap() >= 1005,
+        "{status}"
+    );
 }
 
 #[test]
@@ -473,4 +485,80 @@ fn the_shipped_tbhp_study_completes_from_its_shipped_runs() {
         };
         assert!(point["rmse"].as_f64().unwrap() < limit, "{point}");
     }
+}
+
+#[test]
+fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
+    let dir = scratch("pipeline", "portraits");
+    let study = small_study(&dir, "");
+    let text = std::fs::read_to_string(&study)
+        .unwrap()
+        .replace("method = \"basis\"", "samples = 10\nseed = 3");
+    std::fs::write(&study, text).unwrap();
+    let out = dir.join("report");
+    let run = || {
+        let output = iuq(&[
+            "pipeline",
+            study.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--model-posterior",
+            "--json",
+        ]);
+        assert!(
+            output.status.success(),
+            "{}",
+            String::from_utf8_lossy(&output.stderr)
+        );
+        (
+            json_of(&output),
+            String::from_utf8_lossy(&output.stderr).into_owned(),
+        )
+    };
+    let (summary, stderr) = run();
+    let m = &summary["model_posterior"];
+    assert_eq!(m["samples"], 10, "{m}");
+    assert!(
+        stderr.contains("the cell at the MAP in pictures: 2 runs"),
+        "{stderr}"
+    );
+    for figure in [
+        "cell_shapes",
+        "elongation_trace",
+        "model_posterior_map_runs",
+    ] {
+        assert!(
+            out.join(format!("figures/{figure}.png")).is_file(),
+            "{figure}"
+        );
+    }
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let portraits = report["report"]["cell_portraits"]["portraits"]
+        .as_array()
+        .unwrap();
+    assert_eq!(portraits.len(), 2);
+    let map_runs = report["report"]["model_posterior"]["map_runs"]
+        .as_array()
+        .unwrap();
+    for (p, run) in portraits.iter().zip(map_runs) {
+        assert_eq!(p["x"], run["x"]);
+        // The portrait is the cell model run again at the model posterior's MAP, in this process:
+        // the same elongation index as the campaign's run there, bit for bit.
+        assert_eq!(p["elongation_index"][0], run["at_model_map"], "{p}");
+        let trace = p["trace"].as_array().unwrap();
+        assert!(trace.len() > 10, "{}", trace.len());
+        assert!(p["outline"].as_array().unwrap().len() > 10);
+        assert!(p["side"].as_array().unwrap().len() > 10);
+    }
+    // A replay reads the portraits back from the campaign store: no cell-model run.
+    let (again, stderr) = run();
+    assert!(!stderr.contains("in pictures"), "{stderr}");
+    assert_eq!(again["model_posterior"]["mean"], m["mean"]);
+    let replayed: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        replayed["report"]["cell_portraits"],
+        report["report"]["cell_portraits"]
+    );
 }

@@ -1,6 +1,7 @@
 //! The report's charts, one kind per file, and the drawing helpers they share (legends drawn
 //! in a strip of their own, error bars, panel grids).
 
+pub(crate) mod cell_portraits;
 pub(crate) mod contour;
 pub(crate) mod convergence;
 pub(crate) mod corner;

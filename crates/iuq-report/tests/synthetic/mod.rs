@@ -3,10 +3,11 @@
 //! samples from a seeded random generator, one or two sources.
 
 use iuq_report::{
-    CheckedPoint, ComparedParameter, Convergence, ConvergenceRound, DataSeries, FailureMapPanel,
-    GpDiagnostic, MapRunsAtPoint, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
-    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, Convergence, ConvergenceRound,
+    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, ModelPosteriorReport,
+    ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
+    PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
+    SensitivityResult, StudyReport,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -369,6 +370,38 @@ pub fn synthetic_report(
                     datum: (el, 0.01),
                     at_surrogate_map: Some(el + 0.01),
                     at_model_map: Some(el - 0.003),
+                })
+                .collect(),
+        }),
+        cell_portraits: Some(CellPortraits {
+            source: "the cell model posterior's MAP".to_string(),
+            portraits: stresses
+                .iter()
+                .map(|&x| {
+                    let el = 0.1 + 0.05 * x;
+                    let (a, b) = (4.0 * (1.0 + el), 4.0 * (1.0 - el));
+                    let ring = |rx: f64, ry: f64| -> Vec<[f64; 2]> {
+                        (0..40)
+                            .map(|i| {
+                                let t = i as f64 / 40.0 * std::f64::consts::TAU;
+                                [rx * t.cos(), ry * t.sin()]
+                            })
+                            .collect()
+                    };
+                    CellPortrait {
+                        x,
+                        elongation_index: (el, 0.002),
+                        trace: (0..60)
+                            .map(|i| {
+                                let strain = i as f64 * 0.16;
+                                (strain, el * (1.0 - (-strain).exp()))
+                            })
+                            .collect(),
+                        window: (7.5, 9.375),
+                        outline: ring(a, b),
+                        ellipse: [0.0, 0.0, a, b, 0.1],
+                        side: ring(a, 1.2),
+                    }
                 })
                 .collect(),
         }),

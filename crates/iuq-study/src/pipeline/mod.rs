@@ -26,12 +26,14 @@
 //! | [`surrogate`] | GPs per data point and failure classifiers, as a model for BASIS |
 //! | [`adaptive`] | the adaptive engine: new runs where the posterior lies, until it converges |
 //! | [`model_posterior`] | the model's own posterior from the surrogate's |
+//! | [`cell_portraits`] | the cell at the MAP in pictures (shapes, elongation against strain) |
 //! | [`settings`] | the pipeline's settings from `[surrogate]` and `[sensitivity]` |
 //! | [`report_data`] | from the results to the report and `pipeline.json` |
 
 pub mod adaptive;
 mod adaptive_report;
 pub mod cell_model_campaign;
+pub mod cell_portraits;
 pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;
@@ -759,6 +761,23 @@ fn run_stages(
         }
         _ => None,
     };
+    let portraits = match &reweighted {
+        Some(outcome) => {
+            let stage = Instant::now();
+            let d = model_runs.parameters().len();
+            let portraits = cell_portraits::portraits_at(
+                study,
+                &model_runs,
+                &outcome.posterior.map[..d],
+                &mut |line| events.message(line),
+            )?;
+            if portraits.is_some() {
+                stage_seconds.push(("the cell at the MAP".into(), stage.elapsed().as_secs_f64()));
+            }
+            portraits
+        }
+        None => None,
+    };
     let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
         Some(settings) => {
             let stage = Instant::now();
@@ -787,6 +806,7 @@ fn run_stages(
         gp_posterior: &gp_posterior,
         model_posterior: model_posterior.as_ref(),
         reweighted: reweighted.as_ref(),
+        portraits: portraits.as_deref(),
         campaign_runs: model_runs
             .campaign()
             .run_statistics()

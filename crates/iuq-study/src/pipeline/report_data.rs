@@ -11,10 +11,10 @@ use serde_json::{Value, json};
 use iuq_campaign::StatusCounts;
 use iuq_gp::GpBank;
 use iuq_report::{
-    CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic, MapRunsAtPoint,
-    ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport,
-    PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage, SensitivityIndex,
-    SensitivityResult, StudyReport, write_report,
+    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic,
+    MapRunsAtPoint, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
+    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage,
+    SensitivityIndex, SensitivityResult, StudyReport, write_report,
 };
 use iuq_sensitivity::SensitivityReport;
 
@@ -79,6 +79,8 @@ pub struct PipelineResults<'a> {
     pub model_posterior: Option<&'a SampledPosterior>,
     /// The model's posterior from the surrogate's (certified importance stages).
     pub reweighted: Option<&'a ModelPosteriorOutcome>,
+    /// The cell at the model posterior's MAP in pictures (cell-model studies).
+    pub portraits: Option<&'a [iuq_rbc::ShearPortrait]>,
     /// The campaign store's runs by status and the reasons of its failed runs.
     pub campaign_runs: (StatusCounts, Vec<String>),
     /// The adaptive engine's rounds, when it ran.
@@ -562,6 +564,21 @@ pub fn write_pipeline_report(
         model_posterior: results
             .reweighted
             .map(|m| model_posterior_report(m, results.gp_posterior, data, &labels)),
+        cell_portraits: results.portraits.map(|portraits| CellPortraits {
+            source: format!("the {} posterior's MAP", labels.model_source),
+            portraits: portraits
+                .iter()
+                .map(|p| CellPortrait {
+                    x: p.stress,
+                    elongation_index: p.elongation_index,
+                    trace: p.trace.clone(),
+                    window: p.window,
+                    outline: p.outline.clone(),
+                    ellipse: p.ellipse,
+                    side: p.side.clone(),
+                })
+                .collect(),
+        }),
         run_statistics: RunStatistics {
             runs,
             succeeded: counts.succeeded as usize,
