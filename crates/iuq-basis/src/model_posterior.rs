@@ -77,6 +77,9 @@ use crate::settings::Resampling;
 /// itself, and a few members with a large r would hold k̂ up however small the step.
 pub const NEARLY_EQUAL_CV: f64 = 0.1;
 
+/// The smallest population: k̂ needs a tail of 5 weights, ⌈min(0.2·S, 3√S)⌉ ≥ 5 from S = 21.
+pub const MIN_SAMPLES: usize = 25;
+
 /// First stream stage of the model-posterior sampler (stage k uses `STREAM_BASE + k`; the
 /// selection of the surrogate members uses `STREAM_BASE`).
 pub const STREAM_BASE: u64 = 2 << 32;
@@ -430,6 +433,18 @@ pub fn model_posterior(
             )));
         }
     }
+    if let Some(i) = (0..n).find(|&i| {
+        !population.log_likelihood[i].is_finite() || !population.log_prior[i].is_finite()
+    }) {
+        return Err(BasisError::InvalidData(format!(
+            "member {i} of the surrogate population has a non-finite log-likelihood or log-prior"
+        )));
+    }
+    if n < MIN_SAMPLES {
+        return Err(BasisError::InvalidData(format!(
+            "the surrogate population has {n} members, fewer than the {MIN_SAMPLES} k̂ needs"
+        )));
+    }
     let s = settings.samples.min(n);
     let widths: Vec<f64> = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
     let mut selection_rng = stream(settings.seed, STREAM_BASE, 0);
@@ -463,7 +478,7 @@ pub fn model_posterior(
     let corrected_holder: CorrectedLikelihood;
     let mut surrogate = surrogate;
     if settings.corrections > 0 {
-        let r: Vec<f64> = lm.iter().zip(&ls).map(|(m, s)| m - s).collect();
+        let r: Vec<f64> = log_ratios(&lm, &ls);
         let max_r = r
             .iter()
             .copied()
@@ -471,7 +486,9 @@ pub fn model_posterior(
             .fold(f64::NEG_INFINITY, f64::max);
         let one_stage = max_r.is_finite() && {
             let rule = next_step(&r, 0.0, settings.cv_target, max_r);
-            rule.reaches_one && pareto_smooth(&r).pareto_k <= threshold
+            rule.reaches_one
+                && (pareto_smooth(&r).pareto_k <= threshold
+                    || coefficient_of_variation(&r) <= NEARLY_EQUAL_CV)
         };
         let fit = if one_stage {
             None
@@ -519,7 +536,7 @@ pub fn model_posterior(
         }
     }
     let (raw, smoothed, pareto_k, stop) = loop {
-        let r: Vec<f64> = lm.iter().zip(&ls).map(|(m, s)| m - s).collect();
+        let r: Vec<f64> = log_ratios(&lm, &ls);
         let max_r = r
             .iter()
             .copied()
@@ -777,6 +794,18 @@ pub fn model_posterior(
         model_evaluations: evaluations,
         failures,
     })
+}
+
+/// r_i = ℓ_m,i − ℓ_s,i, −∞ where it is not finite (a failed model run).
+fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
+    model
+        .iter()
+        .zip(surrogate)
+        .map(|(m, s)| {
+            let r = m - s;
+            if r.is_finite() { r } else { f64::NEG_INFINITY }
+        })
+        .collect()
 }
 
 /// CV (population std / mean) of the weights exp(lw − max lw); failed members count as 0.

@@ -96,15 +96,20 @@ pub fn pareto_smooth(log_weights: &[f64]) -> ParetoSmoothing {
         tail.sort_by(|&a, &b| x[a].total_cmp(&x[b]));
         let exceedances: Vec<f64> = tail.iter().map(|&i| x[i].exp() - exp_cutoff).collect();
         let (k, sigma) = generalised_pareto_fit(&exceedances);
-        if k.is_finite() {
-            let m = tail.len();
-            for (r, &i) in tail.iter().enumerate() {
-                let p = (r as f64 + 0.5) / m as f64;
-                let q = generalised_pareto_quantile(p, k, sigma);
-                x[i] = (q + exp_cutoff).ln().min(0.0);
+        if !(sigma.is_finite() && sigma > 0.0) {
+            // No usable fit (degenerate exceedances): no smoothing, and nothing certified.
+            f64::INFINITY
+        } else {
+            if k.is_finite() {
+                let m = tail.len();
+                for (r, &i) in tail.iter().enumerate() {
+                    let p = (r as f64 + 0.5) / m as f64;
+                    let q = generalised_pareto_quantile(p, k, sigma);
+                    x[i] = (q + exp_cutoff).ln().min(0.0);
+                }
             }
+            k
         }
-        k
     };
     let total = log_sum_exp(&x);
     for v in &mut x {

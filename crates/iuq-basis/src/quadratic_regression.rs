@@ -5,8 +5,13 @@
 //! posterior shifted or too narrow differs from the model's by exactly such an r).
 //!
 //! The normal equations are solved by Cholesky with a ridge of 1e-8·(mean diagonal); with fewer
-//! than twice as many points as quadratic terms the fit is linear, and with fewer than twice as
-//! many as linear terms there is no fit.
+//! than twice as many distinct points as quadratic terms the fit is linear, and with fewer than
+//! twice as many as linear terms there is no fit. A prediction is made at θ clamped to the box
+//! of the fitted points widened by its own width on every side: a quadratic extrapolated
+//! without bound (an upward curvature where the surrogate's log-likelihood flattens) would make
+//! the corrected surrogate improper or pile its mass at the prior's corners, while within three
+//! times the points' extent it still reaches a posterior twice as wide as theirs. Any bounded
+//! stand-in keeps the importance weights and the delayed acceptance exact.
 
 use crate::proposal::cholesky_lower;
 
@@ -17,6 +22,7 @@ pub struct QuadraticFit {
     scale: Vec<f64>,
     quadratic: bool,
     coefficients: Vec<f64>,
+    bounds: Vec<(f64, f64)>,
 }
 
 impl QuadraticFit {
@@ -31,6 +37,26 @@ impl QuadraticFit {
         if kept.is_empty() {
             return None;
         }
+        let bounds: Vec<(f64, f64)> = (0..d)
+            .map(|k| {
+                let (lo, hi) = kept
+                    .iter()
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &i| {
+                        (a.min(points[i][k]), b.max(points[i][k]))
+                    });
+                (lo - (hi - lo), hi + (hi - lo))
+            })
+            .collect();
+        let mut distinct: Vec<&Vec<f64>> = kept.iter().map(|&i| &points[i]).collect();
+        distinct.sort_by(|a, b| {
+            a.iter()
+                .zip(b.iter())
+                .map(|(x, y)| x.total_cmp(y))
+                .find(|o| o.is_ne())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        distinct.dedup();
+        let distinct = distinct.len();
         let centre: Vec<f64> = (0..d)
             .map(|k| kept.iter().map(|&i| points[i][k]).sum::<f64>() / n)
             .collect();
@@ -50,9 +76,10 @@ impl QuadraticFit {
                 scale: scale.clone(),
                 quadratic,
                 coefficients: Vec::new(),
+                bounds: bounds.clone(),
             };
             let terms = fit.features(&points[kept[0]]).len();
-            if kept.len() < 2 * terms {
+            if distinct < 2 * terms {
                 continue;
             }
             let mut normal = vec![vec![0.0; terms]; terms];
@@ -111,9 +138,14 @@ impl QuadraticFit {
         f
     }
 
-    /// f̂(θ).
+    /// f̂ at θ clamped to the widened box of the fitted points.
     pub fn predict(&self, theta: &[f64]) -> f64 {
-        self.features(theta)
+        let clamped: Vec<f64> = theta
+            .iter()
+            .zip(&self.bounds)
+            .map(|(t, (lo, hi))| t.clamp(*lo, *hi))
+            .collect();
+        self.features(&clamped)
             .iter()
             .zip(&self.coefficients)
             .map(|(f, c)| f * c)
@@ -142,6 +174,19 @@ mod tests {
         for p in [[0.3, -0.2], [1.5, 2.0]] {
             assert!((fit.predict(&p) - f(&p)).abs() < 1e-6);
         }
+        // Far from its points the fit is held at the edge of the widened box.
+        let far = fit.predict(&[100.0, -50.0]);
+        let edge = [fit.bounds[0].1, fit.bounds[1].0];
+        assert!(edge[0] < 100.0 && edge[1] > -50.0);
+        assert!((far - f(&edge)).abs() < 1e-6, "{far}");
+        // Repeated points count once: 40 copies of 8 points are 8 points.
+        let repeated: Vec<Vec<f64>> = (0..40).map(|i| points[i % 8].clone()).collect();
+        let repeated_values: Vec<f64> = repeated.iter().map(|p| f(p)).collect();
+        assert!(
+            !QuadraticFit::fit(&repeated, &repeated_values)
+                .unwrap()
+                .is_quadratic()
+        );
         // 8 points: too few for 6 quadratic terms (12 needed), enough for 3 linear ones.
         let fit = QuadraticFit::fit(&points[..8], &values[..8]).unwrap();
         assert!(!fit.is_quadratic());

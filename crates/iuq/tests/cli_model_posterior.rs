@@ -173,7 +173,7 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
         .replace(
             "[surrogate]",
             &format!(
-                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\" }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\nsamples = 24\nmax_stages = 1\n\n[surrogate]",
+                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\" }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\nsamples = 30\nmax_stages = 1\n\n[surrogate]",
                 log.display()
             ),
         )
@@ -238,7 +238,7 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
             .collect()
     };
     assert!(
-        finished_before.len() > design_runs && finished_before.len() < design_runs + 24,
+        finished_before.len() > design_runs && finished_before.len() < design_runs + 30,
         "killed after {} stored runs",
         finished_before.len()
     );

@@ -493,7 +493,7 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
     let study = small_study(&dir, "");
     let text = std::fs::read_to_string(&study)
         .unwrap()
-        .replace("method = \"basis\"", "samples = 10\nseed = 3");
+        .replace("method = \"basis\"", "samples = 25\nseed = 3");
     std::fs::write(&study, text).unwrap();
     let out = dir.join("report");
     let run = || {
@@ -517,7 +517,7 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
     };
     let (summary, stderr) = run();
     let m = &summary["model_posterior"];
-    assert_eq!(m["samples"], 10, "{m}");
+    assert_eq!(m["samples"], 25, "{m}");
     assert!(
         stderr.contains("the cell at the MAP in pictures: 2 runs"),
         "{stderr}"

@@ -55,7 +55,9 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     }
     let d = ModelPosteriorSettings::default();
     let settings = ModelPosteriorSettings {
-        samples: s.count("samples", 10)?.unwrap_or(d.samples),
+        samples: s
+            .count("samples", iuq_basis::model_posterior::MIN_SAMPLES)?
+            .unwrap_or(d.samples),
         seed: s.seed("seed")?.unwrap_or(d.seed),
         cv_target: s.positive("cv_target")?.unwrap_or(d.cv_target),
         bridge_cv_target: s
