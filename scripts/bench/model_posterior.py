@@ -189,7 +189,8 @@ def bench_tinyda(work, problem, exact, sizes, seeds):
     # The chain starts where the surrogate's posterior has its MAP, as iuq's method starts from
     # the surrogate's posterior (not from the exact posterior, which a user does not have).
     with open(os.path.join(os.path.dirname(gp_file), "basis-gp", "summary.json")) as f:
-        surrogate_map = np.array([json.load(f)["map"][p] for p in PARAMETERS])
+        surrogate_map_by_name = json.load(f)["map"]
+    surrogate_map = np.array([surrogate_map_by_name[p] for p in PARAMETERS])
     fails = PROBLEMS[problem]["fails"]
 
     class Fine:
