@@ -765,12 +765,22 @@ fn run_stages(
         Some(outcome) => {
             let stage = Instant::now();
             let d = model_runs.parameters().len();
-            let portraits = cell_portraits::portraits_at(
+            // Pictures only: a cell that cannot be portrayed (a run that fails where the
+            // campaign's did not) costs the figures, not the model posterior just made.
+            let portraits = match cell_portraits::portraits_at(
                 study,
                 &model_runs,
                 &outcome.posterior.map[..d],
                 &mut |line| events.message(line),
-            )?;
+            ) {
+                Ok(portraits) => portraits,
+                Err(e) => {
+                    events.message(format!(
+                        "the cell at the MAP in pictures: {e} (the report goes without them)"
+                    ));
+                    None
+                }
+            };
             if portraits.is_some() {
                 stage_seconds.push(("the cell at the MAP".into(), stage.elapsed().as_secs_f64()));
             }
