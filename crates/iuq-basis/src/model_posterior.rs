@@ -808,13 +808,10 @@ fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// CV (population std / mean) of the weights exp(lw − max lw); failed members count as 0.
+/// CV (population std / mean) of the weights exp(lw − max lw), as BASIS's rule measures it;
+/// failed members count as 0.
 fn coefficient_of_variation(log_weights: &[f64]) -> f64 {
-    let w = normalised_weights(log_weights);
-    let n = w.len() as f64;
-    let mean = 1.0 / n;
-    let var = w.iter().map(|w| (w - mean).powi(2)).sum::<f64>() / n;
-    var.sqrt() / mean
+    crate::annealing::coefficient_of_variation(&normalised_weights(log_weights))
 }
 
 /// The best model-evaluated point so far (largest ℓ_m + ln π; the first one on ties).

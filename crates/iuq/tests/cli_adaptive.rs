@@ -17,20 +17,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{iuq, json_of, scratch, stderr_of};
+use common::{cooling_example, iuq, json_of, stderr_of};
 
-/// A copy of `examples/cooling` in a scratch directory (runs and reports stay out of the
-/// repository).
 fn cooling(suite_name: &str) -> PathBuf {
-    let dir = scratch("adaptive", suite_name);
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/cooling");
-    for entry in std::fs::read_dir(&source).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_file() {
-            std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
-        }
-    }
-    dir
+    cooling_example("adaptive", suite_name)
 }
 
 /// Mean and std per parameter from a `--json` output's posterior (the GP surrogate's).

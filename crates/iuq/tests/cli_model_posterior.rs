@@ -13,18 +13,10 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{iuq, json_of, scratch, stderr_of};
+use common::{cooling_example, iuq, json_of, stderr_of};
 
 fn cooling(suite_name: &str) -> PathBuf {
-    let dir = scratch("model-posterior", suite_name);
-    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/cooling");
-    for entry in std::fs::read_dir(&source).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_file() {
-            std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
-        }
-    }
-    dir
+    cooling_example("model-posterior", suite_name)
 }
 
 /// The cooling study per measurement time with the closed-form curve as an expression model, a

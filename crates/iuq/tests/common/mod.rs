@@ -35,6 +35,21 @@ pub fn scratch(suite: &str, name: &str) -> PathBuf {
     dir
 }
 
+/// A copy of `examples/cooling` in a scratch directory of `suite` (runs and reports stay out of
+/// the repository).
+#[allow(dead_code)]
+pub fn cooling_example(suite: &str, name: &str) -> PathBuf {
+    let dir = scratch(suite, name);
+    let source = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../examples/cooling");
+    for entry in std::fs::read_dir(&source).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_file() {
+            std::fs::copy(&path, dir.join(path.file_name().unwrap())).unwrap();
+        }
+    }
+    dir
+}
+
 /// `iuq serve umbridge STUDY` running in the background on a free port of 127.0.0.1; killed
 /// when dropped.
 pub struct Served {
