@@ -62,11 +62,11 @@ def basis(
     bounds: Any = None,
     *,
     samples: int = 1000,
-    burn: int = 0,
+    burn: Optional[int] = None,
     max_chain: int = 1,
     seed: int = 0,
     cv_target: float = 1.0,
-    proposal_scale: float = 0.2,
+    proposal_scale: Optional[float] = None,
     max_stages: int = 100,
     model: Optional[Callable[[np.ndarray], Any]] = None,
     data: Any = None,
@@ -91,7 +91,10 @@ def basis(
     in a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
     ``problem`` dict.
     ``samples`` N, ``burn``, ``max_chain``, ``seed``, ``cv_target``, ``proposal_scale`` and
-    ``max_stages`` are the ``[sampler]`` settings. Non-finite log-likelihoods are rejections;
+    ``max_stages`` are the ``[sampler]`` settings: with neither ``burn`` nor ``proposal_scale``
+    given the chains move until they decorrelate at an adapted scale (``burn = "auto"``,
+    ``docs/methods.md`` §5), with either given they take ``burn`` steps (default 0) at scale
+    ``proposal_scale`` (default 0.2). Non-finite log-likelihoods are rejections;
     ``on_error="fail"`` makes exceptions of the callable rejections too (counted with their
     reason), ``"raise"`` re-raises them. For a given seed the result equals ``iuq basis``.
     """
@@ -136,11 +139,11 @@ def basis(
         names,
         priors,
         count("samples", samples, 2),
-        count("burn", burn, 0),
+        None if burn is None else count("burn", burn, 0),
         count("max_chain", max_chain, 1),
         seed_of(seed),
         real("cv_target", cv_target),
-        real("proposal_scale", proposal_scale),
+        None if proposal_scale is None else real("proposal_scale", proposal_scale),
         count("max_stages", max_stages, 1),
         on_error,
     )

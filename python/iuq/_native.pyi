@@ -43,11 +43,11 @@ def basis(
     names: Sequence[str],
     priors: Sequence[Tuple[str, Sequence[float]]],
     samples: int,
-    burn: int,
+    burn: Optional[int],
     max_chain: int,
     seed: int,
     cv_target: float,
-    proposal_scale: float,
+    proposal_scale: Optional[float],
     max_stages: int,
     on_error: str,
 ) -> Dict[str, Any]: ...

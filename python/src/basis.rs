@@ -65,11 +65,11 @@ pub fn basis<'py>(
     names: Vec<String>,
     priors: Vec<PriorArgs>,
     samples: usize,
-    burn: usize,
+    burn: Option<usize>,
     max_chain: usize,
     seed: u64,
     cv_target: f64,
-    proposal_scale: f64,
+    proposal_scale: Option<f64>,
     max_stages: usize,
     on_error: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -125,15 +125,23 @@ pub fn basis<'py>(
             ));
         }
     };
+    // A number of steps or a scale fixes the mixing, as a study's `[sampler]` does.
+    let defaults = BasisSettings::default();
+    let mixing = if burn.is_some() || proposal_scale.is_some() {
+        iuq_basis::Mixing::Fixed
+    } else {
+        defaults.mixing
+    };
     let settings = BasisSettings {
         samples,
-        burn_in: burn,
+        burn_in: burn.unwrap_or(defaults.burn_in),
         max_chain_length: max_chain,
         cv_target,
-        proposal_scale,
+        proposal_scale: proposal_scale.unwrap_or(defaults.proposal_scale),
+        mixing,
         max_stages,
         seed,
-        ..BasisSettings::default()
+        ..defaults
     }
     .check()
     .map_err(|e| match e {

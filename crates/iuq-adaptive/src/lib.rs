@@ -24,6 +24,7 @@
 //! | [`moment_acquisition`] | the batch that most shrinks the first-order error of the posterior moments |
 //! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
 //! | [`moment_error`] | the error ε of the posterior moments under the GPs' error |
+//! | [`sampler_agreement`] | whether the posterior depends on how it was sampled (replicates with stronger mixing) |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
 //! | [`error`] | the crate's error type [`AdaptiveError`] |
 //!
@@ -39,6 +40,7 @@ pub mod error;
 pub mod extrapolation;
 pub mod moment_acquisition;
 pub mod moment_error;
+pub mod sampler_agreement;
 
 pub use acquisition::{likelihood_weights, log_likelihood_variance};
 pub use allocation::group_batches;
@@ -50,6 +52,7 @@ pub use convergence::{
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
 pub use moment_acquisition::select_batch_for_moments;
+pub use sampler_agreement::{SamplerAgreement, sampler_agreement};
 pub use moment_error::{
     MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
     sampled_moment_errors_by_group,

@@ -45,6 +45,18 @@ pub struct StageDiagnostics {
     pub proposals: usize,
     /// Proposals accepted.
     pub accepted: usize,
+    /// The proposal scale β of the stage's moves (0 at stage 0; read as 0 from a checkpoint
+    /// written before it was recorded).
+    #[serde(default)]
+    pub proposal_scale: f64,
+    /// Discarded MCMC steps each chain took before its first sample.
+    #[serde(default)]
+    pub burn_in: usize,
+    /// The largest correlation, over the parameters, between the chains' starting points and
+    /// their states at the end of the stage: near 0 when the moves took the resampled copies
+    /// apart, near 1 when they barely moved (0 at stage 0).
+    #[serde(default)]
+    pub start_correlation: f64,
     /// accepted / proposals (0 when there were no proposals).
     pub acceptance_rate: f64,
     /// Proposals outside the prior support, rejected without evaluation.

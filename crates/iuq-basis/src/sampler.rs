@@ -14,7 +14,10 @@
 //!    ([`crate::proposal`]); copy counts n_i ([`crate::resampling`], stream (seed,
 //!    SAMPLER_BASE + k, [`RESAMPLING_STREAM`])); member i seeds ⌈n_i/l_max⌉ chains of
 //!    near-equal lengths summing to n_i; chain c (in member order) draws from stream (seed,
-//!    SAMPLER_BASE + k, c) and runs n_burn discarded steps then its length; each step proposes
+//!    SAMPLER_BASE + k, c) and runs n_burn discarded steps then its length (with
+//!    [`Mixing::Adaptive`] the scale β comes from the previous stage's acceptance rate and
+//!    n_burn is the first step count after which no parameter's correlation between the chains'
+//!    starts and states exceeds the target); each step proposes
 //!    θ' = θ + L z, rejects θ' outside the prior support without evaluating it, and accepts with
 //!    ln u < p'(ll' − ll) + (lp' − lp); a failed or non-finite evaluation is a rejection. Every
 //!    state after a post-burn-in step is a member of the new population (chain by chain, in
@@ -37,6 +40,7 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use iuq_core::ParameterSpace;
+use iuq_core::normal::quantile;
 use iuq_core::random::{StreamRng, stages::SAMPLER_BASE, stream};
 
 use crate::annealing::{incremental_weights, log_evidence_increment, max_finite, next_step};
@@ -45,7 +49,7 @@ use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 use crate::proposal::Proposal;
 use crate::resampling::resample;
-use crate::settings::{CheckedSettings, MinStepAction};
+use crate::settings::{CheckedSettings, MinStepAction, Mixing};
 
 /// The stream index (within a stage) of the resampling draws; chains use 0, 1, 2, ….
 pub const RESAMPLING_STREAM: u64 = u64::MAX;
@@ -411,6 +415,9 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
             chains: 0,
             proposals: 0,
             accepted: 0,
+            proposal_scale: 0.0,
+            burn_in: 0,
+            start_correlation: 0.0,
             acceptance_rate: 0.0,
             out_of_support: 0,
             failures,
@@ -505,12 +512,12 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         let total: f64 = raw_weights.iter().sum();
         let weights: Vec<f64> = raw_weights.iter().map(|w| w / total).collect();
         let ess_fraction = 1.0 / (n as f64 * weights.iter().map(|w| w * w).sum::<f64>());
-        let proposal = Proposal::new(
-            &state.samples,
-            &weights,
-            settings.proposal_scale,
-            &self.widths,
-        )?;
+        let dimension = self.space.dimension();
+        let scale = match settings.mixing {
+            Mixing::Fixed => settings.proposal_scale,
+            Mixing::Adaptive { .. } => adapted_scale(&state.diagnostics, dimension),
+        };
+        let proposal = Proposal::new(&state.samples, &weights, scale, &self.widths)?;
 
         // Step 5: resampling.
         let mut resampling_rng = stream(settings.seed, stage_key, RESAMPLING_STREAM);
@@ -538,20 +545,32 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
                 });
             }
         }
-        let burn_in = settings.burn_in;
+        let starts: Vec<Vec<f64>> = chains.iter().map(|c| c.theta.clone()).collect();
+        // The burn-in, once known: fixed, or (adaptive) when the chains have decorrelated.
+        let (mut burn, decorrelation) = match settings.mixing {
+            Mixing::Fixed => (Some(settings.burn_in), None),
+            Mixing::Adaptive {
+                correlation,
+                max_burn_in,
+            } => (None, Some((correlation, max_burn_in))),
+        };
         let longest = chains.iter().map(|c| c.length).max().unwrap_or(0);
-        let dimension = self.space.dimension();
         let mut reasons = BTreeMap::new();
         let (mut failures, mut proposals, mut accepted, mut out_of_support) = (0, 0, 0, 0);
         let (mut evaluations, mut batches) = (0, 0);
-        for step_index in 0..burn_in + longest {
+        let mut step_index = 0;
+        loop {
+            if burn.is_some_and(|b| step_index >= b + longest) {
+                break;
+            }
+            let moving = |length: usize| burn.is_none_or(|b| b + length > step_index);
             let active: Vec<usize> = (0..chains.len())
-                .filter(|&c| burn_in + chains[c].length > step_index)
+                .filter(|&c| moving(chains[c].length))
                 .collect();
             // Propose in parallel, each chain from its own stream.
             let space = self.space;
             chains.par_iter_mut().with_min_len(64).for_each(|chain| {
-                if burn_in + chain.length > step_index {
+                if moving(chain.length) {
                     let z: Vec<f64> = (0..dimension)
                         .map(|_| StandardNormal.sample(&mut chain.rng))
                         .collect();
@@ -606,17 +625,31 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
                     chain.log_prior = proposed.log_prior;
                 }
             }
-            if step_index >= burn_in {
-                for &c in &active {
-                    let chain = &mut chains[c];
-                    chain.samples.push((
-                        chain.theta.clone(),
-                        chain.log_likelihood,
-                        chain.log_prior,
-                    ));
+            match (burn, decorrelation) {
+                (Some(b), _) if step_index >= b => {
+                    for &c in &active {
+                        let chain = &mut chains[c];
+                        chain.samples.push((
+                            chain.theta.clone(),
+                            chain.log_likelihood,
+                            chain.log_prior,
+                        ));
+                    }
                 }
+                (None, Some((target, max_burn_in))) => {
+                    let taken = step_index + 1;
+                    if taken >= settings.burn_in.max(1)
+                        && (taken >= max_burn_in || start_correlation(&starts, &chains) <= target)
+                    {
+                        burn = Some(taken);
+                    }
+                }
+                _ => {}
             }
+            step_index += 1;
         }
+        let burn_in = burn.unwrap_or(0);
+        let correlation_left = start_correlation(&starts, &chains);
 
         let mut samples = Vec::with_capacity(n);
         let mut log_likelihood = Vec::with_capacity(n);
@@ -645,6 +678,9 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
             chains: chains.len(),
             proposals,
             accepted,
+            proposal_scale: scale,
+            burn_in,
+            start_correlation: correlation_left,
             acceptance_rate: if proposals > 0 {
                 accepted as f64 / proposals as f64
             } else {
@@ -697,6 +733,66 @@ struct Proposed {
     /// −∞ outside the prior support.
     log_prior: f64,
     ln_u: f64,
+}
+
+/// The acceptance rate the scale of [`Mixing::Adaptive`] aims at: optimal for a random walk
+/// in many dimensions (Roberts, Gelman & Gilks 1997).
+pub const TARGET_ACCEPTANCE: f64 = 0.234;
+
+/// The proposal scale of [`Mixing::Adaptive`] for the next stage. Before any moves,
+/// min(1, 2.38/√d) (Roberts, Gelman & Gilks 1997). After a stage that moved at scale β with
+/// acceptance rate a, the scale whose acceptance the random walk's law a(β) = 2Φ(−β√I/2) puts at
+/// [`TARGET_ACCEPTANCE`]: β·Φ⁻¹(a*/2)/Φ⁻¹(a/2), held within [β/2, 2β] and (0, 2.38].
+fn adapted_scale(diagnostics: &[StageDiagnostics], dimension: usize) -> f64 {
+    let initial = (2.38 / (dimension.max(1) as f64).sqrt()).min(1.0);
+    let Some(last) = diagnostics
+        .iter()
+        .rev()
+        .find(|d| d.proposals > 0 && d.proposal_scale > 0.0)
+    else {
+        return initial;
+    };
+    let beta = last.proposal_scale;
+    let a = last.acceptance_rate.clamp(1e-3, 1.0 - 1e-3);
+    let ratio = quantile(TARGET_ACCEPTANCE / 2.0) / quantile(a / 2.0);
+    (beta * ratio.clamp(0.5, 2.0)).min(2.38)
+}
+
+/// The largest |correlation|, over the parameters, between the chains' starting points and their
+/// current states (each chain counted once). A parameter whose states have not spread (zero
+/// variance) counts as correlation 1; one whose starts were all equal and whose states have
+/// spread, as 0.
+fn start_correlation(starts: &[Vec<f64>], chains: &[Chain]) -> f64 {
+    let m = chains.len();
+    if m < 2 {
+        return 1.0;
+    }
+    let d = starts[0].len();
+    let mut largest: f64 = 0.0;
+    for k in 0..d {
+        let (mut sa, mut sb) = (0.0, 0.0);
+        for (start, chain) in starts.iter().zip(chains) {
+            sa += start[k];
+            sb += chain.theta[k];
+        }
+        let (ma, mb) = (sa / m as f64, sb / m as f64);
+        let (mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0);
+        for (start, chain) in starts.iter().zip(chains) {
+            let (a, b) = (start[k] - ma, chain.theta[k] - mb);
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+        }
+        let rho = if sbb <= 0.0 {
+            1.0
+        } else if saa <= 0.0 {
+            0.0
+        } else {
+            (sab / (saa * sbb).sqrt()).abs()
+        };
+        largest = largest.max(rho);
+    }
+    largest
 }
 
 /// "name: checkpoint a, this run b" for every setting that differs.

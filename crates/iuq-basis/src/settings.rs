@@ -43,6 +43,46 @@ pub enum MinStepAction {
     Stop,
 }
 
+/// How the chains of a stage mix: fixed-length chains at a fixed scale, as Wu et al. (2017)
+/// ran them, or the length and scale adapted from the run itself.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Mixing {
+    /// [`BasisSettings::burn_in`] discarded steps at scale [`BasisSettings::proposal_scale`]
+    /// (the published BASIS). Fine in two or three dimensions; in ten, β = 0.2 moves a chain
+    /// about a fifth of a posterior std per step and a short burn-in leaves the population
+    /// biased (docs/methods.md §5, "How the chains mix").
+    Fixed,
+    /// The scale of stage k from the acceptance rate a of stage k − 1, β_k = 1/9 + 8/9·a
+    /// (Muto & Beck 2008, as PyMC's SMC and TMCMC codes use it), starting from
+    /// min(1, 2.38/√d) (Roberts, Gelman & Gilks 1997); the burn-in goes on, after at least
+    /// [`BasisSettings::burn_in`] steps, until no parameter's correlation between the chains'
+    /// starting points and their current points exceeds `correlation` (the duplicates that
+    /// resampling made have moved apart; PyMC 3's SMC stops its moves on the same measure),
+    /// or `max_burn_in` steps.
+    Adaptive {
+        /// The largest correlation left between a chain's start and its state (default 0.3:
+        /// two copies of one member then keep a correlation of about 0.09).
+        correlation: f64,
+        /// The most burn-in steps of a stage (default 50); a stage that needs more is
+        /// reported by its `start_correlation`.
+        max_burn_in: usize,
+    },
+}
+
+impl Mixing {
+    /// The default of [`BasisSettings`]: adaptive, correlation 0.3, at most 50 steps.
+    pub const ADAPTIVE: Mixing = Mixing::Adaptive {
+        correlation: 0.3,
+        max_burn_in: 50,
+    };
+
+    /// `Fixed`, what a checkpoint written before this setting existed ran with.
+    fn fixed() -> Mixing {
+        Mixing::Fixed
+    }
+}
+
 /// Settings of a BASIS run (Wu et al. 2017, "A Bayesian annealed sequential importance
 /// sampling", section 3; the study's values are the defaults).
 ///
@@ -60,8 +100,8 @@ pub struct BasisSettings {
     /// Population size N (default 1000; the study used 1000 with the expensive model and 10 000
     /// with the surrogate).
     pub samples: usize,
-    /// Discarded MCMC steps n_burn before each chain's first sample (default 0; 10 with a
-    /// surrogate).
+    /// Discarded MCMC steps n_burn before each chain's first sample (default 0), the least
+    /// number of them with [`Mixing::Adaptive`].
     pub burn_in: usize,
     /// Maximum chain length l_max (default 1: every resampled copy moves once, which balances
     /// the load perfectly). A copy count n_i is split into ⌈n_i/l_max⌉ chains of near-equal
@@ -71,8 +111,13 @@ pub struct BasisSettings {
     /// population CV used here, γ = 1 means ESS = N/2).
     pub cv_target: f64,
     /// Proposal scale β: the proposal covariance is β² times the weighted population covariance
-    /// (default 0.2, i.e. × 0.04).
+    /// (default 0.2, i.e. × 0.04). Used with [`Mixing::Fixed`]; [`Mixing::Adaptive`] sets its
+    /// own.
     pub proposal_scale: f64,
+    /// How the chains mix (default [`Mixing::ADAPTIVE`]; a checkpoint without it ran
+    /// [`Mixing::Fixed`]).
+    #[serde(default = "Mixing::fixed")]
+    pub mixing: Mixing,
     /// Resampling scheme (default multinomial).
     pub resampling: Resampling,
     /// Smallest accepted exponent step (default 1e-6).
@@ -95,6 +140,7 @@ impl Default for BasisSettings {
             max_chain_length: 1,
             cv_target: 1.0,
             proposal_scale: 0.2,
+            mixing: Mixing::ADAPTIVE,
             resampling: Resampling::Multinomial,
             min_step: 1e-6,
             on_min_step: MinStepAction::Clamp,
@@ -111,7 +157,8 @@ impl BasisSettings {
     /// Validate every setting and return the checked settings the sampler accepts.
     ///
     /// Rules: `samples` ≥ 2 (and below [`MAX_SAMPLES`]); `max_chain_length` ≥ 1; `cv_target`
-    /// finite and > 0; `proposal_scale` finite and > 0; `min_step` in (0, 1); `max_stages` ≥ 1.
+    /// finite and > 0; `proposal_scale` finite and > 0; `min_step` in (0, 1); `max_stages` ≥ 1;
+    /// with [`Mixing::Adaptive`], `correlation` in (0, 1) and `max_burn_in` ≥ max(1, `burn_in`).
     pub fn check(self) -> Result<CheckedSettings> {
         let invalid = |setting: &'static str, reason: String| {
             Err(BasisError::InvalidSettings { setting, reason })
@@ -152,9 +199,33 @@ impl BasisSettings {
         if self.max_stages < 1 {
             return invalid("max_stages", "must be at least 1, got 0".into());
         }
+        if let Mixing::Adaptive {
+            correlation,
+            max_burn_in,
+        } = self.mixing
+        {
+            if !(correlation > 0.0 && correlation < 1.0) {
+                return invalid(
+                    "correlation",
+                    format!("must lie strictly between 0 and 1, got {correlation}"),
+                );
+            }
+            if max_burn_in < self.burn_in.max(1) {
+                return invalid(
+                    "max_burn_in",
+                    format!(
+                        "must be at least 1 and at least burn_in = {}, got {max_burn_in}",
+                        self.burn_in
+                    ),
+                );
+            }
+        }
         Ok(CheckedSettings(self))
     }
 }
+
+/// The strongest level [`CheckedSettings::with_stronger_mixing`] goes to.
+pub const MAX_MIXING_LEVEL: u32 = 4;
 
 /// Settings that passed [`BasisSettings::check`]; read them through `Deref`.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -165,6 +236,35 @@ impl CheckedSettings {
     /// The settings as plain data.
     pub fn settings(&self) -> &BasisSettings {
         &self.0
+    }
+
+    /// The same settings with the chains mixing harder, `level` steps up (0: unchanged; at most
+    /// [`MAX_MIXING_LEVEL`]): a second sampler whose posterior must agree with this one's if
+    /// both are right (the adaptive engine's check of its sampler). [`Mixing::Fixed`] becomes
+    /// [`Mixing::ADAPTIVE`] at level 1 (with at least the same burn-in); each further level
+    /// halves the correlation target and doubles `max_burn_in`.
+    pub fn with_stronger_mixing(&self, level: u32) -> CheckedSettings {
+        let level = level.min(MAX_MIXING_LEVEL);
+        if level == 0 {
+            return *self;
+        }
+        let mut s = self.0;
+        let (base, halvings) = match s.mixing {
+            Mixing::Fixed => (Mixing::ADAPTIVE, level - 1),
+            adaptive => (adaptive, level),
+        };
+        if let Mixing::Adaptive {
+            correlation,
+            max_burn_in,
+        } = base
+        {
+            let factor = 1usize << halvings;
+            s.mixing = Mixing::Adaptive {
+                correlation: correlation / factor as f64,
+                max_burn_in: max_burn_in.max(s.burn_in) * factor,
+            };
+        }
+        CheckedSettings(s)
     }
 }
 
@@ -245,6 +345,48 @@ mod tests {
                 Err(BasisError::InvalidSettings { setting, .. }) => assert_eq!(setting, name),
                 other => panic!("{name}: expected rejection, got {other:?}"),
             }
+        }
+    }
+
+    #[test]
+    fn stronger_mixing_turns_fixed_chains_adaptive_then_tightens_them() {
+        let fixed = BasisSettings {
+            burn_in: 40,
+            mixing: Mixing::Fixed,
+            ..Default::default()
+        }
+        .check()
+        .unwrap();
+        assert_eq!(fixed.with_stronger_mixing(0), fixed);
+        assert_eq!(
+            fixed.with_stronger_mixing(1).mixing,
+            Mixing::Adaptive {
+                correlation: 0.3,
+                max_burn_in: 50
+            }
+        );
+        assert_eq!(
+            fixed.with_stronger_mixing(2).mixing,
+            Mixing::Adaptive {
+                correlation: 0.15,
+                max_burn_in: 100
+            }
+        );
+        let adaptive = BasisSettings::default().check().unwrap();
+        assert_eq!(
+            adaptive.with_stronger_mixing(1).mixing,
+            Mixing::Adaptive {
+                correlation: 0.15,
+                max_burn_in: 100
+            }
+        );
+        assert_eq!(
+            adaptive.with_stronger_mixing(99),
+            adaptive.with_stronger_mixing(MAX_MIXING_LEVEL)
+        );
+        // every level passes the checks
+        for level in 0..=MAX_MIXING_LEVEL {
+            adaptive.with_stronger_mixing(level).settings().check().unwrap();
         }
     }
 

@@ -3,18 +3,21 @@
 //! ```toml
 //! [sampler]
 //! samples = 10000            # N (default 1000)
-//! burn = 10                  # n_burn (default 0)
+//! burn = "auto"              # "auto" (default): moves until the chains decorrelate, at an
+//!                            # adapted scale; a number: that many steps at proposal_scale
+//! correlation = 0.3          # with "auto": the correlation a chain may keep with its start
+//! max_burn = 50              # with "auto": steps per stage at most
 //! max_chain = 1              # l_max (default 1)
 //! seed = 1                   # (default 0)
 //! cv_target = 1.0            # γ (default 1)
-//! proposal_scale = 0.2       # β (default 0.2)
+//! proposal_scale = 0.2       # β (default 0.2 with a numeric burn; not with "auto")
 //! resampling = "multinomial" # | "systematic"
 //! min_step = 1e-6            # smallest exponent step (default 1e-6)
 //! on_min_step = "clamp"      # | "stop"
 //! max_stages = 100           # annealing stages before p = 1 (default 100)
 //! ```
 
-use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Resampling};
+use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Mixing, Resampling};
 
 use iuq_campaign::StudySection;
 
@@ -42,6 +45,8 @@ fn names_of(setting: &str) -> (&'static str, Option<&'static str>) {
         "max_chain_length" => ("max_chain", Some("--max-chain")),
         "seed" => ("seed", Some("--seed")),
         "cv_target" => ("cv_target", None),
+        "correlation" => ("correlation", None),
+        "max_burn_in" => ("max_burn", None),
         "proposal_scale" => ("proposal_scale", None),
         "resampling" => ("resampling", None),
         "min_step" => ("min_step", None),
@@ -82,18 +87,66 @@ fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Resul
         Some("clamp") => MinStepAction::Clamp,
         Some(_) => MinStepAction::Stop,
     };
+    // The mixing: fixed when a number of steps or a scale is given (on the command line or in
+    // the file), adaptive otherwise.
+    let burn = match s.value("burn") {
+        None => None,
+        Some(toml::Value::String(text)) if text == "auto" => None,
+        Some(toml::Value::Integer(_)) => s.count("burn", 0)?,
+        Some(other) => {
+            return Err(s
+                .error(
+                    "burn",
+                    format!("must be \"auto\" or a count of steps ≥ 0, got {other}"),
+                )
+                .into());
+        }
+    };
+    let burn = overrides.burn.or(burn);
+    let proposal_scale = s.number("proposal_scale")?;
+    let correlation = s.number("correlation")?;
+    let max_burn = s.count("max_burn", 1)?;
+    let mixing = if burn.is_some() || proposal_scale.is_some() {
+        for (key, given) in [
+            ("correlation", correlation.is_some()),
+            ("max_burn", max_burn.is_some()),
+        ] {
+            if given {
+                return Err(s
+                    .error(
+                        key,
+                        "applies to burn = \"auto\" only, and a number of steps or a proposal_scale is given",
+                    )
+                    .into());
+            }
+        }
+        Mixing::Fixed
+    } else {
+        let Mixing::Adaptive {
+            correlation: c,
+            max_burn_in: m,
+        } = Mixing::ADAPTIVE
+        else {
+            return Err(s.section_error("the default mixing is not adaptive").into());
+        };
+        Mixing::Adaptive {
+            correlation: correlation.unwrap_or(c),
+            max_burn_in: max_burn.unwrap_or(m),
+        }
+    };
     let settings = BasisSettings {
         samples: overrides
             .samples
             .or(s.count("samples", 0)?)
             .unwrap_or(d.samples),
-        burn_in: overrides.burn.or(s.count("burn", 0)?).unwrap_or(d.burn_in),
+        burn_in: burn.unwrap_or(d.burn_in),
         max_chain_length: overrides
             .max_chain
             .or(s.count("max_chain", 0)?)
             .unwrap_or(d.max_chain_length),
         cv_target: s.number("cv_target")?.unwrap_or(d.cv_target),
-        proposal_scale: s.number("proposal_scale")?.unwrap_or(d.proposal_scale),
+        proposal_scale: proposal_scale.unwrap_or(d.proposal_scale),
+        mixing,
         resampling,
         min_step: s.number("min_step")?.unwrap_or(d.min_step),
         on_min_step,

@@ -37,10 +37,12 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::{
-    ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, extrapolation_share,
-    group_batches, likelihood_weights, log_likelihood_variance, sampled_moment_errors_by_group,
-    select_batch, select_batch_for_moments, surrogate_log_likelihood_std,
+    ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, SamplerAgreement,
+    extrapolation_share, group_batches, likelihood_weights, log_likelihood_variance,
+    sampled_moment_errors_by_group, sampler_agreement, select_batch, select_batch_for_moments,
+    surrogate_log_likelihood_std,
 };
+use iuq_basis::MAX_MIXING_LEVEL;
 
 use super::Events;
 use super::model_runs::ModelRuns;
@@ -70,6 +72,10 @@ const UNSURE: (f64, f64) = (0.1, 0.9);
 /// classifier is unsure: a candidate there that is farther than this from every run of its group
 /// gets a run.
 pub const BOUNDARY_RESOLUTION: f64 = 0.25;
+
+/// When a round finds no candidate worth a run although the stopping rule does not hold, the
+/// next looks among this many times more candidates (from twice the samples), twice at most.
+pub const CANDIDATE_WIDENING: usize = 4;
 
 /// How near, in posterior stds, a failed run must be for the posterior to meet the boundary of
 /// the failure region there.
@@ -198,7 +204,15 @@ pub struct AdaptiveRound {
     pub unsure_share: f64,
     /// The log evidence of the round's surrogate posterior.
     pub log_evidence: f64,
-    /// Both convergence criteria held.
+    /// How much harder than `[sampler]` the round's chains mixed (0: as set; each level is
+    /// `iuq_basis::CheckedSettings::with_stronger_mixing`).
+    pub mixing_level: u32,
+    /// The check of the sampler: the posterior of the replicates that mixed one level harder
+    /// against the others (`None`: one replicate, or a round recorded before the check).
+    pub sampler_agreement: Option<SamplerAgreement>,
+    /// Distinct posterior samples scored as candidates for new runs.
+    pub candidates: usize,
+    /// Every convergence criterion held.
     pub converged: bool,
     /// Wall-clock seconds of the round.
     pub seconds: f64,
@@ -221,6 +235,8 @@ pub struct AdaptiveOutcome {
     pub log_likelihood_tolerance: f64,
     /// The posterior checks that failed their test and were trained on, in order.
     pub retrained_checks: Vec<RetrainedCheck>,
+    /// The mixing level of the last round, at which the final posterior is sampled too.
+    pub mixing_level: u32,
     /// The rows of `adaptive/runs.csv` so far.
     #[serde(skip)]
     run_rows: Vec<Vec<f64>>,
@@ -485,11 +501,19 @@ struct RoundMeasurement {
     log_evidence: f64,
     /// Some run group's failure region wants boundary runs (once the surrogate is sure).
     boundary_wanted: bool,
+    /// The check of the sampler (absent in rounds recorded before it was made).
+    #[serde(default)]
+    sampler_agreement: Option<SamplerAgreement>,
 }
 
 impl RoundMeasurement {
     /// Whether this round makes boundary runs: some failure region wants them, the surrogate is
     /// sure where the posterior lies, and rounds make runs at all.
+    /// The posterior depends on how it was sampled.
+    fn sampler_disagrees(&self) -> bool {
+        self.sampler_agreement.as_ref().is_some_and(|a| a.disagrees)
+    }
+
     fn boundary_runs_due(&self, settings: &AdaptiveSettings) -> bool {
         self.boundary_wanted
             && self.log_likelihood_std < settings.log_likelihood_tolerance
@@ -551,7 +575,7 @@ fn round_fingerprint(
     settings: &AdaptiveSettings,
     training_seed: u64,
     base_seed: u64,
-    round_samples: usize,
+    sampling: &RoundSampling,
     groups: &[GroupRuns],
 ) -> String {
     use std::fmt::Write;
@@ -569,17 +593,23 @@ fn round_fingerprint(
     let _ = write!(
         text,
         "data x {:?} y {:?} std {:?} modelling {:?} measurement {} computational {:?}\n\
-         seeds {training_seed} {base_seed} samples {round_samples} replicates {} candidates {} draws {SURROGATE_ERROR_DRAWS} boundary runs {}\n",
+         seeds {training_seed} {base_seed} samples {} replicates {} candidates {} draws {SURROGATE_ERROR_DRAWS} boundary runs {}\n",
         data.x,
         data.observations.values,
         data.observations.measurement_std,
         data.modelling_error,
         data.measurement_error,
         data.computational_error,
+        sampling.samples,
         settings.replicates,
-        settings.candidates,
+        sampling.candidates,
         settings.batch > 0,
     );
+    // Level 0 leaves the text as it was before the sampler was checked, so that the rounds a
+    // store recorded then are read back.
+    if sampling.mixing_level > 0 {
+        let _ = writeln!(text, "mixing level {}", sampling.mixing_level);
+    }
     for (g, group) in groups.iter().enumerate() {
         let _ = writeln!(
             text,
@@ -588,6 +618,17 @@ fn round_fingerprint(
         );
     }
     iuq_campaign::study::hex_sha256(text.as_bytes())
+}
+
+/// How a round samples its posterior and chooses its candidates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RoundSampling {
+    /// BASIS population of each replicate.
+    samples: usize,
+    /// Distinct posterior samples scored as candidates.
+    candidates: usize,
+    /// How much harder than `[sampler]` the chains mix (the check's replicates one more).
+    mixing_level: u32,
 }
 
 /// What a freshly measured round keeps for choosing its new runs.
@@ -609,7 +650,7 @@ fn measure_round(
     training_seed: u64,
     base_seed: u64,
     round: usize,
-    round_samples: usize,
+    sampling: &RoundSampling,
     runs: &ModelRuns,
     groups: &[GroupRuns],
     dir: &Path,
@@ -629,17 +670,22 @@ fn measure_round(
     };
     let mut parameters = Vec::new();
     let mut replicate_moments = Vec::with_capacity(settings.replicates);
+    // With two replicates or more, every second one mixes a level harder: the check of the
+    // sampler (`iuq_adaptive::sampler_agreement`).
+    let checked = settings.replicates >= 2;
     for replicate in 0..settings.replicates {
+        let harder = u32::from(checked && replicate % 2 == 1);
         let sampler = parse_sampler(
             study,
             &SamplerOverrides {
-                samples: Some(round_samples),
+                samples: Some(sampling.samples),
                 seed: Some(
                     base_seed.wrapping_add((round * settings.replicates + replicate) as u64),
                 ),
                 ..Default::default()
             },
-        )?;
+        )?
+        .with_stronger_mixing(sampling.mixing_level + harder);
         let sampled = events.sample(
             "adaptive round",
             study,
@@ -659,9 +705,29 @@ fn measure_round(
     }
     pooled.moments = PosteriorMoments::pooled(&replicate_moments)
         .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+    let sampler_check = if checked {
+        let (harder, as_set): (Vec<_>, Vec<_>) = replicate_moments
+            .iter()
+            .enumerate()
+            .partition(|(r, _)| r % 2 == 1);
+        let strip = |group: Vec<(usize, &(Vec<f64>, Vec<f64>))>| {
+            group.into_iter().map(|(_, m)| m.clone()).collect::<Vec<_>>()
+        };
+        Some(
+            sampler_agreement(
+                &strip(as_set),
+                &strip(harder),
+                &pooled.moments.std,
+                settings.tolerance,
+            )
+            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?,
+        )
+    } else {
+        None
+    };
     let moments = pooled.moments.clone();
     let state = &pooled;
-    let c = candidates(state, d, modelling_error, data, settings.candidates);
+    let c = candidates(state, d, modelling_error, data, sampling.candidates);
     // The surrogate's predictions at the candidates, per data point.
     let gps = surrogate.bank.gps();
     let mut predictions = Vec::with_capacity(gps.len());
@@ -782,6 +848,7 @@ fn measure_round(
         unsure_share,
         log_evidence: state.log_evidence,
         boundary_wanted: !boundary.is_empty(),
+        sampler_agreement: sampler_check,
     };
     Ok((
         measurement,
@@ -843,9 +910,13 @@ pub(super) fn refine(
         mean_error: r.mean_error.clone(),
         std_error: r.std_error.clone(),
     });
-    let mut round_samples = rounds
-        .last()
-        .map_or(settings.samples, |r| r.samples / settings.replicates.max(1));
+    let mut sampling = RoundSampling {
+        samples: rounds
+            .last()
+            .map_or(settings.samples, |r| r.samples / settings.replicates.max(1)),
+        candidates: rounds.last().map_or(settings.candidates, |r| r.candidates),
+        mixing_level: rounds.last().map_or(0, |r| r.mixing_level),
+    };
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
     let mut converged = false;
     for round in first_round..=settings.max_rounds {
@@ -863,7 +934,7 @@ pub(super) fn refine(
             settings,
             training_seed,
             base_seed,
-            round_samples,
+            &sampling,
             groups,
         );
         let cached = runs
@@ -881,7 +952,9 @@ pub(super) fn refine(
         // stops, or its runs are recorded.
         let reusable = match &cached {
             Some(m) if !recompute => {
-                let converged = judge(m)?.converged && !m.boundary_runs_due(settings);
+                let converged = judge(m)?.converged
+                    && !m.boundary_runs_due(settings)
+                    && !m.sampler_disagrees();
                 converged || made >= settings.max_runs || recorded.is_some()
             }
             _ => false,
@@ -901,7 +974,7 @@ pub(super) fn refine(
                 training_seed,
                 base_seed,
                 round,
-                round_samples,
+                &sampling,
                 runs,
                 groups,
                 &dir,
@@ -930,7 +1003,7 @@ pub(super) fn refine(
             runs: made,
             new_runs: 0,
             new_runs_per_group: vec![0; groups.len()],
-            samples: round_samples * settings.replicates,
+            samples: sampling.samples * settings.replicates,
             mean: moments.mean.clone(),
             std: moments.std.clone(),
             mean_error: moments.mean_error.clone(),
@@ -944,15 +1017,27 @@ pub(super) fn refine(
             extrapolation_share: measured.extrapolation_share,
             unsure_share: measured.unsure_share,
             log_evidence: measured.log_evidence,
-            converged: assessment.converged,
+            mixing_level: sampling.mixing_level,
+            sampler_agreement: measured.sampler_agreement.clone(),
+            candidates: sampling.candidates,
+            converged: assessment.converged && !measured.sampler_disagrees(),
             seconds: 0.0,
         };
         let extrapolation = measured.extrapolation_share;
-        let stop = if assessment.converged && !boundary_due {
+        let disagrees = measured.sampler_disagrees();
+        let disagreement = measured
+            .sampler_agreement
+            .as_ref()
+            .map_or(0.0, |a| a.disagreement);
+        let stop = if assessment.converged && !boundary_due && !disagrees {
             converged = true;
             Some("converged".to_string())
         } else if made >= settings.max_runs {
             Some(format!("reached max_runs = {}", settings.max_runs))
+        } else if disagrees && sampling.mixing_level >= MAX_MIXING_LEVEL {
+            Some(format!(
+                "the surrogate posterior still depends on how it is sampled at the strongest mixing (the replicates that mixed harder differ by {disagreement:.3} posterior stds): raise `samples` of `[surrogate] adaptive` or of `[sampler]`, or set `[sampler] correlation` lower"
+            ))
         } else {
             None
         };
@@ -1061,10 +1146,19 @@ pub(super) fn refine(
             100.0 * extrapolation,
             match (&stop, no_candidate) {
                 (Some(reason), _) => format!("stop: {reason}"),
-                (None, true) => "no candidate run is worth making".to_string(),
+                (None, true) => format!(
+                    "no candidate run is worth making among {} candidates",
+                    sampling.candidates
+                ),
                 (None, false) => format!("{} new runs", requests.len()),
             }
         ));
+        if disagrees && stop.is_none() {
+            events.message(format!(
+                "adaptive round {round}: the replicates that mixed harder differ by {disagreement:.3} posterior stds: not converged; the rounds from the next sample at mixing level {}",
+                sampling.mixing_level + 1
+            ));
+        }
         if !requests.is_empty() {
             let outcomes = runs.run(Some(&label), &requests)?;
             for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
@@ -1091,21 +1185,41 @@ pub(super) fn refine(
             outcome_reason = reason;
             break;
         }
-        if no_candidate {
-            converged = u < settings.log_likelihood_tolerance;
+        if disagrees {
+            sampling.mixing_level = (sampling.mixing_level + 1).min(MAX_MIXING_LEVEL);
+        }
+        if no_candidate && !disagrees {
+            // Nothing to run is no evidence of convergence (the rule did not hold): look among
+            // more and rarer points of the posterior, from a larger population, before giving
+            // up with the reason.
+            let widest = settings.candidates * CANDIDATE_WIDENING * CANDIDATE_WIDENING;
+            if sampling.candidates < widest {
+                sampling.candidates = (sampling.candidates * CANDIDATE_WIDENING).min(widest);
+                sampling.samples = (2 * sampling.samples).min(settings.max_samples);
+                events.message(format!(
+                    "adaptive round {round}: no candidate run is worth making, although the rule does not hold; the next round looks among {} candidates from {} samples per replicate",
+                    sampling.candidates, sampling.samples
+                ));
+                previous = Some(moments);
+                continue;
+            }
             outcome_reason = format!(
-                "no candidate run is worth making (the surrogate's log-likelihood std over the posterior is {u:.3} nats{})",
-                if converged {
-                    ", within the tolerance"
-                } else {
-                    ", above the tolerance"
-                }
+                "no candidate run is worth making among {} candidates, although the rule does not hold (shift {}, sampler noise {}, surrogate error {:.3} posterior stds against the tolerance {}; the surrogate's log-likelihood std over the posterior is {u:.3} nats): the surrogate's remaining error lies where no run can reduce it by the minimum worth a run; lower `log_likelihood_tolerance` to let smaller gains count, or raise `tolerance` if this error is acceptable",
+                sampling.candidates,
+                assessment
+                    .shift
+                    .map_or("-".to_string(), |s| format!("{s:.3}")),
+                assessment
+                    .noise
+                    .map_or("-".to_string(), |s| format!("{s:.3}")),
+                assessment.surrogate_error,
+                settings.tolerance,
             );
             break;
         }
         // The shift cannot be told from the sampler's noise: sample more next round.
         if assessment.noise.is_some_and(|n| n >= settings.tolerance) {
-            round_samples = (2 * round_samples).min(settings.max_samples);
+            sampling.samples = (2 * sampling.samples).min(settings.max_samples);
         }
         previous = Some(moments);
     }
@@ -1117,6 +1231,7 @@ pub(super) fn refine(
         tolerance: settings.tolerance,
         log_likelihood_tolerance: settings.log_likelihood_tolerance,
         retrained_checks,
+        mixing_level: sampling.mixing_level,
         run_rows: new_rows,
     })
 }

@@ -568,11 +568,15 @@ fn run_stages(
         add_seconds(&mut stage_seconds, "GP fits", stage);
         let stage = Instant::now();
         let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
+        // A sampler the adaptive engine found biased is not trusted with the final posterior
+        // either: it is sampled at the rounds' last mixing level.
+        let final_settings = sampler_settings
+            .with_stronger_mixing(adaptive.as_ref().map_or(0, |a| a.mixing_level));
         let gp_posterior = events.sample(
             "GP bank",
             study,
             &posterior,
-            sampler_settings,
+            final_settings,
             &out.join("basis-gp"),
             None,
         )?;

@@ -257,6 +257,7 @@ fn basis_gp_bank(args: &BasisGpBankArgs, json: bool) -> Result<()> {
         samples: args.samples,
         burn_in: args.burn,
         seed: args.seed,
+        mixing: iuq_basis::Mixing::Fixed,
         ..Default::default()
     }
     .check()
