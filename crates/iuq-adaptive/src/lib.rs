@@ -52,8 +52,8 @@ pub use convergence::{
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
 pub use moment_acquisition::select_batch_for_moments;
-pub use sampler_agreement::{SamplerAgreement, sampler_agreement};
 pub use moment_error::{
     MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
     sampled_moment_errors_by_group,
 };
+pub use sampler_agreement::{SamplerAgreement, sampler_agreement};

@@ -17,6 +17,11 @@
 use serde::{Deserialize, Serialize};
 
 use crate::convergence::NOISE_MULTIPLE;
+
+/// One replicate's (means, stds).
+type Replicate = (Vec<f64>, Vec<f64>);
+/// Which value of a replicate a statistic reads.
+type Pick<'a> = &'a dyn Fn(&Replicate) -> f64;
 use crate::error::{AdaptiveError, Result};
 
 /// The comparison of two groups of replicate samplers.
@@ -59,12 +64,12 @@ pub fn sampler_agreement(
             });
         }
     }
-    let average = |group: &[(Vec<f64>, Vec<f64>)], pick: &dyn Fn(&(Vec<f64>, Vec<f64>)) -> f64| {
+    let average = |group: &[Replicate], pick: Pick<'_>| {
         group.iter().map(pick).sum::<f64>() / group.len() as f64
     };
     // Pooled within-group variance of one replicate's value, and the error of the difference
     // of the two groups' averages.
-    let difference_error = |pick: &dyn Fn(&(Vec<f64>, Vec<f64>)) -> f64| {
+    let difference_error = |pick: Pick<'_>| {
         let (ma, mb) = (average(a, pick), average(b, pick));
         let squares: f64 = a.iter().map(|r| (pick(r) - ma).powi(2)).sum::<f64>()
             + b.iter().map(|r| (pick(r) - mb).powi(2)).sum::<f64>();
@@ -78,11 +83,11 @@ pub fn sampler_agreement(
     let (mut disagreement, mut noise): (f64, f64) = (0.0, 0.0);
     for k in 0..d {
         let s = scale[k];
-        if !(s > 0.0) {
+        if s.is_nan() || s <= 0.0 {
             continue;
         }
-        let mean = |r: &(Vec<f64>, Vec<f64>)| r.0[k];
-        let std = |r: &(Vec<f64>, Vec<f64>)| r.1[k];
+        let mean = |r: &Replicate| r.0[k];
+        let std = |r: &Replicate| r.1[k];
         let (em, es) = (
             NOISE_MULTIPLE * difference_error(&mean),
             NOISE_MULTIPLE * difference_error(&std),
@@ -155,8 +160,7 @@ mod tests {
         assert!((r.disagreement - 0.1).abs() < 1e-12 && r.disagrees && r.noise == 0.0);
         assert!(sampler_agreement(&[], &[replicate(0.0, 1.0)], &[1.0, 1.0], 0.1).is_err());
         assert!(
-            sampler_agreement(&[replicate(0.0, 1.0)], &[replicate(0.0, 1.0)], &[1.0], 0.1)
-                .is_err()
+            sampler_agreement(&[replicate(0.0, 1.0)], &[replicate(0.0, 1.0)], &[1.0], 0.1).is_err()
         );
     }
 }

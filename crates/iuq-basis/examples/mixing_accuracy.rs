@@ -1,19 +1,28 @@
-//! How far BASIS's posterior lands from exact ones as the dimension grows, per mixing setting.
+//! How far BASIS's posterior lands from exact ones as the dimension grows, per mixing setting:
+//! the published fixed chains (β = 0.2, burn 0 or 10), the default adaptive mixing and a stricter
+//! one, on correlated Gaussians and on "banana" pairs (b | a ~ N(a²/2, 0.5²)) in 2, 6 and 10
+//! dimensions, with closed-form moments. Prints the largest |Δmean|/std and |Δstd|/std over the
+//! parameters and seeds, the evaluations per run, the stages and the longest burn-in
+//! (docs/methods.md §5, "How the chains mix"). `MIXING_STAGES=1` prints every stage of seed 0.
+//!
 //! `cargo run --release -p iuq-basis --example mixing_accuracy -- [samples] [seeds]`
 use iuq_basis::{Basis, BasisSettings, FnLikelihood, Mixing, Silent};
 use iuq_core::{Parameter, ParameterSpace, Prior};
 
+/// A log-likelihood of the parameter vector.
+type LogLikelihoodFn = Box<dyn Fn(&[f64]) -> f64 + Sync + Send>;
+
 struct Problem {
     name: String,
     d: usize,
-    ll: Box<dyn Fn(&[f64]) -> f64 + Sync + Send>,
+    ll: LogLikelihoodFn,
     mean: Vec<f64>,
     std: Vec<f64>,
     half_width: f64,
 }
 
 fn gaussian(d: usize) -> Problem {
-    // Correlated Gaussian: x_k = y_k + 0.5 y_{k-1}, y ~ N(mu, s²) independent; built as precision.
+    // Correlated Gaussian: x_k = y_k + 0.5 y_{k-1} with independent y_k ~ N(mu_k, s_k²).
     let s: Vec<f64> = (0..d).map(|k| 0.5 + 0.25 * k as f64).collect();
     let mu: Vec<f64> = (0..d).map(|k| 1.0 - 0.3 * k as f64).collect();
     let (s2, mu2) = (s.clone(), mu.clone());
@@ -27,16 +36,25 @@ fn gaussian(d: usize) -> Problem {
         }
         acc
     };
-    // moments: y_k independent N(mu_k, s_k²); x_k = y_k + 0.5 x_{k-1}?? no: y_k = x_k - 0.5 y_{k-1}
-    // => x_k = y_k + 0.5 y_{k-1}
     let mut mean = vec![0.0; d];
     let mut std = vec![0.0; d];
     for k in 0..d {
-        let (pm, pv) = if k > 0 { (mu[k - 1], s[k - 1] * s[k - 1]) } else { (0.0, 0.0) };
+        let (pm, pv) = if k > 0 {
+            (mu[k - 1], s[k - 1] * s[k - 1])
+        } else {
+            (0.0, 0.0)
+        };
         mean[k] = mu[k] + 0.5 * pm;
         std[k] = (s[k] * s[k] + 0.25 * pv).sqrt();
     }
-    Problem { name: format!("gaussian-{d}"), d, ll: Box::new(ll), mean, std, half_width: 12.0 }
+    Problem {
+        name: format!("gaussian-{d}"),
+        d,
+        ll: Box::new(ll),
+        mean,
+        std,
+        half_width: 12.0,
+    }
 }
 
 fn banana(d: usize) -> Problem {
@@ -57,20 +75,55 @@ fn banana(d: usize) -> Problem {
         mean[2 * p + 1] = 0.5;
         std[2 * p + 1] = (0.25 + 0.25 * 2.0f64).sqrt();
     }
-    Problem { name: format!("banana-{d}"), d, ll: Box::new(ll), mean, std, half_width: 10.0 }
+    Problem {
+        name: format!("banana-{d}"),
+        d,
+        ll: Box::new(ll),
+        mean,
+        std,
+        half_width: 10.0,
+    }
 }
 
 fn main() {
     let args: Vec<String> = std::env::args().collect();
     let samples: usize = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(4000);
     let seeds: u64 = args.get(2).and_then(|a| a.parse().ok()).unwrap_or(3);
-    let problems = vec![gaussian(2), gaussian(6), gaussian(10), banana(2), banana(6), banana(10)];
+    let problems = vec![
+        gaussian(2),
+        gaussian(6),
+        gaussian(10),
+        banana(2),
+        banana(6),
+        banana(10),
+    ];
     let settings = [
         ("fixed burn 0", Mixing::Fixed, 0usize),
         ("fixed burn 10", Mixing::Fixed, 10),
-        ("adaptive 0.1/100", Mixing::Adaptive { correlation: 0.1, max_burn_in: 100 }, 0),
-        ("adaptive 0.3/100", Mixing::Adaptive { correlation: 0.3, max_burn_in: 100 }, 0),
-        ("adaptive 0.3/50", Mixing::Adaptive { correlation: 0.3, max_burn_in: 50 }, 0),
+        (
+            "adaptive 0.1/100",
+            Mixing::Adaptive {
+                correlation: 0.1,
+                max_burn_in: 100,
+            },
+            0,
+        ),
+        (
+            "adaptive 0.3/100",
+            Mixing::Adaptive {
+                correlation: 0.3,
+                max_burn_in: 100,
+            },
+            0,
+        ),
+        (
+            "adaptive 0.3/50",
+            Mixing::Adaptive {
+                correlation: 0.3,
+                max_burn_in: 50,
+            },
+            0,
+        ),
     ];
     println!("problem\tsetting\tmax|dmean|/std\tmax|dstd|/std\tevals\tstages\tmax_burn");
     for p in &problems {
@@ -88,10 +141,19 @@ fn main() {
         for (name, mixing, burn) in settings {
             let (mut em, mut es, mut ev, mut st, mut mb) = (0.0f64, 0.0f64, 0usize, 0usize, 0usize);
             for seed in 0..seeds {
-                let s = BasisSettings { samples, seed, burn_in: burn, mixing, ..Default::default() }
-                    .check()
+                let s = BasisSettings {
+                    samples,
+                    seed,
+                    burn_in: burn,
+                    mixing,
+                    ..Default::default()
+                }
+                .check()
+                .unwrap();
+                let run = Basis::new(&space, &likelihood, s)
+                    .unwrap()
+                    .run(&mut Silent)
                     .unwrap();
-                let run = Basis::new(&space, &likelihood, s).unwrap().run(&mut Silent).unwrap();
                 let st_ = &run.state;
                 let n = st_.samples.len() as f64;
                 for k in 0..p.d {
@@ -104,7 +166,14 @@ fn main() {
                     for d in &st_.diagnostics {
                         eprintln!(
                             "  {} {} stage {} p {:.4} scale {:.3} acc {:.3} burn {} rho {:.3}",
-                            p.name, name, d.stage, d.exponent, d.proposal_scale, d.acceptance_rate, d.burn_in, d.start_correlation
+                            p.name,
+                            name,
+                            d.stage,
+                            d.exponent,
+                            d.proposal_scale,
+                            d.acceptance_rate,
+                            d.burn_in,
+                            d.start_correlation
                         );
                     }
                 }

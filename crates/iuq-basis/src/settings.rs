@@ -386,7 +386,11 @@ mod tests {
         );
         // every level passes the checks
         for level in 0..=MAX_MIXING_LEVEL {
-            adaptive.with_stronger_mixing(level).settings().check().unwrap();
+            adaptive
+                .with_stronger_mixing(level)
+                .settings()
+                .check()
+                .unwrap();
         }
     }
 

@@ -115,13 +115,19 @@ fn ten_parameters_with_the_default_mixing_meet_the_accuracy_and_fixed_chains_do_
     );
     // Every stage reports how far its chains got from their starts.
     for stage in &state.diagnostics[1..] {
-        assert!(stage.burn_in >= 1 && stage.proposal_scale > 0.0, "{stage:?}");
+        assert!(
+            stage.burn_in >= 1 && stage.proposal_scale > 0.0,
+            "{stage:?}"
+        );
     }
     // The published fixed chains with no burn-in: the same problem is sampled visibly wrong,
     // and their chains hardly leave their starts.
     let fixed = run(Mixing::Fixed);
     let (mean_error, _) = errors(&fixed.samples, &mean, &std);
-    assert!(mean_error > 0.3, "fixed chains: largest mean error {mean_error}");
+    assert!(
+        mean_error > 0.3,
+        "fixed chains: largest mean error {mean_error}"
+    );
     let last = fixed.diagnostics.last().unwrap();
     assert!(last.start_correlation > 0.9, "{last:?}");
 }

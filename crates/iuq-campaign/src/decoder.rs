@@ -3,6 +3,7 @@
 //! | study file | outputs |
 //! |---|---|
 //! | `output = { file = "result.json", format = "json" }` | the top-level keys named as the outputs (`keys = { f = "/a/0/b" }` gives JSON pointers instead); a value is a number, or `{ "value": v, "std": s }` with a computational std |
+//! | `output = { file = "result.json", format = "json", array = "/T" }` | one JSON array (at a pointer) holds the outputs in order, exactly as many as there are outputs; its elements as above |
 //! | `output = { file = "out.csv", format = "csv" }` | the columns named as the outputs, in one row (`row = "last"` (default), `"first"` or a 0-based index) |
 //! | `output = { file = "out.csv", format = "csv", column = "el" }` | the values of one column, row by row: output k is row k |
 //! | `output = { file = "log.txt", format = "regex", patterns = { el = 'EL = (\S+)' } }` | per output, the first capture group of the last match |
@@ -40,6 +41,11 @@ pub enum DecoderFormat {
         /// One JSON pointer per output.
         pointers: Vec<String>,
     },
+    /// A JSON document with one array (at a JSON pointer) holding every output, in order.
+    JsonArray {
+        /// The array's JSON pointer.
+        pointer: String,
+    },
     /// A CSV file with a header: per output a column, in one row.
     CsvColumns {
         /// The row.
@@ -66,6 +72,11 @@ pub struct DecoderSpec {
     /// How it is decoded.
     pub format: DecoderFormat,
 }
+
+/// The words every reason of an array whose length is not the number of outputs begins with, so
+/// that a caller can tell a study that declares the wrong length (an input error) from a run that
+/// failed.
+pub const ARRAY_LENGTH_MISMATCH: &str = "array length mismatch";
 
 /// A failure to decode: its kind and reason.
 pub type DecodeFailure = (OutcomeKind, String);
@@ -186,6 +197,38 @@ impl OutputDecoder {
                     .then(|| stds.into_iter().map(|s| s.unwrap_or(0.0)).collect());
                 Ok((values, std))
             }
+            DecoderFormat::JsonArray { pointer } => {
+                let doc: serde_json::Value = serde_json::from_str(text)
+                    .map_err(|e| self.bad(format!("not valid JSON ({e})")))?;
+                let items = doc
+                    .pointer(pointer)
+                    .ok_or_else(|| self.bad(format!("no value at `{pointer}`")))?
+                    .as_array()
+                    .ok_or_else(|| self.bad(format!("the value at `{pointer}` is not an array")))?;
+                if items.len() != self.outputs.len() {
+                    return Err(self.bad(format!(
+                        "{ARRAY_LENGTH_MISMATCH}: the array at `{pointer}` has {} values for {} outputs",
+                        items.len(),
+                        self.outputs.len()
+                    )));
+                }
+                let mut values = Vec::with_capacity(items.len());
+                let mut stds = Vec::with_capacity(items.len());
+                for (i, v) in items.iter().enumerate() {
+                    let (value, std) = json_number(v).ok_or_else(|| {
+                        self.bad(format!(
+                            "`{pointer}/{i}` is `{v}`, not a number or {{\"value\": …, \"std\": …}}"
+                        ))
+                    })?;
+                    values.push(value);
+                    stds.push(std);
+                }
+                let std = stds
+                    .iter()
+                    .any(Option::is_some)
+                    .then(|| stds.into_iter().map(|s| s.unwrap_or(0.0)).collect());
+                Ok((values, std))
+            }
             DecoderFormat::CsvColumns { row } => {
                 let (header, rows) = self.read_csv(text)?;
                 let chosen = match row {
@@ -224,7 +267,7 @@ impl OutputDecoder {
                 })?;
                 if rows.len() != self.outputs.len() {
                     return Err(self.bad(format!(
-                        "column `{column}` has {} values for {} outputs",
+                        "{ARRAY_LENGTH_MISMATCH}: column `{column}` has {} values for {} outputs",
                         rows.len(),
                         self.outputs.len()
                     )));

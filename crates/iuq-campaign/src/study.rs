@@ -619,6 +619,21 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
         .string("format")?
         .ok_or_else(|| s.error("format", "missing (\"json\", \"csv\" or \"regex\")"))?;
     let format = match format.as_str() {
+        "json" if s.has("array") => {
+            if s.has("keys") {
+                return Err(s.error(
+                    "array",
+                    "give either `array` (one array holds every output) or `keys` (a pointer per output)",
+                ));
+            }
+            let pointer = s.string("array")?.unwrap_or_default();
+            let pointer = if pointer.starts_with('/') {
+                pointer
+            } else {
+                format!("/{pointer}")
+            };
+            DecoderFormat::JsonArray { pointer }
+        }
         "json" => {
             let pointers = match s.sub_table("keys")? {
                 Some(keys) => outputs
@@ -686,7 +701,7 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
         }
     };
     s.finish_with_hint(
-        "file, format, keys (json), column and row (csv), pattern or patterns (regex)",
+        "file, format, keys or array (json), column and row (csv), pattern or patterns (regex)",
     )?;
     let spec = DecoderSpec {
         file: out_file,

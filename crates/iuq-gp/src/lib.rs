@@ -14,6 +14,8 @@
 //! - [`q2()`], [`GaussianProcess::loo_q2`]: test-set and closed-form leave-one-out Q2.
 //! - [`GaussianProcess::to_json_string`] / [`GaussianProcess::from_json_str`]: persistence.
 //! - [`GpBank`]: one GP per output, an [`iuq_core::Model`].
+//! - [`ReducedBasis`]: GPs on the leading principal components of a curve-valued model's runs
+//!   (Higdon et al. 2008), with the truncation error as variance; an [`iuq_core::Model`].
 //! - [`GaussianProcess::posterior_covariance`]: cov[f(a), f(b) | data], for sequential designs.
 //! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
@@ -38,6 +40,7 @@ pub mod optimizer;
 pub mod persistence;
 mod posterior_covariance;
 pub mod prediction;
+pub mod reduced_basis;
 pub mod scaling;
 pub mod screening;
 #[cfg(test)]
@@ -58,5 +61,6 @@ pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };
 pub use prediction::Prediction;
+pub use reduced_basis::{ReducedBasis, ReducedBasisOptions};
 pub use scaling::{InputScaling, OutputScaling};
 pub use validation::{LeaveOneOut, q2};

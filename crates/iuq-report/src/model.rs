@@ -267,6 +267,14 @@ pub struct ConvergenceRound {
     pub log_likelihood_std: f64,
     /// Share of the posterior farther than one length scale from every training run.
     pub extrapolation_share: f64,
+    /// How much harder than the study's sampler the round's chains mixed (0: as set).
+    #[serde(default)]
+    pub mixing_level: u32,
+    /// The check of the sampler: the largest difference of a posterior mean or std between the
+    /// replicates that mixed harder and the others, beyond the noise, in posterior stds (`None`
+    /// where not made).
+    #[serde(default)]
+    pub sampler_disagreement: Option<f64>,
 }
 
 /// The runs of one run group in the plane of two parameters.

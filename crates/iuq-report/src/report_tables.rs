@@ -420,8 +420,8 @@ pub(crate) fn stage_times(report: &StudyReport, derived: &DerivedResults) -> Tab
 }
 
 /// The adaptive engine's rounds: runs, shift, sampler noise, surrogate error, the surrogate's
-/// log-likelihood std, the
-/// extrapolated share, then the posterior mean and std of each parameter (one column group per
+/// log-likelihood std, the extrapolated share, the check of the sampler and its mixing level,
+/// then the posterior mean and std of each parameter (one column group per
 /// parameter).
 pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
     let parameters = &convergence.parameters;
@@ -434,6 +434,8 @@ pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
         "surrogate error (posterior stds)",
         "log-likelihood std (nats)",
         "extrapolated share",
+        "sampler disagreement (posterior stds)",
+        "mixing level",
     ]
     .map(Column::plain)
     .to_vec();
@@ -465,6 +467,11 @@ pub(crate) fn adaptive_rounds(convergence: &Convergence) -> Table {
                 },
                 Cell::number(round.log_likelihood_std, at("log_likelihood_std")),
                 Cell::number(round.extrapolation_share, at("extrapolation_share")),
+                match round.sampler_disagreement {
+                    Some(d) => Cell::number(d, at("sampler_disagreement")),
+                    None => Cell::Empty,
+                },
+                Cell::count(round.mixing_level as usize, at("mixing_level")),
             ];
             for p in 0..parameters.len() {
                 row.push(Cell::number(round.mean[p], at(&format!("mean/{p}"))));

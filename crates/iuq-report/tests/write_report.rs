@@ -462,6 +462,7 @@ fn adaptive_results_get_their_sections_figures_and_tables() {
         lines.next().unwrap(),
         "round,runs,new runs,shift (posterior stds),sampler noise (posterior stds),\
          surrogate error (posterior stds),log-likelihood std (nats),extrapolated share,\
+         sampler disagreement (posterior stds),mixing level,\
          kLink mean,kLink std,kBend mean,kBend std,sigma_m mean,sigma_m std"
     );
     assert_eq!(lines.count(), 3);

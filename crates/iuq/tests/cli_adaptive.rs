@@ -682,3 +682,46 @@ fn a_batch_command_model_runs_many_runs_per_process_and_converges() {
     let runs = v["runs"].as_u64().unwrap() as usize;
     assert!(2 * batches <= runs, "{batches} processes for {runs} runs");
 }
+
+#[test]
+fn an_array_of_the_wrong_length_exits_2_naming_the_file_and_key() {
+    let dir = cooling("array-length");
+    // The program's curve at 7 times where the data has 8 rows.
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace("\"6\", \"8\", \"10\"]", "\"6\", \"8\"]");
+    assert!(study.contains("array = \"/T\""));
+    let path = dir.join("short.toml");
+    std::fs::write(&path, study).unwrap();
+    let output = iuq(&["pipeline", path.to_str().unwrap(), "--json"]);
+    assert_eq!(output.status.code(), Some(2), "{}", stderr_of(&output));
+    let message = json_of(&output)["error"]["message"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        message.contains("short.toml")
+            && message.contains("`model.output.array`")
+            && message.contains("has 7 values for 8 outputs")
+            && message.contains("8 values, one per data row"),
+        "{message}"
+    );
+    // Keys and pointers together are one declaration too many.
+    let both = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "array = \"/T\"",
+            "array = \"/T\", keys = { \"T[0]\" = \"/T/0\" }",
+        );
+    std::fs::write(&path, both).unwrap();
+    let output = iuq(&["pipeline", path.to_str().unwrap(), "--json"]);
+    assert_eq!(output.status.code(), Some(2));
+    let message = json_of(&output)["error"]["message"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(
+        message.contains("short.toml") && message.contains("model.output.array"),
+        "{message}"
+    );
+}

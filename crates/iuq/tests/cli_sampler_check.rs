@@ -64,9 +64,7 @@ fn exact(y: &[f64]) -> (Vec<f64>, Vec<f64>) {
         }
     }
     let mean = (0..6).map(|r| a[r][6]).collect();
-    let std = (0..6)
-        .map(|r| NOISE_STD * a[r][7 + r].sqrt())
-        .collect();
+    let std = (0..6).map(|r| NOISE_STD * a[r][7 + r].sqrt()).collect();
     (mean, std)
 }
 
@@ -124,10 +122,9 @@ fn run(path: &Path, out: &Path) -> (serde_json::Value, serde_json::Value) {
         "{}",
         String::from_utf8_lossy(&output.stderr)
     );
-    let rounds: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(out.join("adaptive/rounds.json")).unwrap(),
-    )
-    .unwrap();
+    let rounds: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("adaptive/rounds.json")).unwrap())
+            .unwrap();
     (json_of(&output), rounds)
 }
 
@@ -150,7 +147,11 @@ fn an_under_sampled_posterior_is_caught_never_called_converged_and_then_sampled_
             assert_eq!(r["converged"], false, "{r}");
         }
     }
-    assert!(rounds[1..].iter().all(|r| r["mixing_level"].as_u64().unwrap() >= 1));
+    assert!(
+        rounds[1..]
+            .iter()
+            .all(|r| r["mixing_level"].as_u64().unwrap() >= 1)
+    );
     // Sampling harder, the engine converges with the check passing, and its final posterior is
     // the exact one: every mean within 0.1 posterior std and every std within 10 % (the
     // pipeline's spread on the cooling study is half of that, crates/iuq/tests/cli_adaptive.rs).
@@ -160,7 +161,12 @@ fn an_under_sampled_posterior_is_caught_never_called_converged_and_then_sampled_
     let parameters = v["posterior"][0]["parameters"].as_array().unwrap();
     for (k, p) in parameters.iter().enumerate() {
         let (m, s) = (p["mean"].as_f64().unwrap(), p["std"].as_f64().unwrap());
-        assert!((m - mean[k]).abs() < 0.1 * std[k], "{p}: exact {} ± {}", mean[k], std[k]);
+        assert!(
+            (m - mean[k]).abs() < 0.1 * std[k],
+            "{p}: exact {} ± {}",
+            mean[k],
+            std[k]
+        );
         assert!((s / std[k] - 1.0).abs() < 0.1, "{p}: exact std {}", std[k]);
     }
 }
@@ -181,7 +187,12 @@ fn the_default_sampler_passes_its_check_from_the_first_round() {
     let parameters = v["posterior"][0]["parameters"].as_array().unwrap();
     for (k, p) in parameters.iter().enumerate() {
         let (m, s) = (p["mean"].as_f64().unwrap(), p["std"].as_f64().unwrap());
-        assert!((m - mean[k]).abs() < 0.1 * std[k], "{p}: exact {} ± {}", mean[k], std[k]);
+        assert!(
+            (m - mean[k]).abs() < 0.1 * std[k],
+            "{p}: exact {} ± {}",
+            mean[k],
+            std[k]
+        );
         assert!((s / std[k] - 1.0).abs() < 0.1, "{p}: exact std {}", std[k]);
     }
 }

@@ -495,6 +495,8 @@ pub fn add_adaptive_results(report: &mut StudyReport, rounds: usize, panels: usi
                 surrogate_error: Some(0.5 * decay),
                 log_likelihood_std: 2.4 * decay,
                 extrapolation_share: 0.3 * decay,
+                mixing_level: u32::from(r > 0),
+                sampler_disagreement: Some(if r == 0 { 0.4 } else { 0.02 * decay }),
             }
         })
         .collect();

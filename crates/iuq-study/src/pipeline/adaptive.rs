@@ -706,21 +706,18 @@ fn measure_round(
     pooled.moments = PosteriorMoments::pooled(&replicate_moments)
         .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
     let sampler_check = if checked {
-        let (harder, as_set): (Vec<_>, Vec<_>) = replicate_moments
-            .iter()
-            .enumerate()
-            .partition(|(r, _)| r % 2 == 1);
-        let strip = |group: Vec<(usize, &(Vec<f64>, Vec<f64>))>| {
-            group.into_iter().map(|(_, m)| m.clone()).collect::<Vec<_>>()
+        let group = |parity: usize| -> Vec<(Vec<f64>, Vec<f64>)> {
+            replicate_moments
+                .iter()
+                .enumerate()
+                .filter(|(r, _)| r % 2 == parity)
+                .map(|(_, m)| m.clone())
+                .collect()
         };
+        let (as_set, harder) = (group(0), group(1));
         Some(
-            sampler_agreement(
-                &strip(as_set),
-                &strip(harder),
-                &pooled.moments.std,
-                settings.tolerance,
-            )
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?,
+            sampler_agreement(&as_set, &harder, &pooled.moments.std, settings.tolerance)
+                .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?,
         )
     } else {
         None
@@ -952,9 +949,8 @@ pub(super) fn refine(
         // stops, or its runs are recorded.
         let reusable = match &cached {
             Some(m) if !recompute => {
-                let converged = judge(m)?.converged
-                    && !m.boundary_runs_due(settings)
-                    && !m.sampler_disagrees();
+                let converged =
+                    judge(m)?.converged && !m.boundary_runs_due(settings) && !m.sampler_disagrees();
                 converged || made >= settings.max_runs || recorded.is_some()
             }
             _ => false,

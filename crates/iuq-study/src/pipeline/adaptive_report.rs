@@ -21,7 +21,7 @@ const MAX_PANELS: usize = 8;
 pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
     Convergence {
         criterion: format!(
-            "every posterior mean and std moves by less than {0} posterior stds between rounds beyond twice the sampler's Monte Carlo error, that noise is itself below {0} posterior stds, and the surrogate's error could move no posterior mean or std by more than {0} posterior stds",
+            "every posterior mean and std moves by less than {0} posterior stds between rounds beyond twice the sampler's Monte Carlo error, that noise is itself below {0} posterior stds, the surrogate's error could move no posterior mean or std by more than {0} posterior stds, and the replicates that mix harder agree with the others within {0} posterior stds beyond their noise",
             outcome.tolerance
         ),
         converged: outcome.converged,
@@ -41,6 +41,8 @@ pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
                 surrogate_error: Some(r.surrogate_error),
                 log_likelihood_std: r.log_likelihood_std,
                 extrapolation_share: r.extrapolation_share,
+                mixing_level: r.mixing_level,
+                sampler_disagreement: r.sampler_agreement.as_ref().map(|a| a.disagreement),
             })
             .collect(),
         retrained_checks: outcome

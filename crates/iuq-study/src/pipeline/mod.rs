@@ -32,6 +32,7 @@
 
 pub mod adaptive;
 mod adaptive_report;
+mod array_outputs;
 pub mod cell_model_campaign;
 pub mod cell_portraits;
 pub mod model_posterior;
@@ -570,8 +571,8 @@ fn run_stages(
         let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
         // A sampler the adaptive engine found biased is not trusted with the final posterior
         // either: it is sampled at the rounds' last mixing level.
-        let final_settings = sampler_settings
-            .with_stronger_mixing(adaptive.as_ref().map_or(0, |a| a.mixing_level));
+        let final_settings =
+            sampler_settings.with_stronger_mixing(adaptive.as_ref().map_or(0, |a| a.mixing_level));
         let gp_posterior = events.sample(
             "GP bank",
             study,

@@ -64,6 +64,9 @@ pub struct ModelRuns {
     abscissae: Vec<f64>,
     parameters: Vec<String>,
     outputs: Vec<String>,
+    /// A command model's `[model]` table, the study file and the length its arrays must have,
+    /// for the input error of an array of another length.
+    array_check: Option<(Table, String, String)>,
 }
 
 /// A [`Model`] evaluated one point at a time as an in-process campaign model.
@@ -184,7 +187,15 @@ pub fn pipeline_campaign_study(study: &Study) -> Result<CampaignStudy> {
     let data = super::study_data(study)?;
     let text = match &study.model {
         ModelSection::RbcShear { .. } => campaign_study_text(study, &data.x)?,
-        ModelSection::Command { table, .. } => model_campaign_text(study, table.clone(), &data.x)?,
+        ModelSection::Command { table, .. } => {
+            let per_run = if study.abscissa.is_some() {
+                1
+            } else {
+                data.x.len()
+            };
+            let table = super::array_outputs::with_array_outputs(table.clone(), per_run);
+            model_campaign_text(study, table, &data.x)?
+        }
         ModelSection::Expression { .. } | ModelSection::UmBridge(_) => {
             return Err(input_error(format!(
                 "{file}: key `model.kind`: the runs of an in-process model (expression, umbridge) are made and read by `iuq pipeline` alone"
@@ -265,12 +276,14 @@ impl ModelRuns {
                 (text, model)
             }
             ModelSection::Command { table, .. } => {
+                let table =
+                    super::array_outputs::with_array_outputs(table.clone(), outputs_per_run);
                 let count = table
                     .get("outputs")
                     .and_then(Value::as_array)
                     .map_or(0, Vec::len);
                 check_outputs(count)?;
-                (model_campaign_text(study, table.clone(), &data.x)?, None)
+                (model_campaign_text(study, table, &data.x)?, None)
             }
             ModelSection::Expression { outputs } => {
                 in_process_only("expression")?;
@@ -348,6 +361,18 @@ impl ModelRuns {
             abscissae: data.x.clone(),
             parameters,
             outputs,
+            array_check: match &study.model {
+                ModelSection::Command { table, .. } => Some((
+                    table.clone(),
+                    file.clone(),
+                    if per_abscissa {
+                        "1 value per run (one run per parameter vector and data point)".to_string()
+                    } else {
+                        format!("{n} values, one per data row")
+                    },
+                )),
+                _ => None,
+            },
         })
     }
 
@@ -433,7 +458,11 @@ impl ModelRuns {
                 x
             })
             .collect();
-        Ok(self.campaign.evaluate_labelled(label, &points)?)
+        let outcomes = self.campaign.evaluate_labelled(label, &points)?;
+        if let Some((model, file, expected)) = &self.array_check {
+            super::array_outputs::check_lengths(file, Some(model), &outcomes, expected)?;
+        }
+        Ok(outcomes)
     }
 
     /// The requests of the design recorded under `label`, if the store has it: each point back

@@ -1,0 +1,511 @@
+//! A reduced-basis emulator of a curve-valued model: GPs on the leading principal components of
+//! the runs' outputs (Higdon, Gattiker, Williams & Rightley 2008, "Computer model calibration
+//! using high-dimensional output", JASA 103(482); surmise's PCGP).
+//!
+//! With n runs of m outputs Y (n × m), each output centred by its mean over the runs μ_j and
+//! divided by a scale s_j (the data's measurement std when the caller gives it, so that the basis
+//! is judged in the units of the likelihood), Z = (Y − μ)/s = U S Vᵀ (thin SVD). The first q
+//! right singular vectors v_k (q the fewest whose share of Σ S² reaches `explained_variance`, at
+//! most `max_components` and n − 1) span the basis; run i's coefficients are c_ik = U_ik S_k, and
+//! one GP per component is fitted to them (seed `seed + k`). At θ,
+//!
+//! y_j(θ) ≈ μ_j + s_j Σ_k V_jk c_k(θ),  Var = s_j² Σ_k V_jk² Var[c_k(θ)] + τ_j²,
+//!
+//! the components' GPs being independent, and τ_j² = s_j² · mean_i (Z_ij − Σ_k c_ik V_jk)², the
+//! part of the runs' outputs the basis leaves out (the truncation error), carried into the
+//! likelihood as a variance as Higdon et al. carry the discarded components. The decomposition
+//! runs sequentially (faer, `Par::Seq`) and every sum in a fixed order, so the result does not
+//! depend on the number of threads.
+//!
+//! When it pays: a curve of many points whose shapes over the prior span few dimensions (a
+//! profile, a decay, a growth curve: q of 3–10 for hundreds of points), where m GPs would cost m
+//! fits and m predictions per step. When the shapes do not (an oscillation whose frequency is a
+//! parameter, or a few data points that each depend on θ their own way), q approaches m and
+//! per-output GPs are as cheap and exact.
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::svd::{ComputeSvdVectors, svd, svd_scratch};
+use faer::{Mat, Par};
+
+use iuq_core::model::{Evaluation, EvaluationFailure, Model, Outcome};
+
+use crate::bank::PredictiveStd;
+use crate::error::{GpError, Result};
+use crate::fit::{CheckedFitOptions, FitOptions};
+use crate::gaussian_process::GaussianProcess;
+use crate::prediction::Prediction;
+
+/// How the basis is chosen and its GPs fitted.
+#[derive(Debug, Clone)]
+pub struct ReducedBasisOptions {
+    /// The share of the scaled outputs' variance over the runs the kept components must explain
+    /// (default 0.9999).
+    pub explained_variance: f64,
+    /// The most components kept (default 30).
+    pub max_components: usize,
+    /// The scale s_j of each output (default: one scale for all, the std of every centred
+    /// output value over the runs).
+    pub output_scale: Option<Vec<f64>>,
+    /// The options of each component's GP fit (its seed is `fit.seed + k`).
+    pub fit: FitOptions,
+}
+
+impl Default for ReducedBasisOptions {
+    fn default() -> Self {
+        Self {
+            explained_variance: 0.9999,
+            max_components: 30,
+            output_scale: None,
+            fit: FitOptions::default(),
+        }
+    }
+}
+
+/// GPs on the leading principal components of a multi-output model's runs. Implements
+/// [`Model`] as a [`crate::GpBank`] does: means, and the predictive stds (truncation error
+/// included) as the computational std.
+#[derive(Debug, Clone)]
+pub struct ReducedBasis {
+    input_names: Vec<String>,
+    output_names: Vec<String>,
+    centre: Vec<f64>,
+    scale: Vec<f64>,
+    /// V_jk, m rows of q.
+    basis: Vec<Vec<f64>>,
+    /// The share of Σ S² of each kept component.
+    explained: Vec<f64>,
+    /// τ_j² in output units.
+    truncation_variance: Vec<f64>,
+    gps: Vec<GaussianProcess>,
+    predictive_std: PredictiveStd,
+}
+
+impl ReducedBasis {
+    /// Fit the basis and its GPs to runs `inputs` (n × d) with outputs `outputs` (n × m).
+    ///
+    /// # Errors
+    /// Fewer than 3 runs, ragged or non-finite outputs, a non-positive scale, options out of
+    /// range, a decomposition that fails, or a GP fit that fails.
+    pub fn fit(
+        input_names: Vec<String>,
+        output_names: Vec<String>,
+        inputs: &[Vec<f64>],
+        outputs: &[Vec<f64>],
+        options: &ReducedBasisOptions,
+    ) -> Result<Self> {
+        let n = outputs.len();
+        let m = output_names.len();
+        if n < 3 {
+            return Err(GpError::TooFewPoints {
+                required: 3,
+                actual: n,
+            });
+        }
+        if inputs.len() != n {
+            return Err(GpError::LengthMismatch {
+                what: "runs' inputs vs. their outputs",
+                expected: n,
+                actual: inputs.len(),
+            });
+        }
+        if !(options.explained_variance > 0.0 && options.explained_variance <= 1.0) {
+            return Err(GpError::InvalidParameter {
+                what: "explained_variance",
+                reason: format!("must lie in (0, 1], got {}", options.explained_variance),
+            });
+        }
+        if options.max_components == 0 {
+            return Err(GpError::InvalidParameter {
+                what: "max_components",
+                reason: "must be at least 1".into(),
+            });
+        }
+        for (i, row) in outputs.iter().enumerate() {
+            if row.len() != m {
+                return Err(GpError::DimensionMismatch {
+                    what: "run's outputs",
+                    index: i,
+                    expected: m,
+                    actual: row.len(),
+                });
+            }
+            if let Some((j, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+                return Err(GpError::NonFinite {
+                    what: "output",
+                    index: i * m + j,
+                    value: *v,
+                });
+            }
+        }
+        let centre: Vec<f64> = (0..m)
+            .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n as f64)
+            .collect();
+        let scale = match &options.output_scale {
+            Some(s) if s.len() != m => {
+                return Err(GpError::LengthMismatch {
+                    what: "output scales vs. outputs",
+                    expected: m,
+                    actual: s.len(),
+                });
+            }
+            Some(s) => {
+                if let Some(v) = s.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+                    return Err(GpError::InvalidParameter {
+                        what: "output scale",
+                        reason: format!("must be finite and positive, got {v}"),
+                    });
+                }
+                s.clone()
+            }
+            None => {
+                let sum: f64 = outputs
+                    .iter()
+                    .flat_map(|r| r.iter().zip(&centre).map(|(y, c)| (y - c) * (y - c)))
+                    .sum();
+                let s = (sum / (n * m) as f64).sqrt();
+                vec![if s > 0.0 { s } else { 1.0 }; m]
+            }
+        };
+        let z = Mat::<f64>::from_fn(n, m, |i, j| (outputs[i][j] - centre[j]) / scale[j]);
+        let size = n.min(m);
+        let mut s = faer::diag::Diag::<f64>::zeros(size);
+        let mut u = Mat::<f64>::zeros(n, size);
+        let mut v = Mat::<f64>::zeros(m, size);
+        let mut buffer = MemBuffer::new(svd_scratch::<f64>(
+            n,
+            m,
+            ComputeSvdVectors::Thin,
+            ComputeSvdVectors::Thin,
+            Par::Seq,
+            Default::default(),
+        ));
+        svd(
+            z.as_ref(),
+            s.as_mut(),
+            Some(u.as_mut()),
+            Some(v.as_mut()),
+            Par::Seq,
+            MemStack::new(&mut buffer),
+            Default::default(),
+        )
+        .map_err(|e| GpError::FitFailed(format!("principal components: {e:?}")))?;
+        let singular: Vec<f64> = (0..size).map(|k| s[k]).collect();
+        // Components by decreasing singular value (faer's order, made sure of).
+        let mut order: Vec<usize> = (0..size).collect();
+        order.sort_by(|&a, &b| singular[b].total_cmp(&singular[a]).then(a.cmp(&b)));
+        let total: f64 = singular.iter().map(|v| v * v).sum();
+        let limit = options.max_components.min(n - 1).min(size).max(1);
+        let mut q = 0;
+        let mut cumulative = 0.0;
+        let mut explained = Vec::new();
+        while q < limit {
+            let share = if total > 0.0 {
+                singular[order[q]].powi(2) / total
+            } else {
+                0.0
+            };
+            explained.push(share);
+            cumulative += share;
+            q += 1;
+            if total <= 0.0 || cumulative >= options.explained_variance {
+                break;
+            }
+        }
+        let basis: Vec<Vec<f64>> = (0..m)
+            .map(|j| order[..q].iter().map(|&k| v[(j, k)]).collect())
+            .collect();
+        let coefficients: Vec<Vec<f64>> = (0..q)
+            .map(|c| {
+                (0..n)
+                    .map(|i| u[(i, order[c])] * singular[order[c]])
+                    .collect()
+            })
+            .collect();
+        let truncation_variance: Vec<f64> = (0..m)
+            .map(|j| {
+                let sum: f64 = (0..n)
+                    .map(|i| {
+                        let fitted: f64 = (0..q).map(|c| coefficients[c][i] * basis[j][c]).sum();
+                        (z[(i, j)] - fitted).powi(2)
+                    })
+                    .sum();
+                scale[j] * scale[j] * sum / n as f64
+            })
+            .collect();
+        let mut gps = Vec::with_capacity(q);
+        for (c, y) in coefficients.iter().enumerate() {
+            let fit: CheckedFitOptions = FitOptions {
+                seed: options.fit.seed.wrapping_add(c as u64),
+                ..options.fit
+            }
+            .check()?;
+            gps.push(GaussianProcess::fit(inputs, y, &fit)?);
+        }
+        Ok(Self {
+            input_names,
+            output_names,
+            centre,
+            scale,
+            basis,
+            explained,
+            truncation_variance,
+            gps,
+            predictive_std: PredictiveStd::default(),
+        })
+    }
+
+    /// Report the latent std instead of the std with noise, or back.
+    pub fn with_predictive_std(mut self, predictive_std: PredictiveStd) -> Self {
+        self.predictive_std = predictive_std;
+        self
+    }
+
+    /// The number of components kept, q.
+    pub fn components(&self) -> usize {
+        self.gps.len()
+    }
+
+    /// The share of the scaled outputs' variance each kept component explains.
+    pub fn explained_variance(&self) -> &[f64] {
+        &self.explained
+    }
+
+    /// τ_j², the truncation error's variance of each output (output units).
+    pub fn truncation_variance(&self) -> &[f64] {
+        &self.truncation_variance
+    }
+
+    /// The components' GPs, in order.
+    pub fn component_gps(&self) -> &[GaussianProcess] {
+        &self.gps
+    }
+
+    /// s_j·V_jk: how much output j moves per unit of component k's coefficient.
+    pub fn loading(&self, j: usize, k: usize) -> f64 {
+        self.scale[j] * self.basis[j][k]
+    }
+
+    /// The input names.
+    pub fn input_names(&self) -> &[String] {
+        &self.input_names
+    }
+
+    /// The output names.
+    pub fn output_names(&self) -> &[String] {
+        &self.output_names
+    }
+
+    /// Per output, its prediction at `points`: the mean, the latent variance (the components'
+    /// and the truncation error's) and the noise variance the components' GPs add.
+    ///
+    /// # Errors
+    /// Points of the wrong dimension or not finite.
+    pub fn predict(&self, points: &[Vec<f64>]) -> Result<Vec<Prediction>> {
+        let components: Vec<Prediction> = self
+            .gps
+            .iter()
+            .map(|gp| gp.predict(points))
+            .collect::<Result<_>>()?;
+        Ok(self.combine(&components, points.len()))
+    }
+
+    /// The outputs' predictions from the components' `predictions` at `count` points.
+    fn combine(&self, components: &[Prediction], count: usize) -> Vec<Prediction> {
+        (0..self.output_names.len())
+            .map(|j| {
+                let (mut mean, mut variance) = (
+                    vec![self.centre[j]; count],
+                    vec![self.truncation_variance[j]; count],
+                );
+                let mut noise_variance = 0.0;
+                for (k, p) in components.iter().enumerate() {
+                    let a = self.loading(j, k);
+                    for i in 0..count {
+                        mean[i] += a * p.mean[i];
+                        variance[i] += a * a * p.variance[i];
+                    }
+                    noise_variance += a * a * p.noise_variance;
+                }
+                Prediction {
+                    mean,
+                    variance,
+                    noise_variance,
+                }
+            })
+            .collect()
+    }
+}
+
+impl Model for ReducedBasis {
+    fn input_names(&self) -> &[String] {
+        &self.input_names
+    }
+
+    fn output_names(&self) -> &[String] {
+        &self.output_names
+    }
+
+    /// Per point: every output's mean, with its predictive std (components, truncation, and
+    /// the components' noise unless latent) as the computational std. A point of the wrong
+    /// dimension or with a non-finite coordinate is a per-point failure.
+    fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+        let d = self.input_names.len();
+        let valid: Vec<usize> = (0..points.len())
+            .filter(|&i| points[i].len() == d && points[i].iter().all(|v| v.is_finite()))
+            .collect();
+        let probe: Vec<Vec<f64>> = valid.iter().map(|&i| points[i].clone()).collect();
+        let predictions = self
+            .predict(&probe)
+            .map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
+        let mut outcomes: Vec<Outcome> = points
+            .iter()
+            .map(|p| {
+                Err(EvaluationFailure::new(if p.len() != d {
+                    format!("expected {d} inputs, got {}", p.len())
+                } else {
+                    "non-finite input".to_string()
+                }))
+            })
+            .collect();
+        for (slot, &i) in valid.iter().enumerate() {
+            let mean = predictions.iter().map(|p| p.mean[slot]).collect();
+            let std = predictions
+                .iter()
+                .map(|p| {
+                    (p.variance[slot] + self.predictive_std.added_noise_variance(p.noise_variance))
+                        .sqrt()
+                })
+                .collect();
+            outcomes[i] = Ok(Evaluation::with_std(mean, std));
+        }
+        Ok(outcomes)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs of y(θ, x) = θ₀ exp(−θ₁ x) at 60 abscissae: a two-parameter family whose curves span
+    /// few dimensions.
+    fn runs(n: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let xs: Vec<f64> = (0..60).map(|i| 0.1 * i as f64).collect();
+        let inputs: Vec<Vec<f64>> = (0..n)
+            .map(|i| {
+                let u = (i as f64 + 0.5) / n as f64;
+                let v = ((i * 7) % n) as f64 / n as f64;
+                vec![1.0 + u, 0.2 + 0.6 * v]
+            })
+            .collect();
+        let outputs = inputs
+            .iter()
+            .map(|t| xs.iter().map(|x| t[0] * (-t[1] * x).exp()).collect())
+            .collect();
+        (inputs, outputs)
+    }
+
+    fn names(prefix: &str, count: usize) -> Vec<String> {
+        (0..count).map(|j| format!("{prefix}{j}")).collect()
+    }
+
+    #[test]
+    fn a_low_rank_family_needs_few_components_and_predicts_new_curves() {
+        let (inputs, outputs) = runs(40);
+        let rb = ReducedBasis::fit(
+            names("t", 2),
+            names("y", 60),
+            &inputs,
+            &outputs,
+            &ReducedBasisOptions::default(),
+        )
+        .unwrap();
+        assert!(rb.components() <= 6, "{} components", rb.components());
+        let kept: f64 = rb.explained_variance().iter().sum();
+        assert!(kept >= 0.9999, "{kept}");
+        // The truncation error is what the basis leaves of the runs: at most 1e-4 of their
+        // variance, on average over the outputs.
+        let n = outputs.len() as f64;
+        let centre: Vec<f64> = (0..60)
+            .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n)
+            .collect();
+        let total: f64 = outputs
+            .iter()
+            .flat_map(|r| r.iter().zip(&centre).map(|(y, c)| (y - c).powi(2)))
+            .sum::<f64>()
+            / (n * 60.0);
+        let mean_truncation = rb.truncation_variance().iter().sum::<f64>() / 60.0;
+        assert!(
+            mean_truncation <= 1e-4 * total * (1.0 + 1e-9),
+            "{mean_truncation} vs {total}"
+        );
+        let theta = vec![vec![1.37, 0.55]];
+        let predicted = rb.predict(&theta).unwrap();
+        let xs: Vec<f64> = (0..60).map(|i| 0.1 * i as f64).collect();
+        for (j, p) in predicted.iter().enumerate() {
+            let exact = 1.37 * (-0.55 * xs[j]).exp();
+            assert!(
+                (p.mean[0] - exact).abs() < 5e-3,
+                "output {j}: {} vs {exact}",
+                p.mean[0]
+            );
+            assert!(p.variance[0] >= rb.truncation_variance()[j]);
+        }
+        // As a model: the same means, stds ≥ √τ².
+        let outcome = rb.evaluate_batch(&theta).unwrap().remove(0).unwrap();
+        assert_eq!(outcome.outputs[7], predicted[7].mean[0]);
+        assert!(outcome.computational_std.unwrap()[7] > 0.0);
+    }
+
+    #[test]
+    fn fewer_components_leave_their_share_as_truncation_error() {
+        let (inputs, outputs) = runs(30);
+        let options = ReducedBasisOptions {
+            max_components: 1,
+            ..Default::default()
+        };
+        let rb =
+            ReducedBasis::fit(names("t", 2), names("y", 60), &inputs, &outputs, &options).unwrap();
+        assert_eq!(rb.components(), 1);
+        // The left-out share of the variance is the mean truncation variance over the outputs.
+        let n = outputs.len() as f64;
+        let m = 60.0;
+        let centre: Vec<f64> = (0..60)
+            .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n)
+            .collect();
+        let total: f64 = outputs
+            .iter()
+            .flat_map(|r| r.iter().zip(&centre).map(|(y, c)| (y - c).powi(2)))
+            .sum::<f64>()
+            / (n * m);
+        let left = 1.0 - rb.explained_variance()[0];
+        let mean_truncation = rb.truncation_variance().iter().sum::<f64>() / m;
+        assert!(
+            (mean_truncation - left * total).abs() < 1e-10 * total.max(1.0),
+            "{mean_truncation} vs {}",
+            left * total
+        );
+    }
+
+    #[test]
+    fn bad_input_is_an_error() {
+        let (inputs, mut outputs) = runs(10);
+        let fit = |i: &[Vec<f64>], o: &[Vec<f64>], opt: &ReducedBasisOptions| {
+            ReducedBasis::fit(names("t", 2), names("y", 60), i, o, opt)
+        };
+        let d = ReducedBasisOptions::default();
+        assert!(fit(&inputs[..2], &outputs[..2], &d).is_err());
+        assert!(fit(&inputs[..5], &outputs, &d).is_err());
+        let bad = ReducedBasisOptions {
+            explained_variance: 0.0,
+            ..Default::default()
+        };
+        assert!(fit(&inputs, &outputs, &bad).is_err());
+        let bad = ReducedBasisOptions {
+            output_scale: Some(vec![1.0; 59]),
+            ..Default::default()
+        };
+        assert!(fit(&inputs, &outputs, &bad).is_err());
+        outputs[3][4] = f64::NAN;
+        assert!(fit(&inputs, &outputs, &d).is_err());
+    }
+}
