@@ -55,15 +55,22 @@ def test_the_posterior_and_evidence_of_a_gaussian():
     assert set(result.summary()) == {"x1", "x2"}
 
 
-def test_the_likelihood_is_called_once_per_stage_with_the_whole_population():
+def test_the_likelihood_is_called_once_per_mcmc_step_with_the_whole_population():
     sizes = []
 
     def recording(x):
         sizes.append(x.shape[0])
         return log_likelihood(x)
 
-    result = iuq.basis(recording, BOUNDS, samples=300, seed=0)
+    # The published fixed chains (burn = 0, l_max = 1): one batch per stage.
+    result = iuq.basis(recording, BOUNDS, samples=300, seed=0, burn=0)
     assert len(sizes) == len(result.stages)
+    assert sizes[0] == 300 and sum(sizes) == result.evaluations
+    # The default mixing: one batch per MCMC step of every chain, as the stages report.
+    sizes.clear()
+    result = iuq.basis(recording, BOUNDS, samples=300, seed=0)
+    assert len(sizes) == sum(s["batches"] for s in result.stages) > len(result.stages)
+    assert all(s["burn_in"] >= 1 for s in result.stages[1:])
     assert sizes[0] == 300 and sum(sizes) == result.evaluations
 
 
