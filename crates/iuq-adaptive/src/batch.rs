@@ -11,17 +11,17 @@
 //! repeating one point; the batch is as good as its runs' values are predictable, and the next
 //! round refits on what they really returned.
 
-use iuq_gp::GaussianProcess;
+use iuq_gp::OutputPredictor;
 
 use crate::acquisition::log_likelihood_variance;
 use crate::error::{AdaptiveError, Result};
 
-/// One Gaussian log-likelihood term that the surrogate predicts: a GP of the model output that
-/// is compared with `datum`.
-#[derive(Debug, Clone)]
+/// One Gaussian log-likelihood term that the surrogate predicts: the emulator of the model
+/// output (its GP, or an output of a reduced basis) that is compared with `datum`.
+#[derive(Clone)]
 pub struct LikelihoodTerm<'a> {
-    /// The GP of the model output.
-    pub gp: &'a GaussianProcess,
+    /// The emulator of the model output.
+    pub gp: &'a dyn OutputPredictor,
     /// The datum the output is compared with.
     pub datum: f64,
     /// The total data variance s² (measurement plus modelling error) at each candidate: it
@@ -118,8 +118,7 @@ pub fn select_batch(
         // elongation at 9.04 Pa, chaotic in its parameters) a run tells the latent mean little,
         // and the batch keeps its runs where the posterior needs that mean rather than spreading
         // them as if each settled its neighbourhood.
-        let s = term.gp.output_scaling().std;
-        noise.push(prediction.noise_variance + term.gp.jitter() * s * s);
+        noise.push(term.gp.run_noise_variance(&prediction));
         means.push(prediction.mean);
         variances.push(prediction.variance);
     }
@@ -211,7 +210,7 @@ pub(crate) fn greedy_selection(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use iuq_gp::FitOptions;
+    use iuq_gp::{FitOptions, GaussianProcess};
 
     /// A GP of f(x) = sin(3x) from runs on [0, 0.3] ∪ [0.7, 1]: unsure in the gap.
     fn gap_gp() -> GaussianProcess {
@@ -354,7 +353,7 @@ mod tests {
 #[cfg(test)]
 mod clustered {
     use super::*;
-    use iuq_gp::FitOptions;
+    use iuq_gp::{FitOptions, GaussianProcess};
 
     /// Candidates clustered far inside the GP's length scales (a sharp posterior): after a pick,
     /// its neighbours are explained and the next pick is not one of them.

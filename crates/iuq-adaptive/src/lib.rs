@@ -51,9 +51,11 @@ pub use convergence::{
 };
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
-pub use moment_acquisition::select_batch_for_moments;
+pub use moment_acquisition::{
+    SensitivityTerm, select_batch_for_moments, select_batch_for_moments_by_sensitivity,
+};
 pub use moment_error::{
-    MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
-    sampled_moment_errors_by_group,
+    ComponentErrors, MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
+    sampled_moment_errors_by_group, sampled_moment_errors_by_group_from_components,
 };
 pub use sampler_agreement::{SamplerAgreement, sampler_agreement};

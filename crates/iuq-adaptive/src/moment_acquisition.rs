@@ -29,7 +29,7 @@
 //! variance reduction of Sürer, Plumlee & Wild (2023) with the posterior moments, rather than the
 //! likelihood, as the integrand's target.
 
-use iuq_gp::GaussianProcess;
+use iuq_gp::OutputPredictor;
 
 use crate::batch::{LikelihoodTerm, Selection, greedy_selection};
 use crate::error::{AdaptiveError, Result};
@@ -79,33 +79,22 @@ struct TermState {
 }
 
 impl TermState {
+    /// The state of an emulated quantity f with latent covariance C over the candidates and
+    /// first-order sensitivity `a` = ∂ℓ/∂f at each candidate.
     fn new(
-        term: &LikelihoodTerm<'_>,
-        gp: &GaussianProcess,
+        gp: &dyn OutputPredictor,
+        a: &[f64],
         candidates: &[Vec<f64>],
         sensitivities: &[Vec<f64>],
     ) -> Result<Self> {
         let prediction = gp.predict(candidates)?;
-        let s = gp.output_scaling().std;
-        let noise = prediction.noise_variance + gp.jitter() * s * s;
+        let noise = gp.run_noise_variance(&prediction);
         let covariance = gp.posterior_covariance(candidates, candidates)?;
-        let a: Vec<f64> = prediction
-            .mean
-            .iter()
-            .zip(&term.total_variance)
-            .map(|(m, s2)| {
-                if *s2 > 0.0 && s2.is_finite() {
-                    (term.datum - m) / s2
-                } else {
-                    0.0
-                }
-            })
-            .collect();
         let m = candidates.len();
         let projected = sensitivities
             .iter()
             .map(|g| {
-                let u: Vec<f64> = g.iter().zip(&a).map(|(g, a)| g * a).collect();
+                let u: Vec<f64> = g.iter().zip(a).map(|(g, a)| g * a).collect();
                 let mut p = vec![0.0; m];
                 for (ui, row) in u.iter().zip(&covariance) {
                     if *ui != 0.0 {
@@ -157,6 +146,52 @@ impl TermState {
     }
 }
 
+/// The checks both selections make of the candidates' data, and the empty selection when there
+/// is nothing to choose (no candidate, no term, no mass).
+fn empty_selection(
+    m: usize,
+    no_terms: bool,
+    sampled: &[Vec<f64>],
+    mass: &[f64],
+    answer: &[f64],
+    min_score: f64,
+) -> Result<Option<Selection>> {
+    for (what, len) in [
+        ("sampled parameters vs. candidates", sampled.len()),
+        ("masses vs. candidates", mass.len()),
+        ("answer probabilities vs. candidates", answer.len()),
+    ] {
+        if len != m {
+            return Err(AdaptiveError::LengthMismatch {
+                what,
+                expected: m,
+                actual: len,
+            });
+        }
+    }
+    if let Some(bad) = mass.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+        return Err(AdaptiveError::InvalidParameter {
+            what: "candidate mass",
+            reason: format!("{bad} must be finite and non-negative"),
+        });
+    }
+    if min_score.is_nan() || min_score < 0.0 {
+        return Err(AdaptiveError::InvalidParameter {
+            what: "minimum score",
+            reason: format!("{min_score} must be non-negative"),
+        });
+    }
+    let total_mass: f64 = mass.iter().sum();
+    if m == 0 || no_terms || total_mass <= 0.0 {
+        return Ok(Some(Selection {
+            indices: Vec::new(),
+            scores: Vec::new(),
+            initial_scores: vec![0.0; m],
+        }));
+    }
+    Ok(None)
+}
+
 /// Pick up to `batch` of `candidates` (the GPs' inputs, original units) greedily by the
 /// reduction of the posterior moments' first-order error they bring (module docs), stopping when
 /// the best remaining score is at most `min_score`. `sampled[i]` is candidate i's every sampled
@@ -177,19 +212,6 @@ pub fn select_batch_for_moments(
     min_score: f64,
 ) -> Result<Selection> {
     let m = candidates.len();
-    for (what, len) in [
-        ("sampled parameters vs. candidates", sampled.len()),
-        ("masses vs. candidates", mass.len()),
-        ("answer probabilities vs. candidates", answer.len()),
-    ] {
-        if len != m {
-            return Err(AdaptiveError::LengthMismatch {
-                what,
-                expected: m,
-                actual: len,
-            });
-        }
-    }
     if let Some(term) = terms.iter().find(|t| t.total_variance.len() != m) {
         return Err(AdaptiveError::LengthMismatch {
             what: "total variances vs. candidates",
@@ -197,30 +219,74 @@ pub fn select_batch_for_moments(
             actual: term.total_variance.len(),
         });
     }
-    if let Some(bad) = mass.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-        return Err(AdaptiveError::InvalidParameter {
-            what: "candidate mass",
-            reason: format!("{bad} must be finite and non-negative"),
+    if let Some(empty) = empty_selection(m, terms.is_empty(), sampled, mass, answer, min_score)? {
+        return Ok(empty);
+    }
+    let sources = terms
+        .iter()
+        .map(|term| {
+            let prediction = term.gp.predict(candidates)?;
+            let a = prediction
+                .mean
+                .iter()
+                .zip(&term.total_variance)
+                .map(|(m, s2)| {
+                    if *s2 > 0.0 && s2.is_finite() {
+                        (term.datum - m) / s2
+                    } else {
+                        0.0
+                    }
+                })
+                .collect();
+            Ok(SensitivityTerm { gp: term.gp, a })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    select_batch_for_moments_by_sensitivity(
+        &sources, candidates, sampled, mass, answer, batch, min_score,
+    )
+}
+
+/// One emulated quantity f (a model output, or a component of a reduced basis) and the
+/// first-order sensitivity a = ∂ℓ/∂f of the log-likelihood to it at each candidate: for an
+/// output, (y − m)/s²; for component k of a reduced basis, Σ_t a_t·a_tk over the outputs t it
+/// loads on, so that δℓ = Σ_k a_k δc_k.
+#[derive(Clone)]
+pub struct SensitivityTerm<'a> {
+    /// The emulator of f.
+    pub gp: &'a dyn OutputPredictor,
+    /// ∂ℓ/∂f at each candidate.
+    pub a: Vec<f64>,
+}
+
+/// [`select_batch_for_moments`] on quantities given with their sensitivities: the same score
+/// Σ_M Δ_M(c), each term's u_{M,i} = g_{M,i}·a_i.
+///
+/// # Errors
+/// As [`select_batch_for_moments`].
+pub fn select_batch_for_moments_by_sensitivity(
+    terms: &[SensitivityTerm<'_>],
+    candidates: &[Vec<f64>],
+    sampled: &[Vec<f64>],
+    mass: &[f64],
+    answer: &[f64],
+    batch: usize,
+    min_score: f64,
+) -> Result<Selection> {
+    let m = candidates.len();
+    if let Some(term) = terms.iter().find(|t| t.a.len() != m) {
+        return Err(AdaptiveError::LengthMismatch {
+            what: "sensitivities vs. candidates",
+            expected: m,
+            actual: term.a.len(),
         });
     }
-    if min_score.is_nan() || min_score < 0.0 {
-        return Err(AdaptiveError::InvalidParameter {
-            what: "minimum score",
-            reason: format!("{min_score} must be non-negative"),
-        });
-    }
-    let total_mass: f64 = mass.iter().sum();
-    if m == 0 || terms.is_empty() || total_mass <= 0.0 {
-        return Ok(Selection {
-            indices: Vec::new(),
-            scores: Vec::new(),
-            initial_scores: vec![0.0; m],
-        });
+    if let Some(empty) = empty_selection(m, terms.is_empty(), sampled, mass, answer, min_score)? {
+        return Ok(empty);
     }
     let sensitivities = moment_sensitivities(sampled, mass);
     let mut states = terms
         .iter()
-        .map(|t| TermState::new(t, t.gp, candidates, &sensitivities))
+        .map(|t| TermState::new(t.gp, &t.a, candidates, &sensitivities))
         .collect::<Result<Vec<_>>>()?;
     let score = |states: &[TermState], c: usize| -> f64 {
         answer[c] * states.iter().map(|s| s.reduction(c)).sum::<f64>()
@@ -242,7 +308,7 @@ mod tests {
     use super::*;
     use crate::batch::select_batch;
     use crate::moment_error::{MomentTerm, linearised_moment_error};
-    use iuq_gp::FitOptions;
+    use iuq_gp::{FitOptions, GaussianProcess};
 
     /// A GP of f(x) = x² from runs on [0.3, 0.7] (the posterior's bulk): sure there, unsure
     /// towards 1.

@@ -97,6 +97,17 @@ fn checked_weights(
     weights: &[f64],
     terms: &[MomentTerm<'_>],
 ) -> Result<Vec<f64>> {
+    checked_weights_with(samples, weights, terms, true)
+}
+
+/// [`checked_weights`], the terms' covariances checked only when `covariances` (a reduced
+/// basis's terms carry none: its components do).
+fn checked_weights_with(
+    samples: &[Vec<f64>],
+    weights: &[f64],
+    terms: &[MomentTerm<'_>],
+    covariances: bool,
+) -> Result<Vec<f64>> {
     let n = samples.len();
     let Some(first) = samples.first() else {
         return Err(AdaptiveError::InvalidParameter {
@@ -127,6 +138,9 @@ fn checked_weights(
         }
         if t.sampled_variance.len() != n {
             return mismatch("sampled variances vs. samples", t.sampled_variance.len(), n);
+        }
+        if !covariances {
+            continue;
         }
         if t.covariance.len() != n {
             return mismatch("covariance rows vs. samples", t.covariance.len(), n);
@@ -347,6 +361,101 @@ pub fn sampled_moment_errors_by_group(
     Ok((all, per_group))
 }
 
+/// The error of a reduced-basis surrogate: the components' latent posterior covariances over
+/// the samples (independent GPs) and, per likelihood term t, its loadings a_tk on them, so that
+/// δm_t = Σ_k a_tk δc_k: the outputs' errors are correlated through the components.
+#[derive(Debug, Clone, Copy)]
+pub struct ComponentErrors<'a> {
+    /// C_k(θ_i, θ_j), one symmetric matrix per component.
+    pub covariances: &'a [Vec<Vec<f64>>],
+    /// a_tk, one row per term (in the order of the terms), one column per component.
+    pub loadings: &'a [Vec<f64>],
+}
+
+/// [`sampled_moment_errors_by_group`] for a reduced basis: the draws are of the components'
+/// errors, mapped to the outputs by their loadings (the terms' own `covariance` is not read and
+/// may be empty). Each component's covariance is factorised once; every group's error uses the
+/// same draws of all components.
+///
+/// # Errors
+/// As [`sampled_moment_errors_by_group`], or loadings that do not match the terms and
+/// components.
+pub fn sampled_moment_errors_by_group_from_components(
+    samples: &[Vec<f64>],
+    weights: &[f64],
+    terms: &[MomentTerm<'_>],
+    components: ComponentErrors<'_>,
+    groups: &[std::ops::Range<usize>],
+    draws: usize,
+    seed: u64,
+) -> Result<(MomentError, Vec<MomentError>)> {
+    let w = checked_weights_with(samples, weights, terms, false)?;
+    check_draws(draws)?;
+    let n = samples.len();
+    let q = components.covariances.len();
+    if components.loadings.len() != terms.len() {
+        return Err(AdaptiveError::LengthMismatch {
+            what: "loadings vs. terms",
+            expected: terms.len(),
+            actual: components.loadings.len(),
+        });
+    }
+    if let Some(row) = components.loadings.iter().find(|r| r.len() != q) {
+        return Err(AdaptiveError::LengthMismatch {
+            what: "loadings vs. components",
+            expected: q,
+            actual: row.len(),
+        });
+    }
+    for c in components.covariances {
+        if c.len() != n || c.iter().any(|r| r.len() != n) {
+            return Err(AdaptiveError::LengthMismatch {
+                what: "component covariance vs. samples",
+                expected: n,
+                actual: c.len(),
+            });
+        }
+    }
+    if let Some(g) = groups
+        .iter()
+        .find(|g| g.start > g.end || g.end > terms.len())
+    {
+        return Err(AdaptiveError::InvalidParameter {
+            what: "group of likelihood terms",
+            reason: format!("{g:?} is not a range of the {} terms", terms.len()),
+        });
+    }
+    let factors = components
+        .covariances
+        .iter()
+        .map(|c| cholesky_with_jitter(c))
+        .collect::<Result<Vec<_>>>()?;
+    let all = drawn_component_error(
+        samples,
+        &w,
+        terms,
+        components.loadings,
+        &factors,
+        draws,
+        seed,
+    );
+    let per_group = groups
+        .iter()
+        .map(|g| {
+            drawn_component_error(
+                samples,
+                &w,
+                &terms[g.clone()],
+                &components.loadings[g.clone()],
+                &factors,
+                draws,
+                seed,
+            )
+        })
+        .collect();
+    Ok((all, per_group))
+}
+
 fn check_draws(draws: usize) -> Result<()> {
     if draws < 2 {
         return Err(AdaptiveError::InvalidParameter {
@@ -374,25 +483,79 @@ fn drawn_moment_error(
     draws: usize,
     seed: u64,
 ) -> MomentError {
-    use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
+    let n = samples.len();
+    let mut z = vec![0.0; n];
+    drawn_moment_error_with(samples, w, terms, draws, seed, &mut |rng, dm| {
+        for (t, l) in factors.iter().enumerate() {
+            for v in z.iter_mut() {
+                *v = StandardNormal.sample(rng);
+            }
+            for i in 0..n {
+                dm[t][i] = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
+            }
+        }
+    })
+}
+
+/// The draws of a reduced basis: each component's error drawn from its factor, every output's
+/// error δm_t = Σ_k a_tk δc_k.
+fn drawn_component_error(
+    samples: &[Vec<f64>],
+    w: &[f64],
+    terms: &[MomentTerm<'_>],
+    loadings: &[Vec<f64>],
+    factors: &[Vec<Vec<f64>>],
+    draws: usize,
+    seed: u64,
+) -> MomentError {
+    use rand_distr::{Distribution, StandardNormal};
+    let n = samples.len();
+    let mut z = vec![0.0; n];
+    let mut dc = vec![vec![0.0; n]; factors.len()];
+    drawn_moment_error_with(samples, w, terms, draws, seed, &mut |rng, dm| {
+        for (k, l) in factors.iter().enumerate() {
+            for v in z.iter_mut() {
+                *v = StandardNormal.sample(rng);
+            }
+            for i in 0..n {
+                dc[k][i] = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
+            }
+        }
+        for (t, row) in dm.iter_mut().enumerate() {
+            for (i, v) in row.iter_mut().enumerate() {
+                *v = loadings[t].iter().zip(&dc).map(|(a, c)| a * c[i]).sum();
+            }
+        }
+    })
+}
+
+/// The reweighting of every draw: `draw(rng, dm)` fills dm[t][i], the error of term t at sample
+/// i, for one joint draw.
+fn drawn_moment_error_with(
+    samples: &[Vec<f64>],
+    w: &[f64],
+    terms: &[MomentTerm<'_>],
+    draws: usize,
+    seed: u64,
+    draw: &mut dyn FnMut(&mut rand_xoshiro::Xoshiro256PlusPlus, &mut [Vec<f64>]),
+) -> MomentError {
+    use rand::SeedableRng;
     let n = samples.len();
     let d = samples[0].len();
     let (mean0, std0, log_z0) = reweighted_moments(samples, w, &vec![0.0; n]);
     let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut changes: Vec<Vec<f64>> = Vec::with_capacity(draws);
-    let mut z = vec![0.0; n];
+    let mut dm = vec![vec![0.0; n]; terms.len()];
     for _ in 0..draws {
+        draw(&mut rng, &mut dm);
         let mut dl = vec![0.0; n];
-        for (t, l) in terms.iter().zip(factors) {
-            for v in z.iter_mut() {
-                *v = StandardNormal.sample(&mut rng);
-            }
+        for (t, errors) in terms.iter().zip(&dm) {
             for i in 0..n {
-                let dm: f64 = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
                 let (r, s2, c2) = (t.residual[i], t.variance[i], t.sampled_variance[i]);
+                let e = errors[i];
                 dl[i] +=
-                    r * r / (2.0 * c2) - (r - dm) * (r - dm) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
+                    r * r / (2.0 * c2) - (r - e) * (r - e) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
             }
         }
         let (mean, std, log_z) = reweighted_moments(samples, w, &dl);
@@ -722,6 +885,56 @@ mod tests {
         }
         let beyond = vec![std::ops::Range { start: 2, end: 4 }];
         assert!(sampled_moment_errors_by_group(&samples, &w, &terms, &beyond, 20, 9).is_err());
+
+        // A reduced basis whose components are the outputs themselves (identity loadings) draws
+        // the same errors as independent outputs: the same result, bit for bit, for all terms.
+        let covariances = vec![cov.clone(), cov.clone(), cov.clone()];
+        let identity: Vec<Vec<f64>> = (0..3)
+            .map(|t| (0..3).map(|k| if t == k { 1.0 } else { 0.0 }).collect())
+            .collect();
+        let components = ComponentErrors {
+            covariances: &covariances,
+            loadings: &identity,
+        };
+        let (from_components, _) = sampled_moment_errors_by_group_from_components(
+            &samples, &w, &terms, components, &groups, 20, 9,
+        )
+        .unwrap();
+        assert_eq!(from_components, all);
+        // One component shared by all three outputs: their errors move together, so the
+        // moments move more than with independent errors of the same size.
+        let shared = vec![cov.clone()];
+        let ones_loading = vec![vec![1.0]; 3];
+        let (together, _) = sampled_moment_errors_by_group_from_components(
+            &samples,
+            &w,
+            &terms,
+            ComponentErrors {
+                covariances: &shared,
+                loadings: &ones_loading,
+            },
+            &groups,
+            20,
+            9,
+        )
+        .unwrap();
+        assert!(together.largest() > 0.0 && together.largest().is_finite());
+        let bad = vec![vec![1.0, 0.0]; 3];
+        assert!(
+            sampled_moment_errors_by_group_from_components(
+                &samples,
+                &w,
+                &terms,
+                ComponentErrors {
+                    covariances: &shared,
+                    loadings: &bad,
+                },
+                &groups,
+                20,
+                9,
+            )
+            .is_err()
+        );
     }
 
     #[test]

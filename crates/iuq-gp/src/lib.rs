@@ -37,6 +37,7 @@ pub mod log_marginal_likelihood;
 pub mod mean_gradient;
 mod multi_start;
 pub mod optimizer;
+pub mod output_predictor;
 pub mod persistence;
 mod posterior_covariance;
 pub mod prediction;
@@ -60,6 +61,7 @@ pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };
+pub use output_predictor::{OutputPredictor, ReducedBasisOutput};
 pub use prediction::Prediction;
 pub use reduced_basis::{ReducedBasis, ReducedBasisOptions};
 pub use scaling::{InputScaling, OutputScaling};

@@ -295,8 +295,10 @@ impl ReducedBasis {
         &self.output_names
     }
 
-    /// Per output, its prediction at `points`: the mean, the latent variance (the components'
-    /// and the truncation error's) and the noise variance the components' GPs add.
+    /// Per output, its prediction at `points`: the mean, the latent variance of the components'
+    /// GPs and the noise variance they add. The truncation error is not in it (a run at θ does
+    /// not lower it there): it is [`ReducedBasis::truncation_variance`], which the model's
+    /// computational std adds.
     ///
     /// # Errors
     /// Points of the wrong dimension or not finite.
@@ -309,30 +311,50 @@ impl ReducedBasis {
         Ok(self.combine(&components, points.len()))
     }
 
+    /// Output j's prediction at `points` alone (the components' predictions are made again for
+    /// each output: callers that need every output use [`ReducedBasis::predict`]).
+    ///
+    /// # Errors
+    /// An output index out of range, or points of the wrong dimension or not finite.
+    pub fn predict_output(&self, j: usize, points: &[Vec<f64>]) -> Result<Prediction> {
+        if j >= self.output_names.len() {
+            return Err(GpError::InvalidParameter {
+                what: "output index",
+                reason: format!("{j} of {} outputs", self.output_names.len()),
+            });
+        }
+        let components: Vec<Prediction> = self
+            .gps
+            .iter()
+            .map(|gp| gp.predict(points))
+            .collect::<Result<_>>()?;
+        Ok(self.combine_output(j, &components, points.len()))
+    }
+
     /// The outputs' predictions from the components' `predictions` at `count` points.
     fn combine(&self, components: &[Prediction], count: usize) -> Vec<Prediction> {
         (0..self.output_names.len())
-            .map(|j| {
-                let (mut mean, mut variance) = (
-                    vec![self.centre[j]; count],
-                    vec![self.truncation_variance[j]; count],
-                );
-                let mut noise_variance = 0.0;
-                for (k, p) in components.iter().enumerate() {
-                    let a = self.loading(j, k);
-                    for i in 0..count {
-                        mean[i] += a * p.mean[i];
-                        variance[i] += a * a * p.variance[i];
-                    }
-                    noise_variance += a * a * p.noise_variance;
-                }
-                Prediction {
-                    mean,
-                    variance,
-                    noise_variance,
-                }
-            })
+            .map(|j| self.combine_output(j, components, count))
             .collect()
+    }
+
+    /// Output j's prediction from the components' `predictions` at `count` points.
+    fn combine_output(&self, j: usize, components: &[Prediction], count: usize) -> Prediction {
+        let (mut mean, mut variance) = (vec![self.centre[j]; count], vec![0.0; count]);
+        let mut noise_variance = 0.0;
+        for (k, p) in components.iter().enumerate() {
+            let a = self.loading(j, k);
+            for i in 0..count {
+                mean[i] += a * p.mean[i];
+                variance[i] += a * a * p.variance[i];
+            }
+            noise_variance += a * a * p.noise_variance;
+        }
+        Prediction {
+            mean,
+            variance,
+            noise_variance,
+        }
     }
 }
 
@@ -371,9 +393,12 @@ impl Model for ReducedBasis {
             let mean = predictions.iter().map(|p| p.mean[slot]).collect();
             let std = predictions
                 .iter()
-                .map(|p| {
-                    (p.variance[slot] + self.predictive_std.added_noise_variance(p.noise_variance))
-                        .sqrt()
+                .zip(&self.truncation_variance)
+                .map(|(p, t)| {
+                    (p.variance[slot]
+                        + t
+                        + self.predictive_std.added_noise_variance(p.noise_variance))
+                    .sqrt()
                 })
                 .collect();
             outcomes[i] = Ok(Evaluation::with_std(mean, std));
@@ -448,12 +473,20 @@ mod tests {
                 "output {j}: {} vs {exact}",
                 p.mean[0]
             );
-            assert!(p.variance[0] >= rb.truncation_variance()[j]);
+            assert!(p.variance[0] >= 0.0);
         }
-        // As a model: the same means, stds ≥ √τ².
+        // As a model: the same means, stds with the truncation error and the noise.
         let outcome = rb.evaluate_batch(&theta).unwrap().remove(0).unwrap();
         assert_eq!(outcome.outputs[7], predicted[7].mean[0]);
-        assert!(outcome.computational_std.unwrap()[7] > 0.0);
+        let std = outcome.computational_std.unwrap()[7];
+        let expected = (predicted[7].variance[0]
+            + rb.truncation_variance()[7]
+            + predicted[7].noise_variance)
+            .sqrt();
+        assert!((std - expected).abs() <= 1e-15 * expected.max(1.0), "{std} vs {expected}");
+        // One output alone is the same as all of them.
+        let alone = rb.predict_output(7, &theta).unwrap();
+        assert_eq!(alone, predicted[7]);
     }
 
     #[test]
