@@ -554,8 +554,7 @@ fn drawn_moment_error_with(
             for i in 0..n {
                 let (r, s2, c2) = (t.residual[i], t.variance[i], t.sampled_variance[i]);
                 let e = errors[i];
-                dl[i] +=
-                    r * r / (2.0 * c2) - (r - e) * (r - e) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
+                dl[i] += r * r / (2.0 * c2) - (r - e) * (r - e) / (2.0 * s2) + 0.5 * (c2 / s2).ln();
             }
         }
         let (mean, std, log_z) = reweighted_moments(samples, w, &dl);

@@ -479,11 +479,13 @@ mod tests {
         let outcome = rb.evaluate_batch(&theta).unwrap().remove(0).unwrap();
         assert_eq!(outcome.outputs[7], predicted[7].mean[0]);
         let std = outcome.computational_std.unwrap()[7];
-        let expected = (predicted[7].variance[0]
-            + rb.truncation_variance()[7]
-            + predicted[7].noise_variance)
-            .sqrt();
-        assert!((std - expected).abs() <= 1e-15 * expected.max(1.0), "{std} vs {expected}");
+        let expected =
+            (predicted[7].variance[0] + rb.truncation_variance()[7] + predicted[7].noise_variance)
+                .sqrt();
+        assert!(
+            (std - expected).abs() <= 1e-15 * expected.max(1.0),
+            "{std} vs {expected}"
+        );
         // One output alone is the same as all of them.
         let alone = rb.predict_output(7, &theta).unwrap();
         assert_eq!(alone, predicted[7]);

@@ -37,9 +37,11 @@ use std::time::Instant;
 use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::{
-    ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments, SamplerAgreement,
-    extrapolation_share, group_batches, likelihood_weights, log_likelihood_variance,
-    sampled_moment_errors_by_group, sampler_agreement, select_batch, select_batch_for_moments,
+    ComponentErrors, ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments,
+    SamplerAgreement, SensitivityTerm, extrapolation_share, group_batches, likelihood_weights,
+    log_likelihood_variance, sampled_moment_errors_by_group,
+    sampled_moment_errors_by_group_from_components, sampler_agreement, select_batch,
+    select_batch_for_moments, select_batch_for_moments_by_sensitivity,
     surrogate_log_likelihood_std,
 };
 use iuq_basis::MAX_MIXING_LEVEL;
@@ -49,7 +51,7 @@ use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::{Acquisition, AdaptiveSettings};
-use super::surrogate::Surrogate;
+use super::surrogate::{Emulation, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
 use crate::posterior::build_posterior_with;
@@ -356,13 +358,17 @@ pub(super) fn total_variance(data: &DataLikelihood, j: usize, sigma_m: Option<f6
 
 /// Σ_jj at each candidate as the likelihood has it: `data_variance[i][j]` (measurement and
 /// modelling error) plus the computational error whose part more runs cannot remove, the GP's
-/// noise (the scatter of the runs themselves), in the study's convention.
+/// noise (the scatter of the runs themselves) and `unresolved[j]` (a reduced basis's truncation
+/// error), in the study's convention.
 fn likelihood_variances(
     data: &DataLikelihood,
     predictions: &[iuq_gp::Prediction],
+    unresolved: &[f64],
     data_variance: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
-    with_computational_error(data, predictions, data_variance, |p, _| p.noise_variance)
+    with_computational_error(data, predictions, data_variance, |p, j, _| {
+        p.noise_variance + unresolved[j]
+    })
 }
 
 /// Σ_jj at each candidate as the surrogate's likelihood had it when the round's posterior was
@@ -372,20 +378,21 @@ fn sampled_likelihood_variances(
     data: &DataLikelihood,
     predictions: &[iuq_gp::Prediction],
     predictive_std: iuq_gp::PredictiveStd,
+    unresolved: &[f64],
     data_variance: &[Vec<f64>],
 ) -> Vec<Vec<f64>> {
-    with_computational_error(data, predictions, data_variance, |p, i| {
-        p.variance[i] + predictive_std.added_noise_variance(p.noise_variance)
+    with_computational_error(data, predictions, data_variance, |p, j, i| {
+        p.variance[i] + predictive_std.added_noise_variance(p.noise_variance) + unresolved[j]
     })
 }
 
 /// `data_variance[i][j]` plus the study's computational error term for a model std whose
-/// square is `model_variance(prediction_j, i)` at candidate i.
+/// square is `model_variance(prediction_j, j, i)` at candidate i.
 fn with_computational_error(
     data: &DataLikelihood,
     predictions: &[iuq_gp::Prediction],
     data_variance: &[Vec<f64>],
-    model_variance: impl Fn(&iuq_gp::Prediction, usize) -> f64,
+    model_variance: impl Fn(&iuq_gp::Prediction, usize, usize) -> f64,
 ) -> Vec<Vec<f64>> {
     data_variance
         .iter()
@@ -394,10 +401,11 @@ fn with_computational_error(
             row.iter()
                 .zip(predictions)
                 .zip(&data.observations.values)
-                .map(|((s2, p), y)| {
+                .enumerate()
+                .map(|(j, ((s2, p), y))| {
                     let computational = data
                         .computational_error
-                        .variance(p.mean[i], model_variance(p, i).sqrt(), *y)
+                        .variance(p.mean[i], model_variance(p, j, i).sqrt(), *y)
                         .unwrap_or(0.0);
                     s2 + computational
                 })
@@ -573,6 +581,7 @@ fn round_fingerprint(
     study: &Study,
     data: &DataLikelihood,
     settings: &AdaptiveSettings,
+    emulation: &Emulation,
     training_seed: u64,
     base_seed: u64,
     sampling: &RoundSampling,
@@ -609,6 +618,9 @@ fn round_fingerprint(
     // store recorded then are read back.
     if sampling.mixing_level > 0 {
         let _ = writeln!(text, "mixing level {}", sampling.mixing_level);
+    }
+    if let Emulation::ReducedBasis { settings, scale } = emulation {
+        let _ = writeln!(text, "reduced basis {settings:?} scale {scale:?}");
     }
     for (g, group) in groups.iter().enumerate() {
         let _ = writeln!(
@@ -647,6 +659,7 @@ fn measure_round(
     study: &Study,
     data: &DataLikelihood,
     settings: &AdaptiveSettings,
+    emulation: &Emulation,
     training_seed: u64,
     base_seed: u64,
     round: usize,
@@ -659,7 +672,14 @@ fn measure_round(
 ) -> Result<(RoundMeasurement, RoundScoring)> {
     let d = study.space.dimension();
     let modelling_error = data.modelling_error.is_some();
-    let surrogate = Surrogate::fit(groups, runs, &study.space, training_seed, describe)?;
+    let surrogate = Surrogate::fit(
+        groups,
+        runs,
+        &study.space,
+        training_seed,
+        emulation,
+        describe,
+    )?;
     let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
     let mut pooled = PooledPosterior {
         samples: Vec::new(),
@@ -726,16 +746,18 @@ fn measure_round(
     let state = &pooled;
     let c = candidates(state, d, modelling_error, data, sampling.candidates);
     // The surrogate's predictions at the candidates, per data point.
-    let gps = surrogate.bank.gps();
-    let mut predictions = Vec::with_capacity(gps.len());
-    for gp in gps {
-        predictions.push(gp.predict(&c.theta)?);
-    }
-    let likelihood_variance = likelihood_variances(data, &predictions, &c.variance);
+    let emulator = &surrogate.emulator;
+    let predictions = emulator.predict(&c.theta)?;
+    let outputs = predictions.len();
+    let unresolved: Vec<f64> = (0..outputs)
+        .map(|j| emulator.unresolved_variance(j))
+        .collect();
+    let likelihood_variance = likelihood_variances(data, &predictions, &unresolved, &c.variance);
     let sampled_variance = sampled_likelihood_variances(
         data,
         &predictions,
-        surrogate.bank.predictive_std(),
+        emulator.predictive_std(),
+        &unresolved,
         &c.variance,
     );
     let spread: Vec<f64> = (0..c.theta.len())
@@ -757,11 +779,14 @@ fn measure_round(
     // The posterior mean of the spread: each candidate weighted by the samples it stands for.
     let u = surrogate_log_likelihood_std(&spread, &c.copies);
     // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
-    let mut residuals = Vec::with_capacity(gps.len());
-    let mut variances = Vec::with_capacity(gps.len());
-    let mut sampled_variances = Vec::with_capacity(gps.len());
-    let mut covariances = Vec::with_capacity(gps.len());
-    for (j, (gp, p)) in gps.iter().zip(&predictions).enumerate() {
+    let mut residuals = Vec::with_capacity(outputs);
+    let mut variances = Vec::with_capacity(outputs);
+    let mut sampled_variances = Vec::with_capacity(outputs);
+    // Per output, its GP's covariance over the candidates; a reduced basis's outputs carry none
+    // (their errors are drawn through the components').
+    let mut covariances = Vec::with_capacity(outputs);
+    let per_output = emulator.per_output_gps();
+    for (j, p) in predictions.iter().enumerate() {
         let y = data.observations.values[j];
         residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
         variances.push(
@@ -771,9 +796,12 @@ fn measure_round(
                 .collect::<Vec<f64>>(),
         );
         sampled_variances.push(sampled_variance.iter().map(|v| v[j]).collect::<Vec<f64>>());
-        covariances.push(gp.posterior_covariance(&c.theta, &c.theta)?);
+        covariances.push(match per_output {
+            Some(gps) => gps[j].posterior_covariance(&c.theta, &c.theta)?,
+            None => Vec::new(),
+        });
     }
-    let terms: Vec<MomentTerm<'_>> = (0..gps.len())
+    let terms: Vec<MomentTerm<'_>> = (0..outputs)
         .map(|j| MomentTerm {
             residual: &residuals[j],
             variance: &variances[j],
@@ -784,21 +812,49 @@ fn measure_round(
     // ε, and ε_g: the same measure with only group g's likelihood terms (its share of the runs).
     let group_outputs: Vec<std::ops::Range<usize>> =
         (0..groups.len()).map(|g| runs.group_outputs(g)).collect();
-    let (surrogate_error, group_errors) = sampled_moment_errors_by_group(
-        &c.full,
-        &c.copies,
-        &terms,
-        &group_outputs,
-        SURROGATE_ERROR_DRAWS,
-        base_seed.wrapping_add(round as u64),
-    )
+    let (surrogate_error, group_errors) = match emulator.reduced_basis() {
+        None => sampled_moment_errors_by_group(
+            &c.full,
+            &c.copies,
+            &terms,
+            &group_outputs,
+            SURROGATE_ERROR_DRAWS,
+            base_seed.wrapping_add(round as u64),
+        ),
+        Some(basis) => {
+            let component_covariances = basis
+                .component_gps()
+                .iter()
+                .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
+                .collect::<iuq_gp::Result<Vec<_>>>()?;
+            let loadings: Vec<Vec<f64>> = (0..outputs)
+                .map(|j| {
+                    (0..basis.components())
+                        .map(|k| basis.loading(j, k))
+                        .collect()
+                })
+                .collect();
+            sampled_moment_errors_by_group_from_components(
+                &c.full,
+                &c.copies,
+                &terms,
+                ComponentErrors {
+                    covariances: &component_covariances,
+                    loadings: &loadings,
+                },
+                &group_outputs,
+                SURROGATE_ERROR_DRAWS,
+                base_seed.wrapping_add(round as u64),
+            )
+        }
+    }
     .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
     let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
     drop(terms);
     drop(covariances);
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
     let mut extrapolation: f64 = 0.0;
-    for gp in gps {
+    for gp in emulator.fitted_gps() {
         let share = extrapolation_share(
             &posterior_theta,
             gp.training_inputs(),
@@ -867,6 +923,7 @@ pub(super) fn refine(
     study: &Study,
     data: &DataLikelihood,
     settings: &AdaptiveSettings,
+    emulation: &Emulation,
     training_seed: u64,
     runs: &ModelRuns,
     groups: &mut [GroupRuns],
@@ -929,6 +986,7 @@ pub(super) fn refine(
             study,
             data,
             settings,
+            emulation,
             training_seed,
             base_seed,
             &sampling,
@@ -967,6 +1025,7 @@ pub(super) fn refine(
                 study,
                 data,
                 settings,
+                emulation,
                 training_seed,
                 base_seed,
                 round,
@@ -1058,7 +1117,7 @@ pub(super) fn refine(
                 boundary,
             } = scoring;
             let boundary: &[(usize, usize)] = if boundary_due { boundary } else { &[] };
-            let gps = surrogate.bank.gps();
+            let views = surrogate.emulator.output_views();
             let remaining = settings.max_runs - made;
             // Each group's share of the round's runs follows its share of ε².
             let group_batch = if measured.group_surrogate_error.len() == groups.len() {
@@ -1072,7 +1131,7 @@ pub(super) fn refine(
                 let outputs = runs.group_outputs(g);
                 let terms: Vec<LikelihoodTerm<'_>> = outputs
                     .map(|j| LikelihoodTerm {
-                        gp: &gps[j],
+                        gp: &views[j],
                         datum: data.observations.values[j],
                         total_variance: likelihood_variance.iter().map(|v| v[j]).collect(),
                     })
@@ -1090,15 +1149,32 @@ pub(super) fn refine(
                         group_batch[g].min(remaining),
                         min_score,
                     )?,
-                    Acquisition::Moments => select_batch_for_moments(
-                        &terms,
-                        &c.theta,
-                        &c.full,
-                        &c.copies,
-                        &p_answer,
-                        group_batch[g].min(remaining),
-                        min_moment_score,
-                    )?,
+                    Acquisition::Moments => match surrogate.emulator.reduced_basis() {
+                        None => select_batch_for_moments(
+                            &terms,
+                            &c.theta,
+                            &c.full,
+                            &c.copies,
+                            &p_answer,
+                            group_batch[g].min(remaining),
+                            min_moment_score,
+                        )?,
+                        // The first-order error through the components: δℓ = Σ_k a_k δc_k.
+                        Some(basis) => select_batch_for_moments_by_sensitivity(
+                            &component_sensitivities(
+                                basis,
+                                &terms,
+                                runs.group_outputs(g),
+                                &c.theta,
+                            )?,
+                            &c.theta,
+                            &c.full,
+                            &c.copies,
+                            &p_answer,
+                            group_batch[g].min(remaining),
+                            min_moment_score,
+                        )?,
+                    },
                 };
                 for (order, (&i, &score)) in
                     selection.indices.iter().zip(&selection.scores).enumerate()
@@ -1232,6 +1308,44 @@ pub(super) fn refine(
     })
 }
 
+/// The sensitivities of the log-likelihood to each component of a reduced basis at the
+/// `candidates`: a_k = Σ_t a_t·a_tk over the outputs t of `terms` (output indices `outputs`),
+/// a_t = (y_t − m_t)/s_t², so that δℓ = Σ_t a_t δm_t = Σ_k a_k δc_k.
+fn component_sensitivities<'a>(
+    basis: &'a iuq_gp::ReducedBasis,
+    terms: &[LikelihoodTerm<'_>],
+    outputs: std::ops::Range<usize>,
+    candidates: &[Vec<f64>],
+) -> Result<Vec<SensitivityTerm<'a>>> {
+    let predictions = basis.predict(candidates)?;
+    let m = candidates.len();
+    let q = basis.components();
+    let mut a = vec![vec![0.0; m]; q];
+    for (term, j) in terms.iter().zip(outputs) {
+        let p = &predictions[j];
+        for i in 0..m {
+            let s2 = term.total_variance[i];
+            let at = if s2 > 0.0 && s2.is_finite() {
+                (term.datum - p.mean[i]) / s2
+            } else {
+                0.0
+            };
+            for (k, ak) in a.iter_mut().enumerate() {
+                ak[i] += at * basis.loading(j, k);
+            }
+        }
+    }
+    Ok(basis
+        .component_gps()
+        .iter()
+        .zip(a)
+        .map(|(gp, a)| SensitivityTerm {
+            gp: gp as &dyn iuq_gp::OutputPredictor,
+            a,
+        })
+        .collect())
+}
+
 /// `adaptive/runs.csv`: round, run group (from 0), θ, and 1 where the run failed.
 fn write_runs_table(study: &Study, dir: &Path, rows: &[Vec<f64>]) -> Result<()> {
     let mut columns = vec!["round".to_string(), "group".to_string()];
@@ -1289,7 +1403,12 @@ mod tests {
     fn the_scored_variance_holds_the_gp_noise_as_the_likelihood_does() {
         let s2 = vec![vec![1e-4, 2e-4], vec![3e-4, 4e-4]];
         // Relative (the paper's form): (σ·y/μ)², σ = 0.1 for data point 0 and 0 for point 1.
-        let v = likelihood_variances(&data(ComputationalError::Relative), &predictions(), &s2);
+        let v = likelihood_variances(
+            &data(ComputationalError::Relative),
+            &predictions(),
+            &[0.0, 0.0],
+            &s2,
+        );
         let expected = [
             [1e-4 + (0.1_f64 * 0.5 / 0.25).powi(2), 2e-4],
             [3e-4 + (0.1_f64 * 0.5 / 0.5).powi(2), 4e-4],
@@ -1300,9 +1419,28 @@ mod tests {
             }
         }
         // Absolute: σ² whatever the mean; none: the data's variance alone.
-        let v = likelihood_variances(&data(ComputationalError::Absolute), &predictions(), &s2);
+        let v = likelihood_variances(
+            &data(ComputationalError::Absolute),
+            &predictions(),
+            &[0.0, 0.0],
+            &s2,
+        );
         assert!((v[1][0] - (3e-4 + 0.01)).abs() < 1e-15);
-        let v = likelihood_variances(&data(ComputationalError::None), &predictions(), &s2);
+        // A reduced basis's truncation error joins the noise as variance no run removes.
+        let v = likelihood_variances(
+            &data(ComputationalError::Absolute),
+            &predictions(),
+            &[0.0, 0.002],
+            &s2,
+        );
+        assert!((v[1][0] - (3e-4 + 0.01)).abs() < 1e-15);
+        assert!((v[1][1] - (4e-4 + 0.002)).abs() < 1e-15);
+        let v = likelihood_variances(
+            &data(ComputationalError::None),
+            &predictions(),
+            &[0.0, 0.0],
+            &s2,
+        );
         assert_eq!(v, s2);
     }
 
@@ -1312,10 +1450,20 @@ mod tests {
     fn the_sampled_variance_holds_the_reported_std_as_the_surrogate_likelihood_did() {
         let s2 = vec![vec![1e-4, 2e-4], vec![3e-4, 4e-4]];
         let d = data(ComputationalError::Absolute);
-        let with_noise =
-            sampled_likelihood_variances(&d, &predictions(), iuq_gp::PredictiveStd::WithNoise, &s2);
-        let latent =
-            sampled_likelihood_variances(&d, &predictions(), iuq_gp::PredictiveStd::Latent, &s2);
+        let with_noise = sampled_likelihood_variances(
+            &d,
+            &predictions(),
+            iuq_gp::PredictiveStd::WithNoise,
+            &[0.0, 0.0],
+            &s2,
+        );
+        let latent = sampled_likelihood_variances(
+            &d,
+            &predictions(),
+            iuq_gp::PredictiveStd::Latent,
+            &[0.0, 0.0],
+            &s2,
+        );
         let expected_with_noise = [
             [1e-4 + 1e-6 + 0.01, 2e-4 + 1e-6],
             [3e-4 + 1e-6 + 0.01, 4e-4 + 1e-6],

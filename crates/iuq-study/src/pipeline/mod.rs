@@ -35,6 +35,7 @@ mod adaptive_report;
 mod array_outputs;
 pub mod cell_model_campaign;
 pub mod cell_portraits;
+pub mod emulator;
 pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;
@@ -68,7 +69,7 @@ use model_runs::{ModelRuns, RunShape};
 use report_data::{PipelineResults, PointRuns, write_pipeline_report};
 use run_groups::{GroupRuns, RunOrigin};
 use settings::{PipelineSettings, parse_pipeline_settings};
-use surrogate::Surrogate;
+use surrogate::{Emulation, Surrogate};
 
 /// How to run the pipeline (the flags of `iuq pipeline`).
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -531,12 +532,14 @@ fn run_stages(
     }
 
     // 2. The adaptive rounds.
+    let emulation = Emulation::of(settings.reduced_basis, &data);
     let refine = |groups: &mut Vec<GroupRuns>, earlier: Option<adaptive::AdaptiveOutcome>| {
         settings.adaptive.as_ref().map(|adaptive_settings| {
             adaptive::refine(
                 study,
                 &data,
                 adaptive_settings,
+                &emulation,
                 settings.training_seed,
                 &model_runs,
                 groups,
@@ -564,6 +567,7 @@ fn run_stages(
             &model_runs,
             &study.space,
             settings.training_seed,
+            &emulation,
             describe,
         )?;
         add_seconds(&mut stage_seconds, "GP fits", stage);
@@ -685,22 +689,58 @@ fn run_stages(
     let runs_made: usize = groups.iter().map(GroupRuns::len).sum();
     let failed: usize = groups.iter().map(|g| g.failure_reasons().len()).sum();
     let mut gp_checks: Vec<(f64, f64)> = Vec::new();
-    for (gp, r) in surrogate.bank.gps().iter().zip(&point_runs) {
-        let q2 = if r.test_y.len() >= 2 {
-            gp.q2(&r.test_x, &r.test_y).unwrap_or(f64::NAN)
-        } else {
-            f64::NAN
-        };
-        gp_checks.push((q2, gp.loo_q2().unwrap_or(f64::NAN)));
+    let emulator = surrogate.emulator.clone();
+    match &emulator {
+        emulator::Emulator::PerOutput(bank) => {
+            for (gp, r) in bank.gps().iter().zip(&point_runs) {
+                let q2 = if r.test_y.len() >= 2 {
+                    gp.q2(&r.test_x, &r.test_y).unwrap_or(f64::NAN)
+                } else {
+                    f64::NAN
+                };
+                gp_checks.push((q2, gp.loo_q2().unwrap_or(f64::NAN)));
+            }
+            write_atomically(&out.join("gp-bank.json"), bank.to_json_string()?.as_bytes())?;
+        }
+        emulator::Emulator::ReducedBasis(basis) => {
+            // The test runs' Q2 per data point; a reduced basis has no leave-one-out Q2.
+            for (j, r) in point_runs.iter().enumerate() {
+                let q2 = if r.test_y.len() >= 2 {
+                    let predicted = &emulator.predict_means(&r.test_x)?[j];
+                    iuq_gp::q2(&r.test_y, predicted).unwrap_or(f64::NAN)
+                } else {
+                    f64::NAN
+                };
+                gp_checks.push((q2, f64::NAN));
+            }
+            let summary = serde_json::json!({
+                "components": basis.components(),
+                "explained_variance": basis.explained_variance(),
+                "explained_variance_total": basis.explained_variance().iter().sum::<f64>(),
+                "truncation_std": basis.truncation_variance().iter().map(|v| v.sqrt()).collect::<Vec<f64>>(),
+                "outputs": basis.output_names(),
+            });
+            write_atomically(
+                &out.join("reduced-basis.json"),
+                serde_json::to_string_pretty(&summary)?.as_bytes(),
+            )?;
+            events.message(format!(
+                "reduced basis: {} principal components explain {:.6} of the runs' variance (in measurement stds); largest truncation std {:.3e}",
+                basis.components(),
+                basis.explained_variance().iter().sum::<f64>(),
+                basis
+                    .truncation_variance()
+                    .iter()
+                    .fold(0.0f64, |a, v| a.max(v.sqrt()))
+            ));
+        }
     }
-    let bank = surrogate.bank.clone();
-    write_atomically(&out.join("gp-bank.json"), bank.to_json_string()?.as_bytes())?;
 
     // 4. Sobol' indices.
     let stage = Instant::now();
     let sensitivity_section = || format!("{}: section `[sensitivity]`", study.path.display());
     let surrogate_sobol = analyse(
-        &bank,
+        &emulator,
         &study.space,
         &sobol_options(&settings, settings.surrogate_sobol_n)
             .check()
@@ -815,7 +855,7 @@ fn run_stages(
         settings: &settings,
         point_runs: &point_runs,
         gp_checks: &gp_checks,
-        bank: &bank,
+        emulator: &emulator,
         surrogate_sobol: &surrogate_sobol,
         model_sobol: model_sobol.as_ref(),
         gp_posterior: &gp_posterior,

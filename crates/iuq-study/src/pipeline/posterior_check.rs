@@ -313,7 +313,7 @@ pub fn check_posterior(
         .flat_map(|g| points.iter().map(move |p| (g, p.clone())))
         .collect();
     let outcomes = runs.run_with_diagnostics(Some(&label), &requests)?;
-    let predictions = surrogate.bank.predict(&points).map_err(|e| {
+    let predictions = surrogate.emulator.predict(&points).map_err(|e| {
         StudyError::Failure(format!("predicting the posterior check's points: {e}"))
     })?;
     let mut checks = Vec::new();
@@ -326,9 +326,8 @@ pub fn check_posterior(
             // default bank, that of a new run (latent and noise), so the check asks whether the
             // runs scatter about the surrogate as the calibration assumed.
             let std: Vec<f64> = surrogate
-                .bank
-                .predictive_std()
-                .variance(prediction)
+                .emulator
+                .reported_variance(j, prediction)
                 .into_iter()
                 .map(f64::sqrt)
                 .collect();

@@ -8,8 +8,8 @@ use std::time::Instant;
 
 use serde_json::{Value, json};
 
+use super::emulator::Emulator;
 use iuq_campaign::StatusCounts;
-use iuq_gp::GpBank;
 use iuq_report::{
     CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic,
     MapRunsAtPoint, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
@@ -67,8 +67,8 @@ pub struct PipelineResults<'a> {
     pub point_runs: &'a [PointRuns],
     /// (Q2 on the test set, leave-one-out Q2) per data point.
     pub gp_checks: &'a [(f64, f64)],
-    /// The GP bank (one GP per data point).
-    pub bank: &'a GpBank,
+    /// The emulator of the outputs (a GP per data point, or a reduced basis).
+    pub emulator: &'a Emulator,
     /// Sobol' indices on the surrogate.
     pub surrogate_sobol: &'a SensitivityReport,
     /// Sobol' indices from model runs.
@@ -157,7 +157,7 @@ fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
 fn reweighted_result(
     source: &str,
     outcome: &ModelPosteriorOutcome,
-    bank: &GpBank,
+    emulator: &Emulator,
     stresses: &[f64],
     d: usize,
 ) -> Result<PosteriorResult> {
@@ -198,11 +198,13 @@ fn reweighted_result(
     let theta = model_part(&samples, d);
     let map = vec![p.map[..d].to_vec()];
     let mut propagated = Vec::with_capacity(stresses.len());
-    for (gp, s) in bank.gps().iter().zip(stresses) {
+    let means = emulator.predict_means(&theta)?;
+    let at_map = emulator.predict_means(&map)?;
+    for ((samples, at_map), s) in means.into_iter().zip(at_map).zip(stresses) {
         propagated.push(PropagatedOutput {
             x: *s,
-            samples: gp.predict_mean(&theta)?,
-            map_prediction: gp.predict_mean(&map)?[0],
+            samples,
+            map_prediction: at_map[0],
         });
     }
     Ok(PosteriorResult {
@@ -294,7 +296,7 @@ fn model_posterior_report(
 fn posterior_result(
     source: &str,
     sampled: &SampledPosterior,
-    bank: &GpBank,
+    emulator: &Emulator,
     stresses: &[f64],
     d: usize,
 ) -> Result<PosteriorResult> {
@@ -335,9 +337,9 @@ fn posterior_result(
     let theta = model_part(&state.samples, d);
     let map = vec![sampled.summary.map[..d].to_vec()];
     let mut propagated = Vec::with_capacity(stresses.len());
-    for (gp, s) in bank.gps().iter().zip(stresses) {
-        let samples = gp.predict_mean(&theta)?;
-        let at_map = gp.predict_mean(&map)?;
+    let means = emulator.predict_means(&theta)?;
+    let at_map = emulator.predict_means(&map)?;
+    for ((samples, at_map), s) in means.into_iter().zip(at_map).zip(stresses) {
         propagated.push(PropagatedOutput {
             x: *s,
             samples,
@@ -410,7 +412,7 @@ pub fn write_pipeline_report(
     let mut posteriors = vec![posterior_result(
         "GP surrogate",
         results.gp_posterior,
-        results.bank,
+        results.emulator,
         &stresses,
         d,
     )?];
@@ -418,7 +420,7 @@ pub fn write_pipeline_report(
         posteriors.push(posterior_result(
             labels.model_source,
             m,
-            results.bank,
+            results.emulator,
             &stresses,
             d,
         )?);
@@ -427,7 +429,7 @@ pub fn write_pipeline_report(
         posteriors.push(reweighted_result(
             labels.model_source,
             m,
-            results.bank,
+            results.emulator,
             &stresses,
             d,
         )?);
@@ -443,10 +445,11 @@ pub fn write_pipeline_report(
         &labels,
     ));
     let mut gp_diagnostics = Vec::new();
+    let per_output: &[iuq_gp::GaussianProcess] = results.emulator.per_output_gps().unwrap_or(&[]);
     for ((r, gp), (q2, loo)) in results
         .point_runs
         .iter()
-        .zip(results.bank.gps())
+        .zip(per_output)
         .zip(results.gp_checks)
     {
         // The diagnostic plots test runs against predictions; without a test set (the default

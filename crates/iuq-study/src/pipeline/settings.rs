@@ -11,6 +11,8 @@
 //!              candidates = 1000 }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
+//! # a whole-curve model emulated on its leading principal components (absent: a GP per point)
+//! reduced_basis = { explained_variance = 0.9999, max_components = 30 }
 //! [sensitivity]
 //! n = 1024        # Saltelli base points on the surrogate
 //! model_n = 8     # Saltelli base points run on the model itself (0: skip)
@@ -18,6 +20,8 @@
 //! ```
 
 use iuq_campaign::StudySection;
+
+use super::emulator::ReducedBasisSettings;
 
 use crate::error::{Result, input_error};
 use crate::study::Study;
@@ -49,6 +53,62 @@ pub struct PipelineSettings {
     pub adaptive: Option<AdaptiveSettings>,
     /// The model run at the posterior, when `[surrogate] posterior_check` is given.
     pub posterior_check: Option<PosteriorCheckSettings>,
+    /// A reduced basis of the whole curve instead of a GP per data point, when
+    /// `[surrogate] reduced_basis` is given.
+    pub reduced_basis: Option<ReducedBasisSettings>,
+}
+
+/// Read `[surrogate] reduced_basis = { explained_variance, max_components }` (`true` for the
+/// defaults).
+fn parse_reduced_basis(
+    surrogate: &mut StudySection<'_>,
+    study: &Study,
+) -> Result<Option<ReducedBasisSettings>> {
+    let defaults = ReducedBasisSettings::default();
+    let settings = match surrogate.value("reduced_basis") {
+        None => return Ok(None),
+        Some(toml::Value::Boolean(false)) => return Ok(None),
+        Some(toml::Value::Boolean(true)) => defaults,
+        Some(_) => {
+            let Some(mut s) = surrogate.section(
+                "reduced_basis",
+                "{ explained_variance = 0.9999, max_components = 30 }",
+            )?
+            else {
+                return Ok(None);
+            };
+            let explained_variance = s
+                .positive("explained_variance")?
+                .unwrap_or(defaults.explained_variance);
+            if explained_variance > 1.0 {
+                return Err(s
+                    .error(
+                        "explained_variance",
+                        format!("must lie in (0, 1], got {explained_variance}"),
+                    )
+                    .into());
+            }
+            let max_components = s
+                .count("max_components", 1)?
+                .unwrap_or(defaults.max_components);
+            s.finish()?;
+            ReducedBasisSettings {
+                explained_variance,
+                max_components,
+            }
+        }
+    };
+    if study.abscissa.is_some()
+        || matches!(study.model, crate::study::ModelSection::RbcShear { .. })
+    {
+        return Err(surrogate
+            .error(
+                "reduced_basis",
+                "emulates a whole-curve model (one run per parameter vector returning every data point); this model runs once per data point",
+            )
+            .into());
+    }
+    Ok(Some(settings))
 }
 
 /// `[surrogate] posterior_check = { samples, seed, significance, retrain }`: the model itself
@@ -219,6 +279,7 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
             .into());
     }
     let maximin_candidates = surrogate.count("maximin_candidates", 1)?.unwrap_or(100);
+    let reduced_basis = parse_reduced_basis(&mut surrogate, study)?;
     surrogate.finish()?;
     let s = &study.sensitivity;
     let surrogate_sobol_n = s.n.unwrap_or(1024);
@@ -263,5 +324,6 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         resamples,
         adaptive,
         posterior_check,
+        reduced_basis,
     })
 }

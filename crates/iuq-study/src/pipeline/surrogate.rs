@@ -1,15 +1,20 @@
 //! The surrogate of a study's model: one GP per data point, trained on the successful training
-//! runs that inform it, and — where runs have failed — one failure classifier per run group
-//! (`iuq_gp::FailureClassifier`), trained on every run of the group.
+//! runs that inform it (or a reduced basis of the whole curve, [`super::emulator`]), and — where
+//! runs have failed — one failure classifier per run group (`iuq_gp::FailureClassifier`),
+//! trained on every run of the group.
 //!
-//! As a [`Model`] of θ ([`Surrogate`]), it returns the GPs' means with their predictive stds as
-//! the computational std, and *fails* where a classifier says the model is more likely than not
+//! As a [`Model`] of θ ([`Surrogate`]), it returns the emulator's means with its predictive stds
+//! as the computational std, and *fails* where a classifier says the model is more likely than not
 //! to give no answer (p_fail > ½): the posterior then has no mass there, BASIS counts the
 //! proposals as failures, and the adaptive engine places no run there.
 
 use iuq_core::{EvaluationFailure, Model, Outcome, ParameterSpace};
-use iuq_gp::{ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank};
+use iuq_gp::{
+    ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank, ReducedBasis,
+    ReducedBasisOptions,
+};
 
+use super::emulator::{Emulator, ReducedBasisSettings};
 use super::model_runs::ModelRuns;
 use super::run_groups::GroupRuns;
 use crate::error::{Context, Result, StudyError};
@@ -17,11 +22,47 @@ use crate::error::{Context, Result, StudyError};
 /// The probability of failure above which the surrogate gives no answer.
 pub const FAILURE_THRESHOLD: f64 = 0.5;
 
-/// GPs of every data point and failure classifiers of the run groups.
+/// How the surrogate emulates the outputs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Emulation {
+    /// One GP per data point.
+    PerOutput,
+    /// A reduced basis of the whole curve, each data row's output divided by `scale` (the data's
+    /// measurement stds, when the data has them) before the principal components are taken.
+    ReducedBasis {
+        /// The basis's settings.
+        settings: ReducedBasisSettings,
+        /// Per data row, its scale.
+        scale: Option<Vec<f64>>,
+    },
+}
+
+impl Emulation {
+    /// The emulation of `[surrogate] reduced_basis` (absent: a GP per point) for `data`: the
+    /// basis is taken in units of each data row's measurement std where the data gives them.
+    pub fn of(
+        reduced_basis: Option<ReducedBasisSettings>,
+        data: &crate::likelihood_section::DataLikelihood,
+    ) -> Self {
+        match reduced_basis {
+            None => Emulation::PerOutput,
+            Some(settings) => Emulation::ReducedBasis {
+                settings,
+                scale: data
+                    .observations
+                    .measurement_std
+                    .clone()
+                    .filter(|s| s.iter().all(|v| v.is_finite() && *v > 0.0)),
+            },
+        }
+    }
+}
+
+/// The emulator of every data point and failure classifiers of the run groups.
 #[derive(Debug, Clone)]
 pub struct Surrogate {
-    /// One GP per data point.
-    pub bank: GpBank,
+    /// The emulator of the outputs.
+    pub emulator: Emulator,
     /// Per run group, its failure classifier (`None`: no run of the group failed).
     pub classifiers: Vec<Option<FailureClassifier>>,
 }
@@ -47,7 +88,8 @@ fn classifier_bounds(space: &ParameterSpace, points: &[Vec<f64>]) -> Vec<(f64, f
 }
 
 impl Surrogate {
-    /// Fit the GPs (GP j with seed `seed + j`) and the classifiers of `groups`.
+    /// Fit the emulator (GP j with seed `seed + j`; component k of a reduced basis with seed
+    /// `seed + k`) and the classifiers of `groups`.
     ///
     /// # Errors
     /// A data point with fewer than 3 successful training runs, or a fit that fails.
@@ -56,8 +98,12 @@ impl Surrogate {
         runs: &ModelRuns,
         space: &ParameterSpace,
         seed: u64,
+        emulation: &Emulation,
         describe: impl Fn(usize) -> String,
     ) -> Result<Self> {
+        if let Emulation::ReducedBasis { settings, scale } = emulation {
+            return Self::fit_reduced_basis(groups, runs, space, seed, settings, scale, describe);
+        }
         let mut gps = Vec::with_capacity(runs.output_names().len());
         let mut classifiers = Vec::with_capacity(groups.len());
         for (g, group) in groups.iter().enumerate() {
@@ -98,7 +144,75 @@ impl Surrogate {
             runs.output_names().to_vec(),
             gps,
         )?;
-        Ok(Self { bank, classifiers })
+        Ok(Self {
+            emulator: Emulator::PerOutput(bank),
+            classifiers,
+        })
+    }
+
+    /// The reduced basis of a whole-curve model's one run group, and its classifier.
+    fn fit_reduced_basis(
+        groups: &[GroupRuns],
+        runs: &ModelRuns,
+        space: &ParameterSpace,
+        seed: u64,
+        settings: &ReducedBasisSettings,
+        scale: &Option<Vec<f64>>,
+        describe: impl Fn(usize) -> String,
+    ) -> Result<Self> {
+        let [group] = groups else {
+            return Err(StudyError::Failure(format!(
+                "a reduced basis emulates a whole-curve model (one run group), not {} run groups",
+                groups.len()
+            )));
+        };
+        let m = runs.output_names().len();
+        let inputs = group.training(0).x;
+        let columns: Vec<Vec<f64>> = (0..m).map(|k| group.training(k).y).collect();
+        if inputs.len() < 3 {
+            return Err(StudyError::Failure(format!(
+                "{}: only {} training runs succeeded; a reduced basis needs at least 3 (failures: {})",
+                describe(0),
+                inputs.len(),
+                group
+                    .failure_reasons()
+                    .first()
+                    .map_or("none", String::as_str)
+            )));
+        }
+        let outputs: Vec<Vec<f64>> = (0..inputs.len())
+            .map(|i| columns.iter().map(|c| c[i]).collect())
+            .collect();
+        let options = ReducedBasisOptions {
+            explained_variance: settings.explained_variance,
+            max_components: settings.max_components,
+            output_scale: scale.clone(),
+            fit: FitOptions {
+                seed,
+                ..Default::default()
+            },
+        };
+        let basis = ReducedBasis::fit(
+            runs.parameters().to_vec(),
+            runs.output_names().to_vec(),
+            &inputs,
+            &outputs,
+            &options,
+        )
+        .with_context(|| "the reduced basis of the curve".to_string())?;
+        let (points, failed) = group.failure_labels();
+        let bounds = classifier_bounds(space, &points);
+        let classifier = FailureClassifier::fit(
+            &points,
+            &failed,
+            &bounds,
+            &ClassifierOptions::default().check()?,
+        )
+        .with_context(|| "failure classifier of run group 1".to_string())?;
+        Ok(Self {
+            emulator: Emulator::ReducedBasis(basis),
+            classifiers: vec![classifier],
+        })
     }
 
     /// The probability that a run of group `g` fails at each point.
@@ -112,15 +226,15 @@ impl Surrogate {
 
 impl Model for Surrogate {
     fn input_names(&self) -> &[String] {
-        self.bank.input_names()
+        self.emulator.input_names()
     }
 
     fn output_names(&self) -> &[String] {
-        self.bank.output_names()
+        self.emulator.output_names()
     }
 
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
-        let mut outcomes = self.bank.evaluate_batch(points)?;
+        let mut outcomes = self.emulator.evaluate_batch(points)?;
         for (g, classifier) in self.classifiers.iter().enumerate() {
             let Some(c) = classifier else { continue };
             let valid: Vec<usize> = (0..points.len()).filter(|&i| outcomes[i].is_ok()).collect();
