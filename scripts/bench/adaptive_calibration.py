@@ -22,7 +22,8 @@ posterior is accurate.
 - iuq adaptive: `iuq pipeline` with `[surrogate] adaptive = { batch = 2 }` after an initial
   maximin LHS of 6 runs, the model a command (one process per run); runs = every run the
   pipeline made; also the runs after which a round's posterior
-  (N = 2,000) first met the accuracy criterion.
+  (N = 2,000) first met the accuracy criterion, and the wall time. For curves of 20 points or
+  more, again with `reduced_basis = true` (GPs on principal components).
 - one-shot LHS: `iuq pipeline` without `adaptive`, design n = 8, 16, …, 256; the smallest n
   whose posterior is accurate.
 - GPry (El Gammal et al. 2023; `pip install gpry`): its Runner with the true log-likelihood, its
@@ -119,13 +120,13 @@ PROBLEMS = {
         "formula": "a0 + a1 * cos(x) + b1 * sin(x) + a2 * cos(2 * x) + b2 * sin(2 * x) + a3 * cos(3 * x) + b3 * sin(3 * x) + a4 * cos(4 * x) + b4 * sin(4 * x) + c * x",
         "fails": None,
     },
-    # A long curve: 240 points of a damped oscillation, four parameters.
+    # A long curve: 240 points of a growth-and-decay profile, four parameters.
     "longcurve": {
-        "parameters": {"A": (0.5, 2.0), "g": (0.05, 0.4), "w": (1.0, 3.0), "p": (-1.0, 1.5)},
-        "truth": {"A": 1.2, "g": 0.15, "w": 2.0, "p": 0.5},
+        "parameters": {"A": (0.5, 2.0), "r": (0.5, 3.0), "t0": (1.0, 5.0), "g": (0.02, 0.3)},
+        "truth": {"A": 1.2, "r": 1.5, "t0": 3.0, "g": 0.1},
         "x": [0.05 * i for i in range(0, 240)],
         "noise": 0.05,
-        "formula": "A * exp(-g * x) * cos(w * x + p)",
+        "formula": "A / (1 + exp(-r * (x - t0))) * exp(-g * x)",
         "fails": None,
     },
 }
@@ -163,7 +164,11 @@ def data(problem):
     return [(x, y + rng.gauss(0, p["noise"])) for x, y in zip(p["x"], exact)]
 
 
-def study_text(problem, name, design_n, adaptive, seed=1):
+# Curves of at least this many points are also run with `[surrogate] reduced_basis`.
+REDUCED_BASIS_MIN_POINTS = 20
+
+
+def study_text(problem, name, design_n, adaptive, seed=1, reduced_basis=False):
     p = PROBLEMS[problem]
     lines = [f'name = "{name}"', "[parameters]"]
     lines += [f"{k} = {{ uniform = [{lo}, {hi}] }}" for k, (lo, hi) in p["parameters"].items()]
@@ -180,6 +185,8 @@ def study_text(problem, name, design_n, adaptive, seed=1):
     ]
     if adaptive:
         lines.append(f"adaptive = {{ batch = 2, max_runs = 300, tolerance = 0.1{ADAPTIVE_EXTRA} }}")
+    if reduced_basis:
+        lines.append("reduced_basis = true")
     lines += ["[sensitivity]", "n = 256", "[sampler]", "samples = 20000", f"seed = {seed}"]
     return "\n".join(lines) + "\n"
 
@@ -266,12 +273,30 @@ def main():
     parser.add_argument("--problems", default=",".join(PROBLEMS))
     parser.add_argument("--skip-gpry", action="store_true")
     parser.add_argument("--work", default=str(ROOT / "target" / "bench-adaptive"))
+    parser.add_argument("--skip-lhs", action="store_true", help="leave out the one-shot designs")
+    parser.add_argument("--results", help="append each row to this CSV as it is measured")
     args = parser.parse_args()
     if args.model:
         return run_model(args.model)
     if not IUQ.exists():
         sys.exit(f"{IUQ} is missing: cargo build --release -p iuq")
     rows = []
+
+    class Rows(list):
+        """The table's rows, each also appended to --results as soon as it is measured."""
+
+        def append(self, row):
+            super().append(row)
+            if args.results:
+                new = not os.path.exists(args.results)
+                with open(args.results, "a", encoding="utf-8") as f:
+                    if new:
+                        f.write("problem,parameters,outputs,method,model_runs,accurate,worst_mean_error_stds,worst_std_error,note\n")
+                    problem, method, runs, ok, dm, ds, note = row
+                    p = PROBLEMS[problem]
+                    f.write(f"{problem},{len(p['parameters'])},{len(p['x'])},{method},{runs},{ok},{dm:.4f},{ds:.4f},\"{note}\"\n")
+
+    rows = Rows()
     for problem in args.problems.split(","):
         work = Path(args.work) / problem
         shutil.rmtree(work, ignore_errors=True)
@@ -285,25 +310,36 @@ def main():
         truth = {k: (t["mean"][k], t["std"][k]) for k in PROBLEMS[problem]["parameters"]}
         print(f"\n{problem}: truth " + ", ".join(f"{k} = {m:.5g} ± {s:.3g}" for k, (m, s) in truth.items()))
 
-        (work / "adaptive.toml").write_text(study_text(problem, f"{problem}-adaptive", INITIAL_RUNS, True))
-        started = time.time()
-        v = iuq_json(["pipeline", "adaptive.toml", "--out", "adaptive-report"], work)
-        seconds = time.time() - started
-        m = moments_of(v)
-        first = None
-        for r in v["adaptive"]["rounds"]:
-            rm = dict(zip(v["adaptive"]["parameters"], zip(r["mean"], r["std"])))
-            if accurate(rm, truth):
-                first = r["runs"]
-                break
-        dm, ds = worst(m, truth)
-        rows.append((problem, "iuq adaptive", v["runs"], accurate(m, truth), dm, ds,
-                     f"{v['rounds']} rounds, converged {v['converged']}, first accurate round after {first} runs, {seconds:.0f} s"))
-        print(f"  iuq adaptive: {v['runs']} runs, accurate {accurate(m, truth)} (mean off {dm:.3f} std, std off {100 * ds:.1f} %)")
+        variants = [("iuq adaptive", False)]
+        if len(PROBLEMS[problem]["x"]) >= REDUCED_BASIS_MIN_POINTS:
+            variants.append(("iuq adaptive, reduced basis", True))
+        for method, reduced in variants:
+            name = "adaptive-rb" if reduced else "adaptive"
+            (work / f"{name}.toml").write_text(
+                study_text(problem, f"{problem}-{name}", INITIAL_RUNS, True, reduced_basis=reduced))
+            started = time.time()
+            try:
+                v = iuq_json(["pipeline", f"{name}.toml", "--out", f"{name}-report"], work)
+            except RuntimeError as e:
+                rows.append((problem, method, "failed", False, float("nan"), float("nan"), str(e).splitlines()[-1][:120]))
+                print(f"  {method} failed: {str(e).splitlines()[-1]}")
+                continue
+            seconds = time.time() - started
+            m = moments_of(v)
+            first = None
+            for r in v["adaptive"]["rounds"]:
+                rm = dict(zip(v["adaptive"]["parameters"], zip(r["mean"], r["std"])))
+                if accurate(rm, truth):
+                    first = r["runs"]
+                    break
+            dm, ds = worst(m, truth)
+            rows.append((problem, method, v["runs"], accurate(m, truth), dm, ds,
+                         f"{v['rounds']} rounds, converged {v['converged']} ({v['adaptive']['stop_reason'][:60]}), first accurate round after {first} runs, {seconds:.0f} s"))
+            print(f"  {method}: {v['runs']} runs, accurate {accurate(m, truth)} (mean off {dm:.3f} std, std off {100 * ds:.1f} %), {seconds:.0f} s")
 
         needed = None
         last = None
-        for n in [8, 16, 32, 64, 128, 256, 512]:
+        for n in ([] if args.skip_lhs else [8, 16, 32, 64, 128, 256, 512]):
             name = f"lhs-{n}"
             (work / f"{name}.toml").write_text(study_text(problem, f"{problem}-{name}", n, False))
             try:
@@ -319,9 +355,10 @@ def main():
             if ok:
                 needed = n
                 break
-        rows.append((problem, "one-shot maximin LHS", needed if needed else f"> {last[0] if last else 512}",
-                     needed is not None, last[1] if last else float("nan"), last[2] if last else float("nan"),
-                     "smallest n of 8, 16, ..., 512 whose posterior is accurate"))
+        if not args.skip_lhs:
+            rows.append((problem, "one-shot maximin LHS", needed if needed else f"> {last[0] if last else 512}",
+                         needed is not None, last[1] if last else float("nan"), last[2] if last else float("nan"),
+                         "smallest n of 8, 16, ..., 512 whose posterior is accurate"))
 
         if not args.skip_gpry:
             try:

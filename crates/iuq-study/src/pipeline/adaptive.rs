@@ -20,11 +20,16 @@
 //!    kriging-believer updates (`iuq_adaptive::batch`), keep the best within `max_runs`, and run
 //!    them through the campaign as the design `adaptive-round-<k>`.
 //!
-//! The loop stops converged, at `max_runs` or `max_rounds`, or when no candidate's score exceeds
-//! the minimum worth a run ((log_likelihood_tolerance/2)² divided by the number of run groups):
-//! the surrogate can no
-//! longer be improved where the posterior lies, and convergence is then judged by its
-//! log-likelihood spread alone.
+//! Every second replicate mixes its chains one level harder (`iuq_basis::CheckedSettings::
+//! with_stronger_mixing`): when the two groups' posteriors differ beyond their noise by more than
+//! `tolerance` (`iuq_adaptive::sampler_agreement`), the round is not converged and later rounds,
+//! and the final posterior, sample at the harder level.
+//!
+//! The loop stops converged, at `max_runs` or `max_rounds`, when the sampler still disagrees at
+//! its strongest mixing, or when no candidate's score exceeds the minimum worth a run
+//! ((log_likelihood_tolerance/2)² divided by the number of run groups) even among 16 times
+//! `candidates` (each round that finds none looks among 4 times more, from twice the samples):
+//! every stop short of convergence says why and what to change.
 //!
 //! Everything is seeded, so a rerun replays the rounds, finding every run in the campaign store:
 //! after a crash (or kill -9) it continues where it stopped, running only what was never
