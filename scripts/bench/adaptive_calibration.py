@@ -51,7 +51,8 @@ ROOT = Path(__file__).resolve().parents[2]
 ADAPTIVE_EXTRA = os.environ.get("IUQ_BENCH_ADAPTIVE_EXTRA", "")
 # The adaptive study's initial maximin LHS (then batches of 2 per round).
 INITIAL_RUNS = 6
-IUQ = ROOT / "target" / "release" / "iuq"
+# The binary measured ($IUQ_BENCH_BIN, e.g. a copy that a rebuild cannot change mid-run).
+IUQ = Path(os.environ.get("IUQ_BENCH_BIN", ROOT / "target" / "release" / "iuq"))
 
 PROBLEMS = {
     "cooling": {
