@@ -725,3 +725,39 @@ fn an_array_of_the_wrong_length_exits_2_naming_the_file_and_key() {
         "{message}"
     );
 }
+
+#[test]
+fn no_candidate_worth_a_run_is_no_convergence_the_engine_looks_wider_then_says_why() {
+    let dir = cooling("no-candidate");
+    // A minimum score no candidate can reach ((1000/2)² nats²): from the initial design on,
+    // nothing is worth a run, though the posterior of 8 runs is far from converged.
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "adaptive = { batch = 3, max_runs = 60, tolerance = 0.1 }",
+            "adaptive = { batch = 3, max_runs = 60, tolerance = 0.1, log_likelihood_tolerance = 1000 }",
+        );
+    assert!(study.contains("log_likelihood_tolerance = 1000"));
+    let path = dir.join("no-candidate.toml");
+    std::fs::write(&path, study).unwrap();
+    let out = dir.join("report");
+    let v = pipeline(&path, &out);
+    assert_eq!(v["converged"], false, "{v}");
+    let reason = v["adaptive"]["stop_reason"].as_str().unwrap();
+    assert!(
+        reason.contains("no candidate run is worth making among 16000 candidates")
+            && reason.contains("although the rule does not hold")
+            && reason.contains("log_likelihood_tolerance"),
+        "{reason}"
+    );
+    // Each round that found nothing looked among 4 times more candidates, from twice the
+    // samples; no run was made after the initial design.
+    let rounds = v["adaptive"]["rounds"].as_array().unwrap();
+    let looked: Vec<u64> = rounds
+        .iter()
+        .map(|r| r["candidates"].as_u64().unwrap())
+        .collect();
+    assert_eq!(looked, [1000, 4000, 16000], "{v}");
+    assert!(rounds.iter().all(|r| r["new_runs"] == 0));
+    assert_eq!(v["runs"], 8);
+}

@@ -749,7 +749,10 @@ fn measure_round(
     };
     let moments = pooled.moments.clone();
     let state = &pooled;
-    let c = candidates(state, d, modelling_error, data, sampling.candidates);
+    // The measurement (u, ε) is made on `candidates` distinct samples; a round that looks wider
+    // for runs (after one that found none worth making) scores more of them below, without
+    // making ε, whose cost grows with the cube of the candidates, dearer.
+    let c = candidates(state, d, modelling_error, data, settings.candidates);
     // The surrogate's predictions at the candidates, per data point.
     let emulator = &surrogate.emulator;
     let predictions = emulator.predict(&c.theta)?;
@@ -868,6 +871,14 @@ fn measure_round(
         )?;
         extrapolation = extrapolation.max(share);
     }
+    let (c, likelihood_variance) = if sampling.candidates > settings.candidates {
+        let wide = candidates(state, d, modelling_error, data, sampling.candidates);
+        let predictions = emulator.predict(&wide.theta)?;
+        let variance = likelihood_variances(data, &predictions, &unresolved, &wide.variance);
+        (wide, variance)
+    } else {
+        (c, likelihood_variance)
+    };
     // Where a classifier is unsure over the posterior, runs on the boundary of its failure
     // region (the acquisition does not go there: the GPs are sure of their extrapolation, the
     // classifier is not). They are made only once the GPs are sure where the posterior lies
