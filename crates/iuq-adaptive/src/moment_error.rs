@@ -263,30 +263,53 @@ fn reweighted_moments(samples: &[Vec<f64>], w: &[f64], dl: &[f64]) -> (Vec<f64>,
 /// mean diagonal, from 10⁻¹⁰ up by factors of 100) that makes it positive definite: near-copies
 /// among the samples make C singular.
 fn cholesky_with_jitter(c: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+    use faer::dyn_stack::{MemBuffer, MemStack};
+    use faer::linalg::cholesky::llt;
+    use faer::{MatMut, Par};
     let n = c.len();
     let mean_diagonal = (0..n).map(|i| c[i][i].max(0.0)).sum::<f64>() / n.max(1) as f64;
     if mean_diagonal == 0.0 {
         return Ok(vec![vec![0.0; n]; n]);
     }
+    // faer's blocked factorisation, sequential (the result does not depend on the thread count).
+    let mut buffer = MemBuffer::new(llt::factor::cholesky_in_place_scratch::<f64>(
+        n,
+        Par::Seq,
+        Default::default(),
+    ));
+    let mut a = vec![0.0; n * n];
     let mut jitter = 1e-10 * mean_diagonal;
-    'attempt: for _ in 0..6 {
-        let mut l = vec![vec![0.0; n]; n];
-        for i in 0..n {
-            for j in 0..=i {
-                let s: f64 = l[i][..j].iter().zip(&l[j][..j]).map(|(a, b)| a * b).sum();
-                if i == j {
-                    let pivot = c[i][i] + jitter - s;
-                    if pivot.is_nan() || pivot <= 0.0 {
-                        jitter *= 100.0;
-                        continue 'attempt;
-                    }
-                    l[i][i] = pivot.sqrt();
-                } else {
-                    l[i][j] = (c[i][j] - s) / l[j][j];
-                }
+    for _ in 0..6 {
+        for j in 0..n {
+            for i in j..n {
+                a[j * n + i] = c[i][j];
             }
+            a[j * n + j] += jitter;
         }
-        return Ok(l);
+        let factored = llt::factor::cholesky_in_place(
+            MatMut::from_column_major_slice_mut(&mut a, n, n),
+            Default::default(),
+            Par::Seq,
+            MemStack::new(&mut buffer),
+            Default::default(),
+        );
+        let pivots_ok = (0..n).all(|i| {
+            let v = a[i * n + i];
+            v.is_finite() && v > 0.0
+        });
+        if factored.is_err() || !pivots_ok {
+            jitter *= 100.0;
+            continue;
+        }
+        return Ok((0..n)
+            .map(|i| {
+                let mut row = vec![0.0; n];
+                for (j, v) in row.iter_mut().enumerate().take(i + 1) {
+                    *v = a[j * n + i];
+                }
+                row
+            })
+            .collect());
     }
     Err(AdaptiveError::InvalidParameter {
         what: "GP covariance over the samples",
@@ -483,19 +506,53 @@ fn drawn_moment_error(
     draws: usize,
     seed: u64,
 ) -> MomentError {
+    let errors = factor_draws(factors, samples.len(), draws, seed);
+    drawn_moment_error_with(samples, w, terms, &errors)
+}
+
+/// e[draw][source][i] = (L_source z)_i, z standard normal drawn in the order draw, source, i from
+/// `seed`: the joint draws of independent Gaussian errors with the Cholesky factors `factors`
+/// (rows; lower-triangular). All draws of one source are one sequential matrix product.
+fn factor_draws(
+    factors: &[Vec<Vec<f64>>],
+    n: usize,
+    draws: usize,
+    seed: u64,
+) -> Vec<Vec<Vec<f64>>> {
+    use faer::linalg::matmul::matmul;
+    use faer::{Accum, Mat, MatRef, Par};
+    use rand::SeedableRng;
     use rand_distr::{Distribution, StandardNormal};
-    let n = samples.len();
-    let mut z = vec![0.0; n];
-    drawn_moment_error_with(samples, w, terms, draws, seed, &mut |rng, dm| {
-        for (t, l) in factors.iter().enumerate() {
-            for v in z.iter_mut() {
-                *v = StandardNormal.sample(rng);
-            }
-            for i in 0..n {
-                dm[t][i] = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
+    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
+    let sources = factors.len();
+    // z of each source, n × draws, column-major.
+    let mut z = vec![vec![0.0; n * draws]; sources];
+    for d in 0..draws {
+        for zs in z.iter_mut() {
+            for v in &mut zs[d * n..(d + 1) * n] {
+                *v = StandardNormal.sample(&mut rng);
             }
         }
-    })
+    }
+    let mut errors = vec![vec![vec![0.0; n]; sources]; draws];
+    let mut product = Mat::<f64>::zeros(n, draws);
+    for (source, l) in factors.iter().enumerate() {
+        let lower = Mat::<f64>::from_fn(n, n, |i, j| if j <= i { l[i][j] } else { 0.0 });
+        matmul(
+            product.as_mut(),
+            Accum::Replace,
+            lower.as_ref(),
+            MatRef::from_column_major_slice(&z[source], n, draws),
+            1.0,
+            Par::Seq,
+        );
+        for (d, per_draw) in errors.iter_mut().enumerate() {
+            for (i, v) in per_draw[source].iter_mut().enumerate() {
+                *v = product[(i, d)];
+            }
+        }
+    }
+    errors
 }
 
 /// The draws of a reduced basis: each component's error drawn from its factor, every output's
@@ -509,48 +566,40 @@ fn drawn_component_error(
     draws: usize,
     seed: u64,
 ) -> MomentError {
-    use rand_distr::{Distribution, StandardNormal};
     let n = samples.len();
-    let mut z = vec![0.0; n];
-    let mut dc = vec![vec![0.0; n]; factors.len()];
-    drawn_moment_error_with(samples, w, terms, draws, seed, &mut |rng, dm| {
-        for (k, l) in factors.iter().enumerate() {
-            for v in z.iter_mut() {
-                *v = StandardNormal.sample(rng);
-            }
-            for i in 0..n {
-                dc[k][i] = l[i][..=i].iter().zip(&z[..=i]).map(|(a, b)| a * b).sum();
-            }
-        }
-        for (t, row) in dm.iter_mut().enumerate() {
-            for (i, v) in row.iter_mut().enumerate() {
-                *v = loadings[t].iter().zip(&dc).map(|(a, c)| a * c[i]).sum();
-            }
-        }
-    })
+    let components = factor_draws(factors, n, draws, seed);
+    let errors: Vec<Vec<Vec<f64>>> = components
+        .iter()
+        .map(|dc| {
+            loadings
+                .iter()
+                .map(|a| {
+                    (0..n)
+                        .map(|i| a.iter().zip(dc).map(|(a, c)| a * c[i]).sum())
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    drawn_moment_error_with(samples, w, terms, &errors)
 }
 
-/// The reweighting of every draw: `draw(rng, dm)` fills dm[t][i], the error of term t at sample
-/// i, for one joint draw.
+/// The reweighting of every draw: `errors[draw][t][i]` is the error of term t at sample i in
+/// one joint draw.
 fn drawn_moment_error_with(
     samples: &[Vec<f64>],
     w: &[f64],
     terms: &[MomentTerm<'_>],
-    draws: usize,
-    seed: u64,
-    draw: &mut dyn FnMut(&mut rand_xoshiro::Xoshiro256PlusPlus, &mut [Vec<f64>]),
+    errors: &[Vec<Vec<f64>>],
 ) -> MomentError {
-    use rand::SeedableRng;
     let n = samples.len();
     let d = samples[0].len();
+    let draws = errors.len();
     let (mean0, std0, log_z0) = reweighted_moments(samples, w, &vec![0.0; n]);
-    let mut rng = rand_xoshiro::Xoshiro256PlusPlus::seed_from_u64(seed);
     let mut changes: Vec<Vec<f64>> = Vec::with_capacity(draws);
-    let mut dm = vec![vec![0.0; n]; terms.len()];
-    for _ in 0..draws {
-        draw(&mut rng, &mut dm);
+    for dm in errors {
         let mut dl = vec![0.0; n];
-        for (t, errors) in terms.iter().zip(&dm) {
+        for (t, errors) in terms.iter().zip(dm) {
             for i in 0..n {
                 let (r, s2, c2) = (t.residual[i], t.variance[i], t.sampled_variance[i]);
                 let e = errors[i];
@@ -842,6 +891,39 @@ mod tests {
 
     /// The grouped form factorises each covariance once and gives, bit for bit, what separate
     /// calls give for all terms and for each group.
+    #[test]
+    fn the_factor_reconstructs_the_covariance_and_a_singular_one_gets_a_jitter() {
+        let n = 40;
+        let c: Vec<Vec<f64>> = (0..n)
+            .map(|i| {
+                (0..n)
+                    .map(|j| (-((i as f64 - j as f64) / 6.0).powi(2)).exp())
+                    .collect()
+            })
+            .collect();
+        let l = cholesky_with_jitter(&c).unwrap();
+        let mean_diagonal = 1.0;
+        for i in 0..n {
+            assert!(l[i][i + 1..].iter().all(|v| *v == 0.0));
+            for j in 0..n {
+                let product: f64 = (0..n).map(|k| l[i][k] * l[j][k]).sum();
+                // A squared-exponential covariance this smooth is singular to rounding: the
+                // factor is of C + jitter·I with a jitter of at most 1e-6 of its diagonal.
+                assert!(
+                    (product - c[i][j]).abs() < 1e-6 * mean_diagonal + 1e-12,
+                    "({i}, {j}): {product} vs {}",
+                    c[i][j]
+                );
+            }
+        }
+        // Rank one: only a jitter makes it factorisable.
+        let rank_one = vec![vec![1.0; 5]; 5];
+        let l = cholesky_with_jitter(&rank_one).unwrap();
+        assert!(l.iter().enumerate().all(|(i, r)| r[i] > 0.0));
+        // Indefinite (eigenvalues 4 and −2): no jitter up to its mean diagonal helps.
+        assert!(cholesky_with_jitter(&[vec![1.0, 3.0], vec![3.0, 1.0]]).is_err());
+    }
+
     #[test]
     fn grouped_errors_equal_separate_calls() {
         let n = 30;
