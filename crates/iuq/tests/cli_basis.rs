@@ -353,6 +353,26 @@ samples = 500
         ),
         (GAUSSIAN_2D.replace("seed = 4", "sead = 4"), "sampler.sead"),
         (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nburn = \"soon\""),
+            "sampler.burn",
+        ),
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nburn = 10\ncorrelation = 0.2"),
+            "sampler.correlation",
+        ),
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\ncorrelation = 1.5"),
+            "sampler.correlation",
+        ),
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nproposal_scale = 0.3\nmax_burn = 20"),
+            "sampler.max_burn",
+        ),
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nmax_burn = 0"),
+            "sampler.max_burn",
+        ),
+        (
             data_study.replace("data/line.csv", "data/missing.csv"),
             "likelihood.data.file",
         ),
