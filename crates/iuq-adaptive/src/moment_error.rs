@@ -453,15 +453,9 @@ pub fn sampled_moment_errors_by_group_from_components(
         .iter()
         .map(|c| cholesky_with_jitter(c))
         .collect::<Result<Vec<_>>>()?;
-    let all = drawn_component_error(
-        samples,
-        &w,
-        terms,
-        components.loadings,
-        &factors,
-        draws,
-        seed,
-    );
+    // The components' draws are the same for the whole surrogate and for every group.
+    let drawn = factor_draws(&factors, samples.len(), draws, seed);
+    let all = drawn_component_error(samples, &w, terms, components.loadings, &drawn);
     let per_group = groups
         .iter()
         .map(|g| {
@@ -470,9 +464,7 @@ pub fn sampled_moment_errors_by_group_from_components(
                 &w,
                 &terms[g.clone()],
                 &components.loadings[g.clone()],
-                &factors,
-                draws,
-                seed,
+                &drawn,
             )
         })
         .collect();
@@ -555,19 +547,16 @@ fn factor_draws(
     errors
 }
 
-/// The draws of a reduced basis: each component's error drawn from its factor, every output's
-/// error δm_t = Σ_k a_tk δc_k.
+/// The draws of a reduced basis: the components' errors `components[draw][k][i]`
+/// ([`factor_draws`]), every output's error δm_t = Σ_k a_tk δc_k.
 fn drawn_component_error(
     samples: &[Vec<f64>],
     w: &[f64],
     terms: &[MomentTerm<'_>],
     loadings: &[Vec<f64>],
-    factors: &[Vec<Vec<f64>>],
-    draws: usize,
-    seed: u64,
+    components: &[Vec<Vec<f64>>],
 ) -> MomentError {
     let n = samples.len();
-    let components = factor_draws(factors, n, draws, seed);
     let errors: Vec<Vec<Vec<f64>>> = components
         .iter()
         .map(|dc| {
