@@ -7,6 +7,8 @@ numpy arrays in and out, any Python function as the model:
 - :func:`iuq.sobol`: Sobol' indices of a Python model (or formulas), with intervals;
 - :func:`iuq.basis`: BASIS posterior samples and evidence of a Python log-likelihood, or of a
   Python model against data with the prediction-error likelihood;
+- :func:`iuq.calibrate`: calibrate a Python function on data with the adaptive engine (a
+  store that survives the session, results as numpy, pandas and ArviZ);
 - :class:`iuq.Study`: a study file's calibration pipeline (the adaptive engine included),
   campaign status and export.
 
@@ -19,6 +21,7 @@ re-raised (or, with ``on_error="fail"``, becomes a failed point). Methods and re
 
 from . import _native, design
 from ._basis import BasisResult, basis
+from ._calibrate import CalibrationResult, calibrate
 from ._gp import GaussianProcess
 from ._sensitivity import SobolResult, sobol
 from ._study import CampaignStatus, PipelineResult, Study
@@ -32,6 +35,8 @@ __all__ = [
     "SobolResult",
     "basis",
     "BasisResult",
+    "calibrate",
+    "CalibrationResult",
     "Study",
     "PipelineResult",
     "CampaignStatus",

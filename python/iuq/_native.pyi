@@ -116,6 +116,16 @@ class Study:
         recompute_rounds: bool,
         progress: Optional[Callable[[str], Any]],
     ) -> str: ...
+    def calibrate(
+        self,
+        out: str,
+        model: Callable[[Any], Any],
+        outputs: int,
+        on_error: str,
+        max_parallel: int,
+        model_posterior: bool,
+        progress: Optional[Callable[[str], Any]],
+    ) -> str: ...
     def sobol(
         self,
         n: Optional[int],

@@ -11,6 +11,7 @@ use pyo3::prelude::*;
 
 mod arrays;
 mod basis;
+mod calibrate;
 mod callable;
 mod design;
 mod errors;

@@ -20,6 +20,8 @@ use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
 use iuq_study::{Study, StudyError};
 
+use crate::calibrate::forwarded_model;
+use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure, study_error};
 
 /// A study file, loaded and checked.
@@ -29,12 +31,25 @@ pub struct NativeStudy {
 }
 
 /// Forwards the pipeline's events to a Python callable as text lines (`None`: quiet).
-struct ProgressObserver {
+pub struct ProgressObserver {
     callback: Option<Py<PyAny>>,
     error: Option<PyErr>,
 }
 
 impl ProgressObserver {
+    /// Lines to `callback` (`None`: quiet).
+    pub fn new(callback: Option<Py<PyAny>>) -> Self {
+        Self {
+            callback,
+            error: None,
+        }
+    }
+
+    /// The exception the callback raised, if any (taken).
+    pub fn take_error(&mut self) -> Option<PyErr> {
+        self.error.take()
+    }
+
     fn send(&mut self, line: String) {
         let Some(callback) = &self.callback else {
             return;
@@ -135,11 +150,9 @@ impl NativeStudy {
             fresh,
             runs_only,
             recompute_rounds,
+            callable: None,
         };
-        let mut observer = ProgressObserver {
-            callback: progress,
-            error: None,
-        };
+        let mut observer = ProgressObserver::new(progress);
         let result =
             py.allow_threads(|| iuq_study::pipeline::run(&self.study, &options, &mut observer));
         if let Some(error) = observer.error.take() {
@@ -148,6 +161,45 @@ impl NativeStudy {
         let outcome = result.map_err(study_error)?;
         let value = outcome.summary();
         to_json_text(&value)
+    }
+
+    /// Run the pipeline of a study whose model is of kind `callable`, the Python `model` (a
+    /// callable (n, inputs) → (n, outputs), or a pair of such arrays, values and stds),
+    /// evaluated on this thread in batches of up to `max_parallel` runs (see
+    /// [`crate::calibrate`]); the outcome as `run` gives it.
+    #[pyo3(signature = (out, model, outputs, on_error, max_parallel, model_posterior, progress))]
+    #[allow(clippy::too_many_arguments)]
+    fn calibrate(
+        &self,
+        py: Python<'_>,
+        out: PathBuf,
+        model: Py<PyAny>,
+        outputs: usize,
+        on_error: &str,
+        max_parallel: usize,
+        model_posterior: bool,
+        progress: Option<Py<PyAny>>,
+    ) -> PyResult<String> {
+        let on_error = OnError::parse(on_error)?;
+        let output_names: Vec<String> = (0..outputs).map(|j| format!("y[{j}]")).collect();
+        let model = PyModel::new(model, self.study.model_inputs(), output_names, on_error);
+        let (shared, mut observer) = forwarded_model(model, progress);
+        let options = PipelineOptions {
+            out,
+            max_parallel: Some(max_parallel),
+            model_posterior,
+            fresh: false,
+            runs_only: false,
+            recompute_rounds: false,
+            callable: Some(shared),
+        };
+        let result =
+            py.allow_threads(|| iuq_study::pipeline::run(&self.study, &options, &mut observer));
+        if let Some(error) = observer.take_error() {
+            return Err(error);
+        }
+        let outcome = result.map_err(study_error)?;
+        to_json_text(&outcome.summary())
     }
 
     /// Sobol' indices of the study's model over its priors (`iuq sobol STUDY`): the options
@@ -248,7 +300,7 @@ impl NativeStudy {
                     None,
                     None,
                     None,
-                    &mut |_| {},
+                    &mut |_| iuq_basis::Control::Continue,
                 )?;
                 let stages = serde_json::to_string(&sampled.run.state.diagnostics)
                     .map_err(|e| StudyError::Failure(e.to_string()))?;

@@ -69,7 +69,35 @@ pub struct CampaignOptions {
     /// Evaluate the runs in this process with this model instead of starting the study's
     /// command (local executor only; see [`crate::in_process`]).
     pub in_process: Option<crate::in_process::SharedModel>,
+    /// Set from outside (a Ctrl-C seen by an embedding program): the campaign submits no more
+    /// runs, files the results of those under way and returns [`CampaignError::Interrupted`].
+    pub interrupt: Option<Interrupt>,
 }
+
+/// A flag another thread raises to stop a campaign (or a pipeline) at its next check; runs
+/// already finished stay stored, runs under way are filed as they end.
+#[derive(Debug, Clone, Default)]
+pub struct Interrupt(pub std::sync::Arc<std::sync::atomic::AtomicBool>);
+
+impl Interrupt {
+    /// Raise the flag.
+    pub fn raise(&self) {
+        self.0.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// Whether the flag is raised.
+    pub fn is_raised(&self) -> bool {
+        self.0.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+impl PartialEq for Interrupt {
+    fn eq(&self, other: &Self) -> bool {
+        std::sync::Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Eq for Interrupt {}
 
 /// A campaign: a study, its store and an executor.
 pub struct Campaign {
@@ -83,6 +111,7 @@ pub struct Campaign {
     directory: PathBuf,
     session_start: Option<Instant>,
     finished_this_session: u64,
+    interrupt: Option<Interrupt>,
 }
 
 impl std::fmt::Debug for Campaign {
@@ -237,6 +266,7 @@ impl Campaign {
             directory,
             session_start: None,
             finished_this_session: 0,
+            interrupt: options.interrupt.clone(),
         };
         let summary = campaign.resume()?;
         Ok((campaign, summary))
@@ -403,10 +433,14 @@ impl Campaign {
         let mut external: Vec<(i64, String)> = Vec::new();
         let mut last_report: Option<Instant> = None;
         loop {
-            let free = self
-                .executor
-                .capacity()
-                .saturating_sub(self.executor.in_flight());
+            let interrupted = self.interrupt.as_ref().is_some_and(Interrupt::is_raised);
+            let free = if interrupted {
+                0
+            } else {
+                self.executor
+                    .capacity()
+                    .saturating_sub(self.executor.in_flight())
+            };
             let pending = if free > 0 {
                 self.store
                     .pending_runs_among(among, free.saturating_mul(runs_per_task).min(100_000))?
@@ -463,6 +497,10 @@ impl Campaign {
                 last_report = Some(Instant::now());
                 observer(&self.progress(start)?);
             }
+            if interrupted && self.executor.in_flight() == 0 {
+                observer(&self.progress(start)?);
+                return Err(CampaignError::Interrupted);
+            }
             if self.executor.in_flight() == 0 && !submitted_any {
                 if self.store.pending_runs_among(among, 1)?.is_empty() {
                     if !external.is_empty() {
@@ -488,9 +526,13 @@ impl Campaign {
                     Ok(())
                 })?;
             }
-            events = self
-                .executor
-                .wait(report_every.min(Duration::from_secs(1)))?;
+            events =
+                self.executor
+                    .wait(report_every.min(Duration::from_millis(if interrupted {
+                        20
+                    } else {
+                        500
+                    })))?;
         }
         let progress = self.progress(start)?;
         observer(&progress);

@@ -52,6 +52,10 @@ pub enum CampaignError {
         /// What went wrong.
         reason: String,
     },
+    /// The campaign was interrupted ([`crate::Interrupt`]): finished runs are stored, the
+    /// rest stay pending and run when the campaign is resumed.
+    #[error("interrupted: the runs finished so far are stored; run again to continue")]
+    Interrupted,
     /// A file written by a worker or a scheduler that cannot be parsed.
     #[error("{path}: {reason}")]
     Format {

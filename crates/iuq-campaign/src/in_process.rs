@@ -25,6 +25,9 @@ pub enum InProcessError {
     /// The model could not be evaluated (a server down, a connection lost): an infrastructure
     /// failure, which the retry policy retries by default.
     Unavailable(String),
+    /// The run was stopped before it finished (the user interrupted the program evaluating the
+    /// model): filed as lost, so the retry policy runs it again.
+    Interrupted,
 }
 
 /// A model evaluated in this process: `parameters` are a run's values in the campaign's
@@ -38,6 +41,14 @@ pub trait InProcessModel: Send + Sync {
 /// A shared in-process model, as [`crate::CampaignOptions`] carries it.
 #[derive(Clone)]
 pub struct SharedModel(pub Arc<dyn InProcessModel>);
+
+impl PartialEq for SharedModel {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0)
+    }
+}
+
+impl Eq for SharedModel {}
 
 impl std::fmt::Debug for SharedModel {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -74,6 +85,9 @@ pub fn execute_in_process(model: &dyn InProcessModel, task: &Task, outputs: usiz
                 Err(InProcessError::Failed(reason)) => failure(OutcomeKind::ExitStatus, reason),
                 Err(InProcessError::Unavailable(reason)) => {
                     failure(OutcomeKind::Infrastructure, reason)
+                }
+                Err(InProcessError::Interrupted) => {
+                    failure(OutcomeKind::Lost, "interrupted before it finished".into())
                 }
                 Ok((values, _)) if values.len() != outputs => failure(
                     OutcomeKind::BadOutput,

@@ -49,7 +49,9 @@ pub mod supervised_process;
 pub mod template;
 pub mod worker;
 
-pub use campaign::{Campaign, CampaignOptions, Progress, ResumeSummary, STORE_FILE, store_path};
+pub use campaign::{
+    Campaign, CampaignOptions, Interrupt, Progress, ResumeSummary, STORE_FILE, store_path,
+};
 pub use campaign_model::CampaignModel;
 pub use error::{CampaignError, Result};
 pub use in_process::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};

@@ -25,7 +25,15 @@ pub enum StudyError {
     /// A failure of the work (a model, a file system, a numerical method).
     #[error("{0}")]
     Failure(String),
+    /// The pipeline was interrupted (its observer asked it to stop): the model runs finished so
+    /// far are stored, and a rerun continues from them.
+    #[error("{INTERRUPTED}")]
+    Interrupted,
 }
+
+/// The message of [`StudyError::Interrupted`].
+pub const INTERRUPTED: &str =
+    "interrupted: the model runs finished so far are stored; run again to continue";
 
 /// Result type of `iuq-study`.
 pub type Result<T, E = StudyError> = std::result::Result<T, E>;
@@ -40,6 +48,7 @@ impl StudyError {
     pub fn message(&self) -> &str {
         match self {
             Self::BadInput(m) | Self::Failure(m) => m,
+            Self::Interrupted => INTERRUPTED,
         }
     }
 
@@ -48,6 +57,7 @@ impl StudyError {
         match self {
             Self::BadInput(m) => Self::BadInput(format!("{context}: {m}")),
             Self::Failure(m) => Self::Failure(format!("{context}: {m}")),
+            Self::Interrupted => Self::Interrupted,
         }
     }
 
@@ -60,6 +70,9 @@ impl StudyError {
             return study.clone();
         }
         if let Some(campaign) = any.downcast_ref::<CampaignError>() {
+            if matches!(campaign, CampaignError::Interrupted) {
+                return Self::Interrupted;
+            }
             if campaign.is_bad_input() {
                 return Self::BadInput(campaign.to_string());
             }

@@ -119,13 +119,15 @@ pub fn build_posterior_with<M: Model + 'static>(
 struct StageWriter<'a> {
     out: PathBuf,
     stop_after: Option<usize>,
-    on_stage: &'a mut dyn FnMut(&BasisState),
+    on_stage: &'a mut dyn FnMut(&BasisState) -> Control,
 }
 
 impl Observer for StageWriter<'_> {
     fn observe(&mut self, state: &BasisState) -> iuq_basis::Result<Control> {
         write_checkpoint(&self.out, state).map_err(|e| BasisError::Observer(e.to_string()))?;
-        (self.on_stage)(state);
+        if (self.on_stage)(state) == Control::Stop {
+            return Ok(Control::Stop);
+        }
         if self.stop_after.is_some_and(|s| state.stage >= s) {
             return Ok(Control::Stop);
         }
@@ -282,7 +284,7 @@ pub fn sample_posterior(
     checkpoint: Option<BasisState>,
     resume_dir: Option<&Path>,
     stop_after: Option<usize>,
-    on_stage: &mut dyn FnMut(&BasisState),
+    on_stage: &mut dyn FnMut(&BasisState) -> Control,
 ) -> Result<SampledPosterior> {
     let out = out.to_path_buf();
     std::fs::create_dir_all(&out)

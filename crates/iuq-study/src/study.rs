@@ -40,18 +40,26 @@ pub enum ModelSection {
         /// The section as written, without `abscissa`.
         table: toml::Table,
     },
+    /// `kind = "callable"`: a model the program running the study supplies (a Python function
+    /// given to `iuq.calibrate`), evaluated in this process; `description` names it in the
+    /// campaign store, so that runs of another model are never taken for its runs.
+    Callable {
+        /// What the model is (the function's name and a digest of its code).
+        description: String,
+    },
     /// No `[model]` section: allowed for studies whose likelihood needs no model
     /// (`[likelihood] log_density = ...` or a `prediction` formula).
     Absent,
 }
 
 /// Model kinds a study file may name.
-pub const MODEL_KINDS: [&str; 5] = [
+pub const MODEL_KINDS: [&str; 6] = [
     "expression",
     "rbc-shear",
     "command",
     "batch-command",
     "umbridge",
+    "callable",
 ];
 
 /// The `abscissa` key of `[model]`: the name under which every run receives the data's abscissa
@@ -131,6 +139,12 @@ fn parse_model_section(mut model: StudySection<'_>) -> Result<ModelSection> {
             Ok(ModelSection::UmBridge(
                 crate::umbridge_section::parse_umbridge_section(&without, model.file())?,
             ))
+        }
+        "callable" => {
+            let description = model.string("description")?.unwrap_or_default();
+            model.allow(&["abscissa"]);
+            model.finish()?;
+            Ok(ModelSection::Callable { description })
         }
         _ => {
             let mut without = table.clone();
@@ -344,6 +358,9 @@ impl Study {
             ModelSection::Command { kind, .. } => Err(input_error(format!(
                 "{file}: key `model.kind`: this command evaluates the model in its own process; a model of kind `{kind}` runs through `iuq run` or `iuq pipeline`"
             ))),
+            ModelSection::Callable { .. } => Err(input_error(format!(
+                "{file}: key `model.kind`: a model of kind `callable` is supplied by the program that runs the study (`iuq.calibrate` in Python), not by a study file alone"
+            ))),
             ModelSection::Absent => Err(input_error(format!(
                 "{file}: section `[model]`: missing; this command needs a model"
             ))),
@@ -377,6 +394,11 @@ impl Study {
             ModelSection::RbcShear { .. } => {
                 return Err(input_error(format!(
                     "{file}: key `model.kind`: this command needs kind = \"expression\", not \"rbc-shear\""
+                )));
+            }
+            ModelSection::Callable { .. } => {
+                return Err(input_error(format!(
+                    "{file}: key `model.kind`: this command needs kind = \"expression\", not \"callable\""
                 )));
             }
             ModelSection::UmBridge(_) => {

@@ -990,6 +990,7 @@ pub(super) fn refine(
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
     let mut converged = false;
     for round in first_round..=settings.max_rounds {
+        events.check_interrupt()?;
         let started = Instant::now();
         let made: usize = groups.iter().map(GroupRuns::len).sum();
         let label = format!("adaptive-round-{round}");

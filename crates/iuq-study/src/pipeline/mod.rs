@@ -51,8 +51,8 @@ use std::time::Instant;
 use serde_json::Value;
 
 use iuq_basis::BasisState;
-use iuq_campaign::Progress;
 use iuq_campaign::campaign_model::ProgressObserver;
+use iuq_campaign::{Interrupt, Progress, SharedModel};
 use iuq_core::ParameterSpace;
 use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, SensitivityReport, analyse};
@@ -93,6 +93,9 @@ pub struct PipelineOptions {
     /// surrogate error) instead of reading back the one the campaign store recorded for the
     /// same inputs; a recomputed measurement that differs from the recorded one is reported.
     pub recompute_rounds: bool,
+    /// The model of a study whose `[model]` is of kind `callable`: supplied by the program that
+    /// runs the study (the Python package's `iuq.calibrate`), evaluated in this process.
+    pub callable: Option<SharedModel>,
 }
 
 /// What the pipeline reports while it works.
@@ -125,7 +128,18 @@ pub enum PipelineEvent<'a> {
 pub trait PipelineObserver {
     /// Look at one event.
     fn event(&mut self, event: &PipelineEvent<'_>);
+
+    /// Asked after every event and at least every [`POLL_INTERVAL`] while the pipeline works,
+    /// on the caller's thread: `true` stops the pipeline at its next check (between model runs,
+    /// sampler stages and adaptive rounds), which then returns [`StudyError::Interrupted`] with
+    /// every finished model run stored. An embedding program looks for a Ctrl-C here.
+    fn interrupted(&mut self) -> bool {
+        false
+    }
 }
+
+/// How often the pipeline asks its observer whether to stop ([`PipelineObserver::interrupted`]).
+pub const POLL_INTERVAL: std::time::Duration = std::time::Duration::from_millis(5);
 
 impl<F: FnMut(&PipelineEvent<'_>)> PipelineObserver for F {
     fn event(&mut self, event: &PipelineEvent<'_>) {
@@ -216,17 +230,37 @@ pub fn run(
     observer: &mut dyn PipelineObserver,
 ) -> Result<PipelineOutcome> {
     let (sender, receiver) = mpsc::channel();
+    let interrupt = Interrupt::default();
+    let stages_interrupt = interrupt.clone();
     std::thread::scope(|scope| {
         let stages = std::thread::Builder::new()
             .name("iuq-pipeline".into())
             // as much stack as a main thread gets
             .stack_size(8 << 20)
-            .spawn_scoped(scope, move || run_stages(study, options, &Events(sender)))
+            .spawn_scoped(scope, move || {
+                run_stages(
+                    study,
+                    options,
+                    &Events {
+                        sender,
+                        interrupt: stages_interrupt,
+                    },
+                )
+            })
             .map_err(|e| StudyError::Failure(format!("cannot start the pipeline's thread: {e}")))?;
         // Ends when the stages are done and every sender (the campaign's progress observer's
         // too) is dropped.
-        for event in receiver {
-            observer.event(&event.borrowed());
+        loop {
+            match receiver.recv_timeout(POLL_INTERVAL) {
+                Ok(event) => observer.event(&event.borrowed()),
+                Err(mpsc::RecvTimeoutError::Timeout) => {}
+                Err(mpsc::RecvTimeoutError::Disconnected) => break,
+            }
+            // Asked every time, also once raised: the observer may serve the model (a Python
+            // function evaluated on this thread) and must go on answering the runs under way.
+            if observer.interrupted() {
+                interrupt.raise();
+            }
         }
         match stages.join() {
             Ok(result) => result,
@@ -264,11 +298,24 @@ impl OwnedEvent {
 }
 
 /// The sending end of the events (an observer that has gone away is not an error).
-struct Events(mpsc::Sender<OwnedEvent>);
+struct Events {
+    sender: mpsc::Sender<OwnedEvent>,
+    /// Raised when the observer asks the pipeline to stop.
+    interrupt: Interrupt,
+}
 
 impl Events {
     fn send(&self, event: OwnedEvent) {
-        let _ = self.0.send(event);
+        let _ = self.sender.send(event);
+    }
+
+    /// [`StudyError::Interrupted`] once the observer has asked the pipeline to stop.
+    fn check_interrupt(&self) -> Result<()> {
+        if self.interrupt.is_raised() {
+            Err(StudyError::Interrupted)
+        } else {
+            Ok(())
+        }
     }
 
     fn message(&self, line: String) {
@@ -296,15 +343,23 @@ impl Events {
             checkpoint,
             Some(dir),
             None,
-            &mut |state| self.send(OwnedEvent::BasisStage(Box::new(state.clone()))),
+            &mut |state| {
+                self.send(OwnedEvent::BasisStage(Box::new(state.clone())));
+                if self.interrupt.is_raised() {
+                    iuq_basis::Control::Stop
+                } else {
+                    iuq_basis::Control::Continue
+                }
+            },
         );
         self.send(OwnedEvent::BasisFinished);
+        self.check_interrupt()?;
         sampled
     }
 
     /// The campaign's progress observer, forwarding to the pipeline's observer.
     fn campaign_progress(&self, label: &'static str) -> ProgressObserver {
-        let sender = self.0.clone();
+        let sender = self.sender.clone();
         Box::new(move |progress: &Progress| {
             let _ = sender.send(OwnedEvent::CampaignProgress {
                 label,
@@ -475,6 +530,7 @@ fn run_stages(
         study,
         &data,
         options.max_parallel,
+        options.callable.clone(),
         events,
         events.campaign_progress("model runs"),
     )?;

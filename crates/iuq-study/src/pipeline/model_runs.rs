@@ -196,9 +196,11 @@ pub fn pipeline_campaign_study(study: &Study) -> Result<CampaignStudy> {
             let table = super::array_outputs::with_array_outputs(table.clone(), per_run);
             model_campaign_text(study, table, &data.x)?
         }
-        ModelSection::Expression { .. } | ModelSection::UmBridge(_) => {
+        ModelSection::Expression { .. }
+        | ModelSection::UmBridge(_)
+        | ModelSection::Callable { .. } => {
             return Err(input_error(format!(
-                "{file}: key `model.kind`: the runs of an in-process model (expression, umbridge) are made and read by `iuq pipeline` alone"
+                "{file}: key `model.kind`: the runs of an in-process model (expression, umbridge, callable) are made and read by `iuq pipeline` alone"
             )));
         }
         ModelSection::Absent => {
@@ -217,6 +219,7 @@ impl ModelRuns {
         study: &Study,
         data: &DataLikelihood,
         max_parallel: Option<usize>,
+        callable: Option<SharedModel>,
         events: &Events,
         progress: ProgressObserver,
     ) -> Result<Self> {
@@ -318,6 +321,26 @@ impl ModelRuns {
                     Some(SharedModel(Arc::new(InProcess(model)))),
                 )
             }
+            ModelSection::Callable { description } => {
+                in_process_only("callable")?;
+                let Some(model) = callable else {
+                    return Err(input_error(format!(
+                        "{file}: key `model.kind`: a model of kind `callable` is supplied by the program that runs the study (`iuq.calibrate` in Python); `iuq pipeline` cannot run it"
+                    )));
+                };
+                let names: Vec<String> = if per_abscissa {
+                    vec!["y".to_string()]
+                } else {
+                    (0..n).map(|j| format!("y[{j}]")).collect()
+                };
+                let description = vec![
+                    "callable".to_string(),
+                    description.clone(),
+                    format!("inputs = {}", study.model_inputs().join(", ")),
+                ];
+                let table = in_process_model_table(description, &names);
+                (model_campaign_text(study, table, &data.x)?, Some(model))
+            }
             ModelSection::Absent => {
                 return Err(input_error(format!(
                     "{file}: section `[model]`: missing; the pipeline runs a model (kind = \"command\", \"expression\", \"umbridge\" or \"rbc-shear\")"
@@ -330,6 +353,7 @@ impl ModelRuns {
             CampaignOptions {
                 max_parallel,
                 in_process,
+                interrupt: Some(events.interrupt.clone()),
                 ..Default::default()
             },
         )?;

@@ -177,7 +177,10 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
         checkpoint,
         args.resume.as_deref(),
         args.stop_after,
-        &mut |state| progress.report(state),
+        &mut |state| {
+            progress.report(state);
+            iuq_basis::Control::Continue
+        },
     );
     progress.finish();
     let sampled = sampled?;

@@ -91,6 +91,7 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
         fresh: args.fresh,
         runs_only: args.runs_only,
         recompute_rounds: args.recompute_rounds,
+        callable: None,
     };
     let outcome = iuq_study::pipeline::run(&study, &options, &mut StderrObserver::default())?;
     let out = &outcome.out;

@@ -1,0 +1,494 @@
+"""Calibrate a Python function: the adaptive engine of ``iuq pipeline`` on a callable model."""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+import json
+import math
+import os
+import re
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+
+from . import _native
+from ._args import count, parameter_priors, real, seed_of, vector
+
+__all__ = ["calibrate", "CalibrationResult"]
+
+PathLike = Union[str, "os.PathLike[str]"]
+
+STUDY_FILE = "calibration.toml"
+DATA_FILE = "data.csv"
+
+
+@dataclass(frozen=True)
+class CalibrationResult:
+    """What :func:`calibrate` found.
+
+    ``samples`` (N, p) are equally weighted posterior samples of the surrogate posterior
+    (columns ``names``: the parameters, then ``sigma_m`` when the modelling error is sampled),
+    with ``log_likelihood``; ``mean``, ``std``, ``map`` and the 5 %/95 % quantiles per column.
+    ``rounds`` are the adaptive engine's rounds (runs, posterior moments, shift, surrogate error,
+    …, as ``iuq pipeline --json`` gives them), ``converged`` and ``stop_reason`` its decision;
+    ``runs`` every model evaluation in the store (parameters, outputs, status, reason);
+    ``model_runs`` and ``failed_runs`` count them. ``data`` holds the abscissae ``x``, the
+    observations ``y`` and their stds ``y_std``. ``model_posterior`` is the model's own
+    posterior (with ``model_posterior=True``). ``out`` is the pipeline's output directory
+    (report, tables, figures; ``None`` when it was temporary), ``store`` the campaign store.
+    """
+
+    names: List[str]
+    parameters: List[str]
+    samples: np.ndarray
+    log_likelihood: np.ndarray
+    mean: np.ndarray
+    std: np.ndarray
+    map: np.ndarray
+    q05: np.ndarray
+    q95: np.ndarray
+    converged: bool
+    stop_reason: str
+    rounds: List[Dict[str, Any]]
+    model_runs: int
+    failed_runs: int
+    runs: List[Dict[str, Any]]
+    data: Dict[str, np.ndarray]
+    model_posterior: Optional[Dict[str, Any]]
+    sensitivity: Optional[Dict[str, Any]]
+    out: Optional[Path]
+    store: Optional[Path]
+    seconds: float
+    posterior_predictive: Optional[np.ndarray] = field(default=None, repr=False)
+    raw: Dict[str, Any] = field(default_factory=dict, repr=False)
+
+    def summary(self) -> Dict[str, Dict[str, float]]:
+        """``{name: {"map", "mean", "std", "q05", "q95"}}`` per column."""
+        return {
+            n: {
+                "map": float(self.map[k]),
+                "mean": float(self.mean[k]),
+                "std": float(self.std[k]),
+                "q05": float(self.q05[k]),
+                "q95": float(self.q95[k]),
+            }
+            for k, n in enumerate(self.names)
+        }
+
+    def to_pandas(self):
+        """The posterior samples as a ``pandas.DataFrame`` (pandas must be installed)."""
+        import pandas as pd
+
+        return pd.DataFrame(self.samples, columns=self.names)
+
+    def to_arviz(self):
+        """The calibration as ArviZ ``InferenceData``: the posterior (one chain of the N
+        equally weighted samples), ``sample_stats`` (``lp``, the log-likelihood), the
+        ``observed_data`` ``y`` (dimension ``point``, coordinate ``x``) and, where the surrogate
+        is a GP per data point, the ``posterior_predictive`` ``y``: the surrogate's mean at each
+        posterior sample plus the likelihood's Gaussian noise (measurement and modelling error).
+        """
+        import arviz as az
+
+        posterior = {n: self.samples[None, :, k] for k, n in enumerate(self.names)}
+        coords = {"point": np.asarray(self.data["x"])}
+        dims = {"y": ["point"]}
+        kwargs: Dict[str, Any] = {
+            "posterior": posterior,
+            "sample_stats": {"lp": self.log_likelihood[None, :]},
+            "observed_data": {"y": np.asarray(self.data["y"])},
+            "coords": coords,
+            "dims": dims,
+        }
+        if self.posterior_predictive is not None:
+            kwargs["posterior_predictive"] = {"y": self.posterior_predictive[None, :, :]}
+        return az.from_dict(**kwargs)
+
+    def _repr_html_(self) -> str:
+        state = "converged" if self.converged else f"not converged ({_escape(self.stop_reason)})"
+        rows = "".join(
+            f"<tr><td>{_escape(n)}</td><td>{self.mean[k]:.5g}</td><td>{self.std[k]:.4g}</td>"
+            f"<td>{self.map[k]:.5g}</td><td>{self.q05[k]:.5g}</td><td>{self.q95[k]:.5g}</td></tr>"
+            for k, n in enumerate(self.names)
+        )
+        report = "" if self.out is None else f"<p>Report: <code>{_escape(str(self.out / 'report.html'))}</code></p>"
+        return (
+            f"<div><p><b>iuq calibration</b>: {self.model_runs} model runs ({self.failed_runs} failed), "
+            f"{len(self.rounds)} adaptive rounds, {state}, {self.seconds:.1f} s</p>"
+            "<table><thead><tr><th>parameter</th><th>mean</th><th>std</th><th>MAP</th>"
+            f"<th>5 %</th><th>95 %</th></tr></thead><tbody>{rows}</tbody></table>{report}</div>"
+        )
+
+    def __repr__(self) -> str:
+        moments = ", ".join(f"{n} = {self.mean[k]:.4g} ± {self.std[k]:.3g}" for k, n in enumerate(self.names))
+        state = "converged" if self.converged else "not converged"
+        return f"CalibrationResult({self.model_runs} runs, {len(self.rounds)} rounds, {state}: {moments})"
+
+
+def _escape(text: str) -> str:
+    return text.replace("&", "&amp;").replace("<", "&lt;").replace(">", "&gt;")
+
+
+def _toml_string(text: str) -> str:
+    return json.dumps(text, ensure_ascii=False)
+
+
+def _toml_number(value: float) -> str:
+    return repr(float(value))
+
+
+def _describe(model: Callable[..., Any], description: Optional[str]) -> str:
+    """What names the model in the store: the caller's text, else the function's qualified
+    name and a digest of its source code (so that an edited function does not reuse the runs
+    of the old one)."""
+    if description is not None:
+        return str(description)
+    name = getattr(model, "__qualname__", None) or type(model).__name__
+    module = getattr(model, "__module__", None) or ""
+    try:
+        source = inspect.getsource(model)
+    except (OSError, TypeError):
+        source = ""
+    digest = hashlib.sha256(source.encode()).hexdigest()[:16] if source else "no source"
+    return f"{module}.{name} ({digest})"
+
+
+def _write_atomically(path: Path, text: str) -> None:
+    tmp = path.with_name(f".{path.name}.tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _progress_printer(progress: Any) -> Optional[Callable[[str], Any]]:
+    """The line callback for ``progress``: ``False`` quiet; ``True`` a progress bar (tqdm's, in
+    a terminal or a notebook, where tqdm is installed) or lines on stderr; a callable gets the
+    lines."""
+    if progress is False or progress is None:
+        return None
+    if callable(progress) and progress is not True:
+        return progress
+    if progress is not True:
+        raise TypeError("progress: expected a bool or a callable taking a line of text")
+    try:
+        from tqdm.auto import tqdm
+    except ImportError:
+        return lambda line: print(line, file=sys.stderr, flush=True)
+    bar = tqdm(total=0, unit="run", desc="model runs", leave=True)
+    finished = re.compile(r"(\d+)/(\d+) finished")
+
+    def update(line: str) -> None:
+        m = finished.search(line)
+        if m:
+            done, total = int(m.group(1)), int(m.group(2))
+            if bar.total != total:
+                bar.total = total
+            bar.n = done
+            bar.refresh()
+        elif line.startswith("pipeline:"):
+            bar.set_postfix_str(line[len("pipeline: ") :][:60], refresh=True)
+
+    return update
+
+
+def calibrate(
+    model: Callable[..., Any],
+    parameters: Any,
+    y: Any,
+    y_std: Any = None,
+    *,
+    x: Any = None,
+    per_point: bool = False,
+    initial_runs: Optional[int] = None,
+    batch: int = 2,
+    max_runs: int = 300,
+    tolerance: float = 0.1,
+    modelling_error: Optional[Tuple[float, float]] = (0.001, 0.1),
+    computational_error: str = "relative",
+    posterior_check: int = 0,
+    model_posterior: bool = False,
+    samples: int = 10000,
+    sensitivity: int = 256,
+    seed: int = 0,
+    store: Optional[PathLike] = None,
+    report: Optional[PathLike] = None,
+    on_error: str = "fail",
+    batch_size: int = 16,
+    description: Optional[str] = None,
+    progress: Any = True,
+) -> CalibrationResult:
+    """Calibrate the Python function ``model`` on data with iuq's adaptive engine.
+
+    ``model`` takes an (n, d) array of parameter vectors (columns in the order of
+    ``parameters``) and returns an (n, m) array, one value per data point (or a pair
+    ``(values, std)`` of such arrays, ``std`` the model's own computational std); with
+    ``per_point=True`` it is called as ``model(theta, x)`` with θ (n, d) and the abscissae
+    ``x`` (n,) and returns (n,): one run per (θ, x). ``parameters`` gives the priors as
+    :func:`iuq.basis` takes them (``{name: (lo, hi) or {"normal": [m, s]}}``, a list of pairs,
+    or SALib's ``problem``). ``y`` (m,) are the observations, ``y_std`` their measurement stds
+    (optional), ``x`` their abscissae (default 0, 1, …). The likelihood is the prediction-error
+    likelihood of ``docs/methods.md`` §4, with a modelling error σ_m ~ U(``modelling_error``)
+    sampled with θ (``None``: left out) and the ``computational_error`` convention.
+
+    The engine (``docs/adaptive-engine.md``): an initial maximin LHS of ``initial_runs``
+    (default max(6, d + 2)) runs, then rounds of up to ``batch`` runs placed where they most
+    reduce the surrogate's error on the posterior, until every posterior mean and std is stable
+    to ``tolerance`` posterior stds and the surrogate's error could move none of them by more,
+    or ``max_runs``. Runs where the function raises or returns non-finite values are failed runs
+    (``on_error="fail"``, their reason stored) that a classifier keeps the posterior away from;
+    ``on_error="raise"`` stops and raises the exception. ``posterior_check`` runs the model at
+    the posterior's MAP and that many samples; ``model_posterior`` also gives the model's own
+    posterior, certified from the surrogate's (a few hundred runs). ``samples`` is the final
+    BASIS population, ``sensitivity`` the Sobol' base points (0: none), ``seed`` seeds everything.
+
+    With ``store`` (a directory), every evaluation is stored as it completes in
+    ``store/calibration.campaign/campaign.sqlite``; calling again with the same store reuses them
+    and continues where the last call stopped (after a crash, a kill or a ``KeyboardInterrupt``).
+    ``report`` is where the report and every table and figure go (default ``store/report``, or a
+    temporary directory). Up to ``batch_size`` runs waiting at once are evaluated in one call of
+    ``model``. ``description`` names the model in the store (default: its name and a digest of
+    its source). ``progress``: ``True`` a progress bar (tqdm, where installed) or lines on
+    stderr, ``False`` quiet, or a callable receiving each line.
+    """
+    if not callable(model):
+        raise TypeError("model: expected a callable taking an (n, d) array")
+    names, priors = parameter_priors(parameters, "parameters")
+    d = len(names)
+    values = vector("y", y)
+    m = values.shape[0]
+    std = None if y_std is None else vector("y_std", y_std, m)
+    if std is not None and not np.all(std > 0):
+        raise ValueError("y_std: every measurement std must be > 0")
+    abscissa = np.arange(m, dtype=np.float64) if x is None else vector("x", x, m)
+    if on_error not in ("raise", "fail"):
+        raise ValueError(f"on_error: `{on_error}` is not one of raise, fail")
+    if computational_error not in ("relative", "absolute-times-data", "absolute", "none"):
+        raise ValueError(
+            f"computational_error: `{computational_error}` is not one of relative, absolute-times-data, absolute, none"
+        )
+    initial = max(6, d + 2) if initial_runs is None else count("initial_runs", initial_runs, 3)
+    batch = count("batch", batch, 1)
+    max_runs = count("max_runs", max_runs, 1)
+    tolerance = real("tolerance", tolerance)
+    if not tolerance > 0:
+        raise ValueError(f"tolerance: must be > 0, got {tolerance}")
+    samples = count("samples", samples, 2)
+    sensitivity = count("sensitivity", sensitivity, 0)
+    posterior_check = count("posterior_check", posterior_check, 0)
+    batch_size = count("batch_size", batch_size, 1)
+    seed = seed_of(seed)
+    if modelling_error is not None:
+        lo, hi = (real("modelling_error", v) for v in modelling_error)
+        if not (0 < lo < hi):
+            raise ValueError(f"modelling_error: expected 0 < lo < hi, got ({lo}, {hi})")
+        modelling_error = (lo, hi)
+    for reserved in ("x", "sigma_m"):
+        if reserved in names:
+            raise ValueError(f"parameters: `{reserved}` is a name iuq uses; rename the parameter")
+
+    temporary = None
+    if store is None:
+        temporary = tempfile.TemporaryDirectory(prefix="iuq-calibrate-")
+        directory = Path(temporary.name)
+    else:
+        directory = Path(store)
+        if directory.exists() and not directory.is_dir():
+            raise ValueError(f"store: {directory} is not a directory")
+        directory.mkdir(parents=True, exist_ok=True)
+    out = Path(report) if report is not None else directory / "report"
+    try:
+        lines = ["x,y" + (",y_err" if std is not None else "")]
+        for j in range(m):
+            row = f"{float(abscissa[j])!r},{float(values[j])!r}"
+            if std is not None:
+                row += f",{float(std[j])!r}"
+            lines.append(row)
+        _write_atomically(directory / DATA_FILE, "\n".join(lines) + "\n")
+        study = [f'name = "calibration"', "[parameters]"]
+        for name, (kind, args) in zip(names, priors):
+            study.append(f"{_toml_string(name)} = {{ {kind} = [{', '.join(_toml_number(v) for v in args)}] }}")
+        data = f'file = "{DATA_FILE}", x = "x", y = "y"' + (', y_err = "y_err"' if std is not None else "")
+        study += ["[likelihood]", f"data = {{ {data} }}"]
+        if modelling_error is None:
+            study.append("modelling_error = false")
+        else:
+            study.append(f"modelling_error = {{ uniform = [{_toml_number(modelling_error[0])}, {_toml_number(modelling_error[1])}] }}")
+        study.append(f"computational_error = {_toml_string(computational_error)}")
+        study += ["[model]", 'kind = "callable"', f"description = {_toml_string(_describe(model, description))}"]
+        if per_point:
+            study.append('abscissa = "x"')
+        adaptive = f"batch = {batch}, max_runs = {max_runs}, tolerance = {_toml_number(tolerance)}"
+        study += ["[surrogate]", f'design = {{ kind = "lhs", n = {initial}, seed = {seed} }}', f"adaptive = {{ {adaptive} }}"]
+        if posterior_check > 0:
+            study.append(f"posterior_check = {{ samples = {posterior_check}, seed = {seed} }}")
+        if sensitivity > 0:
+            study += ["[sensitivity]", f"n = {sensitivity}", f"seed = {seed}"]
+        study += ["[sampler]", f"samples = {samples}", f"seed = {seed}"]
+        study += ["[model_posterior]", f"seed = {seed}", "[executor]", 'kind = "local"']
+        path = directory / STUDY_FILE
+        _write_atomically(path, "\n".join(study) + "\n")
+
+        function = model
+        if per_point:
+
+            def function(a: np.ndarray) -> Any:
+                result = model(a[:, :d], a[:, d])
+                if isinstance(result, tuple) and len(result) == 2:
+                    return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.float64)
+                return np.asarray(result, dtype=np.float64)
+
+        native = _native.Study.load(os.fspath(path))
+        text = native.calibrate(
+            os.fspath(out),
+            function,
+            1 if per_point else m,
+            on_error,
+            batch_size,
+            bool(model_posterior),
+            _progress_printer(progress),
+        )
+        raw = json.loads(text)
+        result = _result(raw, native, out, names, d, abscissa, values, std, modelling_error, seed)
+        if temporary is not None:
+            result = _without_out(result)
+        return result
+    finally:
+        if temporary is not None:
+            temporary.cleanup()
+
+
+def _without_out(result: CalibrationResult) -> CalibrationResult:
+    from dataclasses import replace
+
+    return replace(result, out=None, store=None)
+
+
+def _result(
+    raw: Dict[str, Any],
+    native: Any,
+    out: Path,
+    parameters: List[str],
+    d: int,
+    x: np.ndarray,
+    y: np.ndarray,
+    y_std: Optional[np.ndarray],
+    modelling_error: Optional[Tuple[float, float]],
+    seed: int,
+) -> CalibrationResult:
+    table = np.genfromtxt(out / "basis-gp" / "samples.csv", delimiter=",", names=True)
+    columns = [c for c in table.dtype.names if c not in ("ll", "lp")]
+    samples = np.column_stack([table[c] for c in columns]).astype(np.float64)
+    log_likelihood = np.asarray(table["ll"], dtype=np.float64)
+    names = columns
+    mean = samples.mean(axis=0)
+    std = samples.std(axis=0)
+    q05, q95 = np.quantile(samples, [0.05, 0.95], axis=0)
+    map_ = samples[int(np.argmax(log_likelihood + np.asarray(table["lp"], dtype=np.float64)))]
+    adaptive = raw.get("adaptive") or {}
+    store = _store_of(native)
+    runs = _runs(store, parameters, x)
+    failed = sum(1 for r in runs if r["status"] == "failed")
+    report = json.loads((out / "report.json").read_text()) if (out / "report.json").exists() else {}
+    sensitivity = (report.get("derived") or {}).get("sensitivity") if isinstance(report, dict) else None
+    predictive = _posterior_predictive(out, samples, d, x, y, y_std, names, seed)
+    return CalibrationResult(
+        names=names,
+        parameters=parameters,
+        samples=samples,
+        log_likelihood=log_likelihood,
+        mean=mean,
+        std=std,
+        map=map_,
+        q05=q05,
+        q95=q95,
+        converged=bool(raw.get("converged", True)),
+        stop_reason=str(adaptive.get("stop_reason", "")),
+        rounds=list(adaptive.get("rounds", [])),
+        model_runs=int(raw.get("runs", len(runs))),
+        failed_runs=failed,
+        runs=runs,
+        data={"x": x, "y": y, "y_std": y_std},
+        model_posterior=raw.get("model_posterior"),
+        sensitivity=sensitivity,
+        out=out,
+        store=store,
+        seconds=float(raw.get("seconds", 0.0)),
+        posterior_predictive=predictive,
+        raw=raw,
+    )
+
+
+def _store_of(native: Any) -> Path:
+    """The campaign store of the calibration study (``<study>.campaign/campaign.sqlite``)."""
+    path = Path(native.path)
+    return path.with_name(path.stem + ".campaign") / "campaign.sqlite"
+
+
+def _runs(store: Path, parameters: List[str], x: np.ndarray) -> List[Dict[str, Any]]:
+    """Every run in the store: its parameters by name (and ``x`` for a run per data point),
+    status, outputs and failure reason."""
+    import sqlite3
+
+    con = sqlite3.connect(f"file:{store}?mode=ro", uri=True)
+    try:
+        outputs: Dict[int, List[float]] = {}
+        for run_id, value in con.execute("select run_id, value from outputs order by run_id, position"):
+            outputs.setdefault(run_id, []).append(value)
+        rows = []
+        for run_id, params, status, reason in con.execute(
+            "select id, parameters, status, reason from runs order by id"
+        ):
+            values = json.loads(params)
+            row: Dict[str, Any] = dict(zip(parameters, values))
+            if len(values) > len(parameters):
+                row["x"] = values[len(parameters)]
+            row.update(status=status, outputs=outputs.get(run_id), reason=reason)
+            rows.append(row)
+        return rows
+    finally:
+        con.close()
+
+
+def _posterior_predictive(
+    out: Path,
+    samples: np.ndarray,
+    d: int,
+    x: np.ndarray,
+    y: np.ndarray,
+    y_std: Optional[np.ndarray],
+    names: List[str],
+    seed: int,
+    draws: int = 1000,
+) -> Optional[np.ndarray]:
+    """y_rep at the data points for up to ``draws`` posterior samples: the surrogate's mean (a
+    GP per data point, ``gp-bank.json``) plus the likelihood's Gaussian noise (σ_d² + σ_m²·y²);
+    ``None`` for a reduced-basis surrogate."""
+    bank_file = out / "gp-bank.json"
+    if not bank_file.exists():
+        return None
+    from ._gp import GaussianProcess
+
+    bank = json.loads(bank_file.read_text())
+    rng = np.random.default_rng(seed)
+    take = np.linspace(0, len(samples) - 1, min(draws, len(samples))).astype(int)
+    theta = samples[take, :d]
+    means = np.empty((len(take), len(y)))
+    with tempfile.TemporaryDirectory(prefix="iuq-bank-") as tmp:
+        for j, gp in enumerate(bank["gps"]):
+            f = Path(tmp) / f"gp-{j}.json"
+            # A GP file is a bank of one GP.
+            f.write_text(json.dumps(dict(bank, output_names=[bank["output_names"][j]], gps=[gp])))
+            model = GaussianProcess.load(f)
+            points = theta if model.dimension == d else np.column_stack([theta, np.full(len(theta), x[j])])
+            means[:, j] = model.predict(points)
+    variance = np.zeros((len(take), len(y)))
+    if y_std is not None:
+        variance += y_std[None, :] ** 2
+    if "sigma_m" in names:
+        sm = samples[take, names.index("sigma_m")]
+        variance += (sm[:, None] * y[None, :]) ** 2
+    return means + rng.standard_normal(means.shape) * np.sqrt(variance)

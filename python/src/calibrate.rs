@@ -1,0 +1,147 @@
+//! The engine of `iuq.calibrate`: the calibration pipeline of a study whose model is a Python
+//! function (`[model] kind = "callable"`).
+//!
+//! The pipeline runs its model through a campaign, whose worker threads would call the function
+//! one run each. Python code, though, is best run on the thread that called `calibrate` (the
+//! main thread): only there does a Ctrl-C raise `KeyboardInterrupt`, also inside the user's
+//! function. So each worker hands its run to that thread ([`Request`]) and waits; the caller's
+//! thread, which the pipeline asks every few milliseconds whether to stop
+//! ([`PipelineObserver::interrupted`]), evaluates every run waiting in one call of the function
+//! (a batch of up to `max_parallel` rows) and answers each worker.
+//!
+//! A `KeyboardInterrupt` (in the function or between calls), or an exception of the function
+//! with `on_error="raise"`, stops the pipeline: the runs under way are answered as interrupted
+//! (filed as lost, so a later call runs them again), every finished run stays in the store, and
+//! the exception is raised once the pipeline has stopped.
+
+use std::sync::{Arc, Mutex, mpsc};
+
+use pyo3::prelude::*;
+
+use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};
+use iuq_core::Model;
+use iuq_study::pipeline::{PipelineEvent, PipelineObserver};
+
+use crate::callable::PyModel;
+use crate::study::ProgressObserver;
+
+/// One run waiting for the caller's thread.
+struct Request {
+    parameters: Vec<f64>,
+    reply: mpsc::SyncSender<Result<InProcessOutputs, InProcessError>>,
+}
+
+/// The in-process model the campaign sees: it forwards each run to the caller's thread.
+struct ForwardedModel {
+    requests: Mutex<mpsc::Sender<Request>>,
+}
+
+impl InProcessModel for ForwardedModel {
+    fn evaluate(&self, parameters: &[f64]) -> Result<InProcessOutputs, InProcessError> {
+        let (reply, answer) = mpsc::sync_channel(1);
+        let request = Request {
+            parameters: parameters.to_vec(),
+            reply,
+        };
+        let sent = self
+            .requests
+            .lock()
+            .map_err(|_| InProcessError::Interrupted)?
+            .send(request);
+        if sent.is_err() {
+            return Err(InProcessError::Interrupted);
+        }
+        answer.recv().unwrap_or(Err(InProcessError::Interrupted))
+    }
+}
+
+/// The caller's side: progress lines, and the Python model evaluated for the waiting runs.
+pub struct CalibrationObserver {
+    progress: ProgressObserver,
+    requests: mpsc::Receiver<Request>,
+    model: PyModel,
+    stopped: bool,
+    error: Option<PyErr>,
+}
+
+/// The model the pipeline is given and the observer that evaluates it on the caller's thread.
+pub fn forwarded_model(
+    model: PyModel,
+    progress: Option<Py<PyAny>>,
+) -> (SharedModel, CalibrationObserver) {
+    let (sender, requests) = mpsc::channel();
+    let shared = SharedModel(Arc::new(ForwardedModel {
+        requests: Mutex::new(sender),
+    }));
+    let observer = CalibrationObserver {
+        progress: ProgressObserver::new(progress),
+        requests,
+        model,
+        stopped: false,
+        error: None,
+    };
+    (shared, observer)
+}
+
+impl CalibrationObserver {
+    /// The exception that stopped the pipeline (a `KeyboardInterrupt`, the model's own, or the
+    /// progress callback's), taken.
+    pub fn take_error(&mut self) -> Option<PyErr> {
+        self.error.take().or_else(|| self.progress.take_error())
+    }
+
+    fn stop(&mut self, error: Option<PyErr>) {
+        self.stopped = true;
+        if self.error.is_none() {
+            self.error = error;
+        }
+    }
+
+    fn evaluate_waiting(&mut self) {
+        let batch: Vec<Request> = self.requests.try_iter().collect();
+        if batch.is_empty() {
+            return;
+        }
+        if self.stopped {
+            for request in batch {
+                let _ = request.reply.send(Err(InProcessError::Interrupted));
+            }
+            return;
+        }
+        let points: Vec<Vec<f64>> = batch.iter().map(|r| r.parameters.clone()).collect();
+        match self.model.evaluate_batch(&points) {
+            Ok(outcomes) => {
+                for (request, outcome) in batch.into_iter().zip(outcomes) {
+                    let answer = match outcome {
+                        Ok(e) => Ok((e.outputs, e.computational_std)),
+                        Err(f) => Err(InProcessError::Failed(f.reason)),
+                    };
+                    let _ = request.reply.send(answer);
+                }
+            }
+            Err(_) => {
+                let error = self.model.take_error();
+                self.stop(error);
+                for request in batch {
+                    let _ = request.reply.send(Err(InProcessError::Interrupted));
+                }
+            }
+        }
+    }
+}
+
+impl PipelineObserver for CalibrationObserver {
+    fn event(&mut self, event: &PipelineEvent<'_>) {
+        self.progress.event(event);
+    }
+
+    fn interrupted(&mut self) -> bool {
+        self.evaluate_waiting();
+        if !self.stopped
+            && let Err(e) = Python::with_gil(|py| py.check_signals())
+        {
+            self.stop(Some(e));
+        }
+        self.stopped
+    }
+}
