@@ -24,7 +24,8 @@ else
     py="${PYTHON:-python3}"
     build_flags=()
 fi
-"$py" -m pip install --quiet "maturin>=1.5,<2" pytest numpy scikit-learn SALib scipy
+"$py" -m pip install --quiet "maturin>=1.5,<2" pytest numpy scikit-learn SALib scipy \
+    arviz pandas nbclient nbformat ipykernel
 # --no-build-isolation (in the venv): build with the maturin just installed.
 "$py" -m pip install --quiet "${build_flags[@]}" --no-deps --force-reinstall ./python
 # The command line the Python tests compare with: the binary `cargo test` built (the test

@@ -111,7 +111,7 @@ impl Surrogate {
                 let training = group.training(k);
                 if training.y.len() < 3 {
                     return Err(StudyError::Failure(format!(
-                        "{}: only {} training runs succeeded; a GP needs at least 3 (failures: {})",
+                        "{}: only {} training runs succeeded; a GP needs at least 3 (failures: {}); a larger initial design (`[surrogate] design.n`, `initial_runs` of iuq.calibrate) or narrower priors give it more",
                         describe(j),
                         training.y.len(),
                         group
