@@ -37,7 +37,9 @@ class CalibrationResult:
     ``rounds`` are the adaptive engine's rounds (runs, posterior moments, shift, surrogate error,
     …, as ``iuq pipeline --json`` gives them), ``converged`` and ``stop_reason`` its decision;
     ``runs`` every model evaluation in the store (parameters, outputs, status, reason);
-    ``model_runs`` and ``failed_runs`` count them. ``data`` holds the abscissae ``x``, the
+    ``model_runs`` and ``failed_runs`` count them, ``surrogate_runs`` those the engine made for
+    the surrogate (initial design and rounds; the rest are the posterior check's and the model
+    posterior's). ``data`` holds the abscissae ``x``, the
     observations ``y`` and their stds ``y_std``. ``model_posterior`` is the model's own
     posterior (with ``model_posterior=True``). ``out`` is the pipeline's output directory
     (report, tables, figures; ``None`` when it was temporary), ``store`` the campaign store.
@@ -56,6 +58,7 @@ class CalibrationResult:
     stop_reason: str
     rounds: List[Dict[str, Any]]
     model_runs: int
+    surrogate_runs: int
     failed_runs: int
     runs: List[Dict[str, Any]]
     data: Dict[str, np.ndarray]
@@ -408,7 +411,8 @@ def _result(
         converged=bool(raw.get("converged", True)),
         stop_reason=str(adaptive.get("stop_reason", "")),
         rounds=list(adaptive.get("rounds", [])),
-        model_runs=int(raw.get("runs", len(runs))),
+        model_runs=len(runs),
+        surrogate_runs=int(raw.get("runs", len(runs))),
         failed_runs=failed,
         runs=runs,
         data={"x": x, "y": y, "y_std": y_std},

@@ -134,6 +134,31 @@ def test_a_model_run_once_per_point_is_calibrated(tmp_path):
     assert np.all(np.abs(result.std / std - 1) < 0.1), (result.std, std)
 
 
+def test_the_posterior_check_and_the_model_posterior_run_the_function(tmp_path):
+    y = observations()
+    result = iuq.calibrate(
+        decay, PRIORS, y, np.full(X.size, NOISE), x=X, modelling_error=None, samples=4000,
+        seed=3, store=tmp_path / "s", progress=False, posterior_check=5, model_posterior=True,
+    )
+    check = result.raw["posterior_check"]
+    assert len(check) == X.size and all(point["passed"] for point in check)
+    posterior = result.model_posterior
+    assert posterior["certified"] and posterior["pareto_k"] < 0.7
+    # Importance-weighted model runs: with an effective sample size n_eff the Monte Carlo error
+    # of a mean is std/sqrt(n_eff), of a std about std/sqrt(2 n_eff); 3.5 of those.
+    n_eff = posterior["effective_sample_size"]
+    assert n_eff > 100
+    mean, std = exact_moments(y)
+    for k, name in enumerate(("a", "k")):
+        assert abs(posterior["mean"][name] - mean[k]) < 3.5 * std[k] / np.sqrt(n_eff)
+        assert abs(posterior["std"][name] / std[k] - 1) < 3.5 / np.sqrt(2 * n_eff)
+    # The store holds the engine's runs, the check's (the MAP and 5 samples, one may coincide
+    # with a stored run) and the model posterior's.
+    assert result.model_runs == len(result.runs)
+    assert 4 <= result.model_runs - result.surrogate_runs - posterior["model_runs"] <= 6
+    assert result.surrogate_runs < 30
+
+
 SCRIPT = textwrap.dedent(
     """
     import json, sys, time

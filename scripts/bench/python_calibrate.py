@@ -5,6 +5,7 @@ log-likelihood, side by side, on Python models with known posteriors.
     python3 -m venv .venv-adaptive && .venv-adaptive/bin/pip install -r scripts/bench/requirements-adaptive.txt
     .venv-adaptive/bin/pip install ./python
     .venv-adaptive/bin/python scripts/bench/python_calibrate.py [--problems decay,logistic,oscillator] [--skip-gpry]
+    .venv-adaptive/bin/python scripts/bench/python_calibrate.py --overhead   # round time at 100-500 runs
 
 Problems (synthetic data from known parameters with Gaussian noise, fixed seeds; flat priors; no
 modelling error, so that both methods calibrate the same likelihood):
@@ -86,14 +87,16 @@ def data(problem):
 
 
 def log_likelihood(problem, y, theta):
+    """ln f(D | θ) of each row (−∞ where the model fails), in one vectorised call."""
     p = PROBLEMS[problem]
+    theta = np.asarray(theta, dtype=np.float64)
     out = np.full(len(theta), -np.inf)
-    for i, row in enumerate(theta):
-        try:
-            q = simulate(problem, row[None, :])[0]
-        except Fails:
-            continue
-        out[i] = -0.5 * np.sum(((y - q) / p["noise"]) ** 2)
+    ok = np.ones(len(theta), dtype=bool)
+    if "fails" in p:
+        ok = theta[:, 0] <= p["fails"]
+    if ok.any():
+        q = simulate(problem, theta[ok])
+        out[ok] = -0.5 * np.sum(((y[None, :] - q) / p["noise"]) ** 2, axis=1)
     return out
 
 
@@ -160,11 +163,36 @@ def run_gpry(problem, y):
     return calls[0], mean, std, time.time() - started
 
 
+def overhead(sizes):
+    """iuq's own time per adaptive round with n runs already made (the decay problem, an
+    initial design of n runs, one round): the round's wall time (GP fits on n runs, the
+    replicate BASIS samplings, the surrogate error, the acquisition) and the bridge per run."""
+    import iuq
+
+    p = PROBLEMS["decay"]
+    y = data("decay")
+    print("\n| runs | round 1 (s) | initial design stage per run (ms) |")
+    print("|---|---|---|")
+    for n in sizes:
+        r = iuq.calibrate(
+            lambda t: simulate("decay", t), p["priors"], y, np.full(y.size, p["noise"]), x=p["x"],
+            modelling_error=None, initial_runs=n, max_runs=n + 2, samples=2000, seed=1,
+            progress=False, sensitivity=0,
+        )
+        stages = {s["stage"]: s["seconds"] for s in r.raw["stage_seconds"]}
+        first = r.rounds[0]["seconds"] if r.rounds else float("nan")
+        print(f"| {n} | {first:.2f} | {1000 * stages['initial and test runs'] / n:.2f} |", flush=True)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--problems", default=",".join(PROBLEMS))
     parser.add_argument("--skip-gpry", action="store_true")
+    parser.add_argument("--overhead", action="store_true", help="only the round time at 100, 250 and 500 runs")
     args = parser.parse_args()
+    if args.overhead:
+        overhead([100, 250, 500])
+        return
     rows = []
     for problem in args.problems.split(","):
         y = data(problem)
