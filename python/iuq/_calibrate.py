@@ -195,6 +195,7 @@ def _progress_printer(progress: Any) -> Optional[Callable[[str], Any]]:
         elif line.startswith("pipeline:"):
             bar.set_postfix_str(line[len("pipeline: ") :][:60], refresh=True)
 
+    update.close = bar.close  # type: ignore[attr-defined]
     return update
 
 
@@ -345,15 +346,21 @@ def calibrate(
                 return np.asarray(result, dtype=np.float64)
 
         native = _native.Study.load(os.fspath(path))
-        text = native.calibrate(
-            os.fspath(out),
-            function,
-            1 if per_point else m,
-            on_error,
-            batch_size,
-            bool(model_posterior),
-            _progress_printer(progress),
-        )
+        printer = _progress_printer(progress)
+        try:
+            text = native.calibrate(
+                os.fspath(out),
+                function,
+                1 if per_point else m,
+                on_error,
+                batch_size,
+                bool(model_posterior),
+                printer,
+            )
+        finally:
+            close = getattr(printer, "close", None)
+            if close is not None:
+                close()
         raw = json.loads(text)
         result = _result(raw, native, out, names, d, abscissa, values, std, modelling_error, seed)
         if temporary is not None:

@@ -85,6 +85,31 @@ def test_a_python_model_is_calibrated_to_its_exact_posterior(calibrated):
     assert result.store.is_file() and (result.out / "report.html").is_file()
 
 
+def test_called_again_on_its_store_it_reuses_every_run_and_reports_progress(calibrated):
+    from iuq._calibrate import _describe
+
+    result, y = calibrated
+    calls = []
+    lines = []
+
+    def counted(theta):
+        calls.append(len(theta))
+        return decay(theta)
+
+    # The store knows the model by its description (by default the function's name and a digest
+    # of its source): the same description reuses the runs.
+    again = iuq.calibrate(
+        counted, PRIORS, y, np.full(X.size, NOISE), x=X, modelling_error=None, samples=8000,
+        seed=3, store=result.store.parent.parent, progress=lines.append,
+        description=_describe(decay, None),
+    )
+    assert not calls
+    assert again.model_runs == result.model_runs
+    np.testing.assert_array_equal(again.samples, result.samples)
+    assert any(line.startswith("pipeline: adaptive round") for line in lines), lines[:5]
+    assert any(line.startswith("basis: ") for line in lines)
+
+
 def test_a_raising_model_keeps_the_posterior_out_of_its_failing_region(tmp_path):
     y = observations()
     # The model raises for k > 0.34, three posterior stds above the mean (k ≈ 0.307 ± 0.012):
