@@ -184,6 +184,44 @@ def test_the_posterior_check_and_the_model_posterior_run_the_function(tmp_path):
     assert result.surrogate_runs < 30
 
 
+def test_with_on_error_raise_the_exception_stops_the_call_as_itself(tmp_path):
+    class SolverDiverged(RuntimeError):
+        pass
+
+    def fragile(theta):
+        if np.any(theta[:, 1] > 0.5):
+            raise SolverDiverged("diverged at step 17")
+        return decay(theta)
+
+    with pytest.raises(SolverDiverged, match="diverged at step 17"):
+        iuq.calibrate(
+            fragile, PRIORS, observations(), np.full(X.size, NOISE), x=X, modelling_error=None,
+            seed=3, store=tmp_path / "s", progress=False, on_error="raise", batch_size=1,
+        )
+    # The runs finished before the exception are stored, none as failed.
+    con = sqlite3.connect(tmp_path / "s" / "calibration.campaign" / "campaign.sqlite")
+    try:
+        counts = dict(con.execute("select status, count(*) from runs group by status").fetchall())
+    finally:
+        con.close()
+    assert counts.get("failed", 0) == 0 and counts.get("succeeded", 0) >= 1, counts
+
+
+def test_non_finite_outputs_are_failed_runs_with_their_reason(tmp_path):
+    def gappy(theta):
+        out = decay(theta)
+        out[theta[:, 1] > 0.5] = np.nan
+        return out
+
+    result = iuq.calibrate(
+        gappy, PRIORS, observations(), np.full(X.size, NOISE), x=X, modelling_error=None,
+        samples=4000, seed=3, store=tmp_path / "s", progress=False,
+    )
+    failed = [r for r in result.runs if r["status"] == "failed"]
+    assert failed and all(r["k"] > 0.5 and "non-finite" in r["reason"] for r in failed)
+    assert np.all(result.samples[:, 1] < 0.5)
+
+
 SCRIPT = textwrap.dedent(
     """
     import json, sys, time
