@@ -34,6 +34,8 @@ pub struct NativeStudy {
 pub struct ProgressObserver {
     callback: Option<Py<PyAny>>,
     error: Option<PyErr>,
+    /// A Ctrl-C was seen.
+    interrupt: bool,
 }
 
 impl ProgressObserver {
@@ -42,6 +44,7 @@ impl ProgressObserver {
         Self {
             callback,
             error: None,
+            interrupt: false,
         }
     }
 
@@ -88,6 +91,19 @@ impl PipelineObserver for ProgressObserver {
             }
             PipelineEvent::BasisFinished => {}
         }
+    }
+
+    /// A Ctrl-C (a `KeyboardInterrupt` pending on this thread) stops the pipeline; the
+    /// exception is raised when it has stopped.
+    fn interrupted(&mut self) -> bool {
+        if self.error.is_some() {
+            return self.interrupt;
+        }
+        if let Err(e) = Python::with_gil(|py| py.check_signals()) {
+            self.error = Some(e);
+            self.interrupt = true;
+        }
+        self.interrupt
     }
 }
 

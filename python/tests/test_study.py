@@ -138,3 +138,59 @@ def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
     assert set(m["mean"]) == {"k", "T0"}
     expected = cli("pipeline", study_file, "--model-posterior", "--out", tmp_path / "cli")
     assert without_timings(result.raw["model_posterior"]) == without_timings(expected["model_posterior"])
+
+
+STUDY_FOR_INTERRUPT = '''
+name = "interrupted"
+[parameters]
+a = { uniform = [0.5, 4.0] }
+k = { uniform = [0.05, 0.8] }
+[likelihood]
+data = { file = "data.csv", x = "x", y = "y", y_err = "e" }
+modelling_error = false
+[model]
+kind = "expression"
+abscissa = "x"
+outputs = { y = "a * exp(-k * x)" }
+[surrogate]
+design = { kind = "lhs", n = 6, seed = 1 }
+adaptive = { batch = 1, max_runs = 200, tolerance = 0.01 }
+[sampler]
+samples = 200000
+'''
+
+INTERRUPT_SCRIPT = '''
+import sys
+import iuq
+iuq.Study.load(sys.argv[1]).run(sys.argv[2])
+'''
+
+
+def test_ctrl_c_stops_a_study_run_at_its_next_check(tmp_path):
+    """Study.run looks for a Ctrl-C between model runs, sampler stages and rounds; a GP-bank
+    fit or a sampler stage under way finishes first (under a second here)."""
+    import math
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    lines = ["x,y,e"] + [f"{x},{2.0 * math.exp(-0.3 * x):.6f},0.05" for x in (0.5, 1, 2, 3, 4, 6, 8)]
+    (tmp_path / "data.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "s.toml").write_text(STUDY_FOR_INTERRUPT)
+    (tmp_path / "run.py").write_text(INTERRUPT_SCRIPT)
+    process = subprocess.Popen(
+        [sys.executable, str(tmp_path / "run.py"), str(tmp_path / "s.toml"), str(tmp_path / "out")],
+        stderr=subprocess.PIPE, text=True,
+    )
+    # Wait until the adaptive rounds are under way.
+    deadline = time.time() + 120
+    while not (tmp_path / "out" / "adaptive" / "round-2").exists() and process.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    assert process.poll() is None, "the study ended before it could be interrupted"
+    sent = time.time()
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=60)
+    elapsed = time.time() - sent
+    assert "KeyboardInterrupt" in stderr, stderr[-2000:]
+    assert elapsed < 3.0, f"took {elapsed:.2f} s to stop"
