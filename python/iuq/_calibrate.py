@@ -325,7 +325,12 @@ def calibrate(
         study += ["[model]", 'kind = "callable"', f"description = {_toml_string(_describe(model, description))}"]
         if per_point:
             study.append('abscissa = "x"')
-        adaptive = f"batch = {batch}, max_runs = {max_runs}, tolerance = {_toml_number(tolerance)}"
+        # More samples per round only once the surrogate's error is below the tolerance: early
+        # rounds keep their cost (docs/study-file: `more_samples`).
+        adaptive = (
+            f"batch = {batch}, max_runs = {max_runs}, tolerance = {_toml_number(tolerance)}, "
+            'more_samples = "when-resolving"'
+        )
         study += ["[surrogate]", f'design = {{ kind = "lhs", n = {initial}, seed = {seed} }}', f"adaptive = {{ {adaptive} }}"]
         if posterior_check > 0:
             study.append(f"posterior_check = {{ samples = {posterior_check}, seed = {seed} }}")

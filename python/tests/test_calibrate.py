@@ -83,6 +83,10 @@ def test_a_python_model_is_calibrated_to_its_exact_posterior(calibrated):
     assert first["status"] == "succeeded"
     np.testing.assert_allclose(first["outputs"], decay(np.array([[first["a"], first["k"]]]))[0], rtol=1e-12)
     assert result.store.is_file() and (result.out / "report.html").is_file()
+    # A round samples more only once the surrogate's error is below the tolerance.
+    for before, after in zip(result.rounds, result.rounds[1:]):
+        if before["surrogate_error"] >= 0.1:
+            assert after["samples"] == before["samples"], result.rounds
 
 
 def test_called_again_on_its_store_it_reuses_every_run_and_reports_progress(calibrated):

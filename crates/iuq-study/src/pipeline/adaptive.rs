@@ -55,7 +55,7 @@ use super::Events;
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::{Acquisition, AdaptiveSettings};
+use super::settings::{Acquisition, AdaptiveSettings, MoreSamples};
 use super::surrogate::{Emulation, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
@@ -1306,8 +1306,14 @@ pub(super) fn refine(
             );
             break;
         }
-        // The shift cannot be told from the sampler's noise: sample more next round.
-        if assessment.noise.is_some_and(|n| n >= settings.tolerance) {
+        // The shift cannot be told from the sampler's noise: sample more next round (with
+        // `more_samples = "when-resolving"`, only once the surrogate's error no longer keeps the
+        // round from converging).
+        let resolving = match settings.more_samples {
+            MoreSamples::WhenNoisy => true,
+            MoreSamples::WhenResolving => assessment.surrogate_error < settings.tolerance,
+        };
+        if resolving && assessment.noise.is_some_and(|n| n >= settings.tolerance) {
             sampling.samples = (2 * sampling.samples).min(settings.max_samples);
         }
         previous = Some(moments);

@@ -197,6 +197,20 @@ pub struct AdaptiveSettings {
     pub candidates: usize,
     /// How candidates are scored (`acquisition`, default `"density"`).
     pub acquisition: Acquisition,
+    /// When a round's replicates sample more (`more_samples`, default `"when-noisy"`).
+    pub more_samples: MoreSamples,
+}
+
+/// When the next round's replicates sample twice as many (up to `max_samples`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MoreSamples {
+    /// `"when-noisy"`: whenever the sampler's noise on the shift reaches the tolerance.
+    WhenNoisy,
+    /// `"when-resolving"`: only once the surrogate's error is below the tolerance, so that the
+    /// sampler's noise is what stands between the round and convergence. Early rounds, whose
+    /// posterior moves by many stds anyway, keep their population (and their cost).
+    WhenResolving,
 }
 
 /// How the adaptive engine scores a candidate for a new run.
@@ -228,6 +242,10 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         acquisition: match s.choice("acquisition", &["density", "moments"])? {
             Some("moments") => Acquisition::Moments,
             _ => Acquisition::Density,
+        },
+        more_samples: match s.choice("more_samples", &["when-noisy", "when-resolving"])? {
+            Some("when-resolving") => MoreSamples::WhenResolving,
+            _ => MoreSamples::WhenNoisy,
         },
     };
     s.finish()?;
