@@ -21,20 +21,29 @@ holds the rest), so a cell on a rank boundary appears in several files: vertices
 (`Cell Id`, `Vertex Id`) when HemoCell wrote those datasets, else exact duplicate rows are
 dropped (the copies are synchronised, hence bit-identical).
 
-Checks made against the real HemoCell (v2.1, as the IUQ study):
-* the wall layout: oneCellShear up to HemoCell 2.1 shears between walls on the y planes (the
-  study's experiment, and the x-y projection is the shear plane); from 2.2 on (Lees-Edwards
-  commit) its walls lie on the z planes 9.5 um apart, a different, confined experiment in
-  which the cell's disk lies in the flow-vorticity plane. The direction of the velocity
-  gradient is read from HemoCell's fluid output (`Fluid.<iteration>.p.<rank>.h5`, dataset
-  `Velocity`) at the last frame; a gradient along z is refused (exit 1). Without fluid output
-  the check is skipped with a note.
+The wall layout (--layout): oneCellShear up to HemoCell 2.1 shears between walls on the y planes
+(19.5 um apart; the IUQ study's experiment, flow x, gradient y, vorticity z); from 2.2 on
+(Lees-Edwards commit 267a21d) its walls lie on the z planes, 9.5 um apart (flow x, gradient z,
+vorticity -y). Either way the frames are written in the shear frame of the study, x = flow,
+y = velocity gradient, z = vorticity, so that `iuq rbc elongation` measures the projection on the
+shear plane in both: HemoCell's (x, y, z) for the y-wall layout, (x, z, -y) for the z-wall one.
+`--layout auto` (the default) reads the direction of the velocity gradient from HemoCell's fluid
+output (`Fluid.<iteration>.p.<rank>.h5`, dataset `Velocity`) at the last frame, and takes the
+y-wall layout with a note when there is none; a named layout is checked against the fluid output
+when there is one, and a mismatch fails the run.
+
+Checks made against the real HemoCell (v2.1, the IUQ study's, and v2.7):
 * a cell HemoCell deleted: with --log (HemoCell's stdout, as run-hemocell.sh keeps it), any
   "(Delete Cells) WARNING! Particle deleted" line fails the run with that line as the reason,
   even when frames were written; a frame with fewer vertices than the cell's first output also
-  fails.
-A summary of the frames (iteration, vertices, centroid and extent in um, and the fluid's shear
-rate when available) is written to --summary (default hemocell-frames.json).
+  fails;
+* a cell that left the box: a vertex beyond a wall (--box gives the domain, oneCellShear's
+  40 x 40 x 20 nodes), or a cell split by a periodic boundary (written partly at each end of
+  the box) fails the run with the frame and the coordinates. (HemoCell on one process deletes a
+  cell that reaches a periodic boundary: the case above.)
+A summary of the frames (iteration, vertices, centroid and extent in um in HemoCell's axes, the
+layout, and the fluid's shear rate when available) is written to --summary (default
+hemocell-frames.json).
 
 Exit status: 0 with --out written; 1 when the run produced no usable frames (no output in the
 window, a deleted cell, non-finite positions: the membrane broke) or `iuq` reported a failure;
@@ -176,6 +185,47 @@ def velocity_gradient(files):
     return {name: total / count for name, (total, count) in totals.items()}
 
 
+LAYOUTS = {
+    # gradient axis, and HemoCell's axes -> the shear frame (x flow, y gradient, z vorticity)
+    "y-walls": {"gradient": "y", "walls": 1},
+    "z-walls": {"gradient": "z", "walls": 2},
+}
+
+
+def to_shear_frame(um, layout):
+    """HemoCell's coordinates (um) in the study's shear frame: x flow, y gradient, z vorticity."""
+    if layout == "z-walls":
+        return np.stack([um[:, 0], um[:, 2], -um[:, 1]], axis=1)
+    return um
+
+
+def layout_from_gradient(gradient):
+    return "z-walls" if abs(gradient["z"]) > abs(gradient["y"]) else "y-walls"
+
+
+def outside_box(um, nodes, dx_um, walls_axis):
+    """Why a frame's cell is not inside the box (None when it is): a vertex beyond a wall (the
+    wall nodes 0 and n-1), or a cell split by a periodic boundary (its vertices wrapped to both
+    sides: along that axis the largest gap between neighbouring vertex coordinates is wider than
+    the room the cell leaves in the periodic box, L - (max - min))."""
+    names = "xyz"
+    for axis in range(3):
+        low, high = float(um[:, axis].min()), float(um[:, axis].max())
+        if axis == walls_axis:
+            top = (nodes[axis] - 1) * dx_um
+            if low < 0.0 or high > top:
+                return (f"the cell left the box: vertices beyond a wall along {names[axis]} "
+                        f"({low:.2f} to {high:.2f} um; the walls at 0 and {top:.2f} um)")
+            continue
+        period = nodes[axis] * dx_um
+        gaps = np.diff(np.sort(um[:, axis]))
+        if len(gaps) and float(gaps.max()) > period - (high - low):
+            return (f"the cell lies across the periodic boundary along {names[axis]} (vertices "
+                    f"from {low:.2f} to {high:.2f} um with a gap of {float(gaps.max()):.2f} um "
+                    f"in a {period:.2f} um box)")
+    return None
+
+
 def deletion_in_log(log_path):
     """The first "(Delete Cells)" warning of HemoCell's stdout with the lines after it, or None."""
     if not log_path or not os.path.isfile(log_path):
@@ -213,13 +263,22 @@ def main(argv=None):
                         help="HemoCell's stdout: a cell deletion it reports fails the run with its message")
     parser.add_argument("--summary", default="hemocell-frames.json",
                         help="per-frame summary written here (default: hemocell-frames.json; '' for none)")
-    parser.add_argument("--layout-check", choices=["auto", "off"], default="auto",
-                        help="refuse HemoCell's z-wall layout, read from its fluid output (default: auto)")
+    parser.add_argument("--layout", choices=["auto", "y-walls", "z-walls"], default="auto",
+                        help="oneCellShear's wall layout: y-walls (HemoCell <= 2.1), z-walls (>= 2.2), or auto: "
+                             "from the fluid output's velocity gradient (default)")
+    parser.add_argument("--box", default="40,40,20", metavar="NX,NY,NZ",
+                        help="the domain in lattice nodes (default: oneCellShear's 40,40,20)")
     args = parser.parse_args(argv)
     if args.end < args.start:
         fail(f"--to {args.end} lies before --from {args.start}", 2)
     if args.frames is not None and args.frames < 2:
         fail("--frames must be at least 2", 2)
+    try:
+        nodes = [int(n) for n in args.box.split(",")]
+        if len(nodes) != 3 or min(nodes) < 2:
+            raise ValueError
+    except ValueError:
+        fail(f"--box {args.box!r}: expected three node counts of at least 2, e.g. 40,40,20", 2)
     if not os.path.isdir(args.hdf5_dir):
         fail(f"{args.hdf5_dir}: no such folder (did HemoCell run and write HDF5 output?)")
     if IMPORT_ERROR is not None:
@@ -243,18 +302,25 @@ def main(argv=None):
             )
         gradient = None
         fluid = next((t for t in sorted({t for t, _ in found}) if t.lower() == "fluid"), None)
-        if args.layout_check == "auto" and fluid and (fluid, window[-1]) in found:
+        if fluid and (fluid, window[-1]) in found:
             gradient = velocity_gradient(found[(fluid, window[-1])])
-        if gradient is None and args.layout_check == "auto":
-            print("decode-el.py: no fluid velocity output at the last frame: wall layout not checked", file=sys.stderr)
-        elif gradient is not None:
-            if abs(gradient["z"]) > abs(gradient["y"]):
+        layout = args.layout
+        if gradient is None:
+            if layout == "auto":
+                layout = "y-walls"
+                print("decode-el.py: no fluid velocity output at the last frame: the y-wall layout "
+                      "(HemoCell <= 2.1) is assumed", file=sys.stderr)
+        else:
+            sheared = layout_from_gradient(gradient)
+            if layout == "auto":
+                layout = sheared
+            elif layout != sheared:
                 raise DecodeError(
-                    "the fluid is sheared along z (du_x/dz per node "
-                    f"{gradient['z']:.3g} vs du_x/dy {gradient['y']:.3g}): this oneCellShear has its walls on the "
-                    "z planes (HemoCell >= 2.2), a different experiment from the IUQ study's (walls on the y "
-                    "planes, HemoCell <= 2.1), where the x-y projection is not the shear plane; build HemoCell "
-                    "v2.1 (scripts/hemocell/build-hemocell.sh)")
+                    f"the fluid is sheared along {LAYOUTS[sheared]['gradient']} (du_x/dy per node "
+                    f"{gradient['y']:.3g}, du_x/dz {gradient['z']:.3g}) but the layout is {layout}: "
+                    f"this oneCellShear has the {sheared} layout; run it with HEMOCELL_LAYOUT={sheared} "
+                    "(run-hemocell.sh) or --layout auto")
+        walls_axis = LAYOUTS[layout]["walls"]
         # The cell's vertex count: its first output (iteration 0 or the earliest written).
         reference_count = None
         if iterations:
@@ -283,10 +349,14 @@ def main(argv=None):
                 um = positions * (dx * 1e6)
             else:
                 um = positions
+            escaped = outside_box(um, nodes, (args.dx or dx_attribute or 0.5e-6) * 1e6, walls_axis)
+            if escaped:
+                raise DecodeError(f"iteration {iteration}: {escaped}")
+            shear = to_shear_frame(um, layout)
             path = os.path.join(args.csv_dir, f"frame_{k:02d}_iter_{iteration:012d}.csv")
             with open(path, "w") as f:
                 f.write("x,y,z\n")
-                for x, y, z in um.tolist():
+                for x, y, z in shear.tolist():
                     f.write(f"{x!r},{y!r},{z!r}\n")
             csv_files.append(path)
             summary.append({
@@ -299,7 +369,7 @@ def main(argv=None):
     except DecodeError as e:
         fail(str(e))
     if args.summary:
-        record = {"frames": summary}
+        record = {"layout": layout, "frames": summary}
         if gradient is not None:
             record["fluid_du_x_per_node"] = gradient
         with open(args.summary, "w") as f:

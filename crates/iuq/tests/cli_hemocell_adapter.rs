@@ -235,6 +235,9 @@ def value(path, tag):
 config = sys.argv[1]
 rate, tmax, tmeas = value(config, "shearrate"), int(value(config, "tmax")), int(value(config, "tmeas"))
 assert os.path.exists("RBC_HO.pos") and os.path.exists("RBC.pos"), "no position file"
+layout = os.environ.get("FAKE_LAYOUT", "y-walls")
+angles = open("RBC.pos").read().split("\n")[1].split()[3:]
+assert angles == (["0", "0", "0"] if layout == "z-walls" else ["90", "0", "0"]), angles
 material = "RBC_HO.xml"
 t_start = int(7.5 / (rate * 0.5e-7))
 iterations = [i for i in range(0, tmax + 1, tmeas) if i >= t_start][-10:]
@@ -250,7 +253,8 @@ shapes = json.loads(run.stdout)["shapes"]
 args = []
 for i, s in zip(iterations, shapes):
     args += ["--frame", str(i), s]
-subprocess.run([sys.executable, os.environ["WRITER"], "tmp/hdf5", "--ranks", "2", *args], check=True)
+extra = ["--layout", "z-walls", "--fluid", "z"] if layout == "z-walls" else []
+subprocess.run([sys.executable, os.environ["WRITER"], "tmp/hdf5", "--ranks", "2", *extra, *args], check=True)
 "#;
 
 #[test]
@@ -258,14 +262,40 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
     if skip_without_h5py("the HemoCell campaign test") {
         return;
     }
-    let dir = scratch(SUITE, "campaign");
+    // HemoCell <= 2.1 (walls on the y planes), the fake outside a HemoCell tree: the layout
+    // cannot be read before the run, y-walls is assumed (and checked by the decoder); and
+    // HemoCell >= 2.2 (walls on the z planes), the fake inside a HemoCell tree whose
+    // helper/hemocellInit.hh says so: the cell is placed by RBC-z-walls.pos, the frames are
+    // written in HemoCell 2.7's axes with its fluid output, and the EL is measured in the shear
+    // plane all the same.
+    for layout in ["y-walls", "z-walls"] {
+        campaign_with_a_fake_onecellshear(layout);
+    }
+}
+
+fn campaign_with_a_fake_onecellshear(layout: &str) {
+    let dir = scratch(SUITE, &format!("campaign-{layout}"));
     let study = hemocell_campaign_in(&dir, 3);
-    let fake = dir.join("oneCellShear");
+    let fake = if layout == "z-walls" {
+        let tree = dir.join("HemoCell");
+        std::fs::create_dir_all(tree.join("helper")).unwrap();
+        std::fs::create_dir_all(tree.join("examples/oneCellShear")).unwrap();
+        // The wall line of HemoCell 2.7's iniLatticeSquareCouette.
+        std::fs::write(
+            tree.join("helper/hemocellInit.hh"),
+            "    plb::Box3D top = plb::Box3D(0, nx-1, 0, ny-1, nz-1, nz-1);\n",
+        )
+        .unwrap();
+        tree.join("examples/oneCellShear/oneCellShear")
+    } else {
+        dir.join("oneCellShear")
+    };
     std::fs::write(&fake, FAKE_ONECELLSHEAR).unwrap();
     Command::new("chmod").arg("+x").arg(&fake).status().unwrap();
     let o = Command::new(env!("CARGO_BIN_EXE_iuq"))
         .args(["run", study.to_str().unwrap(), "--json"])
         .env("HEMOCELL_ONECELLSHEAR", &fake)
+        .env("FAKE_LAYOUT", layout)
         .env("IUQ", env!("CARGO_BIN_EXE_iuq"))
         .env(
             "WRITER",
@@ -297,6 +327,7 @@ fn the_campaign_study_runs_end_to_end_with_a_fake_onecellshear() {
         );
         let material = std::fs::read_to_string(run.join("RBC.xml")).unwrap();
         assert!(!material.contains("{{"), "{material}");
+        assert_eq!(read("hemocell-frames.json")["layout"], layout);
         checked += 1;
     }
     assert_eq!(checked, 3);

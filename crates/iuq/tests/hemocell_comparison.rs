@@ -16,8 +16,13 @@
 //!
 //! * The adapter (`run-hemocell.sh`, `decode-el.py`): HemoCell's own reason when it exits
 //!   non-zero (it prints it on stdout) reaches the campaign's record; a cell HemoCell deleted
-//!   fails the run with HemoCell's message; HemoCell's z-wall layout (v2.2 and later) is refused
-//!   from its fluid output; a frame that lost vertices fails. The HDF5 parts need h5py and are
+//!   fails the run with HemoCell's message; both wall layouts (v2.1's y walls, v2.2 and later's z
+//!   walls) decode to the same EL, a layout the fluid output contradicts fails, and so do a cell
+//!   beyond a wall, one split by the periodic boundary and a frame that lost vertices.
+//! * `data/hemocell27_vs_hemocell21.csv` (provenance: `data/hemocell27_vs_hemocell21.md`) holds
+//!   HemoCell 2.7's runs at the same 12 points beside 2.1's and the native model's:
+//!   [`the_hemocell_versions_table_is_complete_and_consistent`] checks it against its own frames,
+//!   the 2.1 table, and what its provenance says of it. The HDF5 parts need h5py and are
 //!   skipped, with the reason printed, without it.
 
 mod common;
@@ -228,27 +233,31 @@ fn write_and_decode(
 }
 
 #[test]
-fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
+fn the_decoder_reads_both_wall_layouts_and_fails_cells_deleted_or_out_of_the_box() {
     if !h5py_available("the decoder's HemoCell checks") {
         return;
     }
     let dir = scratch(SUITE, "decoder-checks");
     let (native, files) = native_frames(&dir, None);
+    let native_el = native["el"]["value"].as_f64().unwrap();
+    let decoded_el = |case: &Path| -> f64 {
+        let el: Value =
+            serde_json::from_str(&std::fs::read_to_string(case.join("el.json")).unwrap()).unwrap();
+        el["el"]["value"].as_f64().unwrap()
+    };
+    let summary_of = |case: &Path| -> Value {
+        serde_json::from_str(&std::fs::read_to_string(case.join("hemocell-frames.json")).unwrap())
+            .unwrap()
+    };
 
     // HemoCell v2.1's layout (walls on the y planes), read from its fluid output: decoded, with
     // the fluid's shear in the summary.
     let case = dir.join("y-walls");
     let o = write_and_decode(&case, &files, &["--fluid", "y"], &[]);
     assert!(o.status.success(), "{}", stderr_of(&o));
-    let el: Value =
-        serde_json::from_str(&std::fs::read_to_string(case.join("el.json")).unwrap()).unwrap();
-    assert!(
-        (el["el"]["value"].as_f64().unwrap() - native["el"]["value"].as_f64().unwrap()).abs()
-            < 1e-9
-    );
-    let summary: Value =
-        serde_json::from_str(&std::fs::read_to_string(case.join("hemocell-frames.json")).unwrap())
-            .unwrap();
+    assert!((decoded_el(&case) - native_el).abs() < 1e-9);
+    let summary = summary_of(&case);
+    assert_eq!(summary["layout"], "y-walls");
     assert_eq!(summary["frames"].as_array().unwrap().len(), 10);
     assert_eq!(summary["frames"][0]["vertices"], 642);
     let g = &summary["fluid_du_x_per_node"];
@@ -256,22 +265,75 @@ fn the_decoder_refuses_the_z_wall_layout_and_cells_hemocell_deleted() {
     assert!((g["y"].as_f64().unwrap() - 2.5e-3).abs() < 1e-6, "{g}");
     assert!(g["z"].as_f64().unwrap().abs() < 1e-9, "{g}");
 
-    // HemoCell >= 2.2 (walls on the z planes): refused, with the reason.
+    // HemoCell >= 2.2 (walls on the z planes, the shear plane x-z): the same shapes turned into
+    // that layout decode to the same EL, the layout read from the fluid output ...
     let case = dir.join("z-walls");
-    let o = write_and_decode(&case, &files, &["--fluid", "z"], &[]);
+    let o = write_and_decode(&case, &files, &["--fluid", "z", "--layout", "z-walls"], &[]);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    assert!((decoded_el(&case) - native_el).abs() < 1e-9);
+    let summary = summary_of(&case);
+    assert_eq!(summary["layout"], "z-walls");
+    // HemoCell's axes in the summary: the cell's thin direction is y (vorticity) here.
+    let extent = &summary["frames"][0]["extent_um"];
+    assert!(
+        extent[2].as_f64().unwrap() > extent[1].as_f64().unwrap(),
+        "{extent}"
+    );
+    // ... or named, without fluid output.
+    let case = dir.join("z-walls-named");
+    let o = write_and_decode(
+        &case,
+        &files,
+        &["--layout", "z-walls"],
+        &["--layout", "z-walls"],
+    );
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    assert!((decoded_el(&case) - native_el).abs() < 1e-9);
+    // A named layout the fluid output contradicts fails the run, saying which it is.
+    let case = dir.join("z-walls-named-wrong");
+    let o = write_and_decode(
+        &case,
+        &files,
+        &["--fluid", "z", "--layout", "z-walls"],
+        &["--layout", "y-walls"],
+    );
     assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
     let last = last_stderr_line(&o);
     assert!(last.contains("the fluid is sheared along z"), "{last}");
-    assert!(last.contains("HemoCell >= 2.2"), "{last}");
+    assert!(last.contains("HEMOCELL_LAYOUT=z-walls"), "{last}");
     assert!(!case.join("el.json").exists());
-    // ... unless the check is turned off.
+
+    // A cell beyond a wall (a gap of 12 nodes instead of 20): failed with the frame, never a
+    // number.
+    let case = dir.join("beyond-a-wall");
     let o = write_and_decode(
-        &dir.join("z-walls-unchecked"),
+        &case,
         &files,
-        &["--fluid", "z"],
-        &["--layout-check", "off"],
+        &["--fluid", "z", "--layout", "z-walls"],
+        &["--box", "40,40,12"],
     );
-    assert!(o.status.success(), "{}", stderr_of(&o));
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
+    let last = last_stderr_line(&o);
+    assert!(
+        last.contains("iteration 100: the cell left the box: vertices beyond a wall along z"),
+        "{last}"
+    );
+    assert!(!case.join("el.json").exists());
+    // A cell split by the periodic boundary along x (moved by 15 nodes and wrapped): failed too.
+    let case = dir.join("across-the-periodic-boundary");
+    let o = write_and_decode(
+        &case,
+        &files,
+        &["--fluid", "z", "--layout", "z-walls", "--wrap-x", "15"],
+        &[],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
+    let last = last_stderr_line(&o);
+    assert!(
+        last.contains("the cell lies across the periodic boundary along x"),
+        "{last}"
+    );
+    assert!(!case.join("el.json").exists());
 
     // A cell HemoCell deleted: its warning in HemoCell's stdout fails the run, frames or not.
     let case = dir.join("deleted");
@@ -351,6 +413,58 @@ const KNOWN_DISAGREEMENTS: [(f64, f64, f64, f64, f64, &str); 3] = [
     ),
 ];
 
+#[test]
+fn the_hemocell_versions_table_is_complete_and_consistent() {
+    let reference = read_table();
+    let rows = read_table_at(&versions_table_path());
+    assert_eq!(rows.len(), 12);
+    for row in &rows {
+        let point = row.point();
+        assert_eq!(row.0["v2.7_status"], "succeeded", "{point:?}");
+        // The summary columns are those of the 10 frames.
+        let frames = row.frames("v2.7_el_frames");
+        assert_eq!(frames.len(), 10, "{point:?}");
+        let (m, s) = mean_std(&frames);
+        assert!((m - row.f("v2.7_el_mean")).abs() < 5e-6, "{point:?}");
+        assert!((s - row.f("v2.7_el_std")).abs() < 5e-6, "{point:?}");
+        // The 2.1 and native columns are the 2.1 table's, at the same point.
+        let r = reference
+            .iter()
+            .find(|r| r.point() == point)
+            .unwrap_or_else(|| panic!("{point:?} is not a point of the 2.1 table"));
+        for (ours, theirs) in [
+            ("v2.1_el_mean", "hemocell_el_mean"),
+            ("v2.1_el_std", "hemocell_el_std"),
+            ("native_el_mean", "native_hemocell_orientation_mean"),
+            ("native_el_std", "native_hemocell_orientation_std"),
+        ] {
+            assert!((row.f(ours) - r.f(theirs)).abs() < 5e-6, "{point:?} {ours}");
+        }
+        let diff = row.f("v2.7_el_mean") - row.f("v2.1_el_mean");
+        assert!((diff - row.f("diff_v2.7_v2.1")).abs() < 5e-6, "{point:?}");
+        let z = diff / (row.f("v2.7_el_std").powi(2) + row.f("v2.1_el_std").powi(2)).sqrt();
+        assert!(
+            (z - row.f("z_v2.7_v2.1")).abs() < 1e-3 * z.abs(),
+            "{point:?}"
+        );
+        // What the provenance says: 2.7's cell is longer at every point, by 0.07-0.17.
+        assert!((0.07..0.17).contains(&diff), "{point:?}: {diff}");
+    }
+    // ... and EL falls with kLink at every stress and rises with stress for every cell, in 2.7
+    // as in 2.1 (the points are sorted by kLink, then stress).
+    for (i, a) in rows.iter().enumerate() {
+        for b in &rows[i + 1..] {
+            let (pa, pb) = (a.point(), b.point());
+            if pa.3 == pb.3 && pa.0 < pb.0 {
+                assert!(a.f("v2.7_el_mean") > b.f("v2.7_el_mean"), "{pa:?} {pb:?}");
+            }
+            if pa.0 == pb.0 && pa.3 < pb.3 {
+                assert!(a.f("v2.7_el_mean") < b.f("v2.7_el_mean"), "{pa:?} {pb:?}");
+            }
+        }
+    }
+}
+
 /// One row of `data/hemocell_vs_native.csv`, by column name.
 struct Row(BTreeMap<String, String>);
 
@@ -383,7 +497,11 @@ impl Row {
 }
 
 fn read_table() -> Vec<Row> {
-    let text = std::fs::read_to_string(table_path()).expect("data/hemocell_vs_native.csv");
+    read_table_at(&table_path())
+}
+
+fn read_table_at(path: &Path) -> Vec<Row> {
+    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let mut lines = text.lines();
     let header: Vec<String> = lines.next().unwrap().split(',').map(String::from).collect();
     lines
@@ -397,6 +515,11 @@ fn read_table() -> Vec<Row> {
                 .collect())
         })
         .collect()
+}
+
+/// HemoCell 2.7's runs at the same 12 points (provenance: `data/hemocell27_vs_hemocell21.md`).
+fn versions_table_path() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/hemocell27_vs_hemocell21.csv")
 }
 
 fn table_path() -> PathBuf {

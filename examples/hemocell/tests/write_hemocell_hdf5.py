@@ -4,7 +4,8 @@ HemoCell.
 
     write_hemocell_hdf5.py OUT_DIR --frame ITERATION SHAPE.vtk [--frame ITERATION SHAPE.vtk ...]
                            [--ranks 3] [--unit m|lattice] [--cell-type RBC_HO] [--with-ids]
-                           [--fluid y|z] [--drop-vertices ITERATION:N]
+                           [--fluid y|z] [--layout y-walls|z-walls] [--drop-vertices ITERATION:N]
+                           [--wrap-x NODES]
 
 Each SHAPE is a legacy ASCII VTK file of `iuq rbc shear --shape-out` (lattice units, HemoCell's
 frame). For every frame this writes OUT_DIR/<iteration, 12 digits>/<type>.<iteration>.p.<rank>.h5
@@ -21,6 +22,12 @@ vertices (each vertex exactly once), the other layout a reader must handle. --wi
 dataset (nz+2, ny+2, nx+2, 3) in m/s (ParaView order, one envelope node around the block, as
 HemoCell v2.1 writes it): a Couette flow u_x = gamma (c - c_mid) along y (HemoCell <= 2.1's
 oneCellShear, walls on the y planes) or z (HemoCell >= 2.2, walls on the z planes).
+--layout z-walls writes the shapes as HemoCell >= 2.2 holds them (walls on the z planes): the
+shear frame of the shapes (x flow, y gradient, z vorticity) turned into HemoCell's axes (x flow,
+z gradient, -y vorticity) and moved to the middle of the 20-node gap; y-walls (the default)
+writes them as they are (HemoCell <= 2.1).
+--wrap-x NODES moves the cell along x by NODES and wraps each vertex into the periodic box
+(0 <= x < 40): a cell split by the periodic boundary, as HemoCell would hold one that crossed it.
 --drop-vertices ITERATION:N leaves the last N vertices out of that iteration's frame (a cell
 HemoCell lost part of).
 """
@@ -76,6 +83,8 @@ def main():
     parser.add_argument("--split", action="store_true")
     parser.add_argument("--with-ids", action="store_true")
     parser.add_argument("--fluid", choices=["y", "z"], default=None)
+    parser.add_argument("--layout", choices=["y-walls", "z-walls"], default="y-walls")
+    parser.add_argument("--wrap-x", type=float, default=None)
     parser.add_argument("--drop-vertices", default=None, metavar="ITERATION:N")
     args = parser.parse_args()
     drop = {}
@@ -86,6 +95,11 @@ def main():
     for iteration_text, shape in args.frame:
         iteration = int(iteration_text)
         points, triangles = read_vtk(shape)
+        if args.layout == "z-walls":
+            points = to_z_walls(points)
+        if args.wrap_x is not None:
+            points = points.copy()
+            points[:, 0] = np.mod(points[:, 0] + args.wrap_x, DOMAIN[0])
         if drop.get(iteration):
             points = points[: len(points) - drop[iteration]]
         folder = os.path.join(args.out_dir, f"{iteration:012d}")
@@ -118,6 +132,17 @@ def main():
         if args.fluid:
             write_fluid(os.path.join(folder, f"Fluid.{iteration:012d}.p.0.h5"), iteration, args.fluid)
     return 0
+
+
+def to_z_walls(points):
+    """Shear-frame lattice coordinates (x flow, y gradient about node 19.5 of 40, z vorticity
+    about 9.5 of 20) as HemoCell >= 2.2 holds them: x flow, z gradient about node 9.5 of 20,
+    y = -vorticity about 19.5 of 40."""
+    nx, ny, nz = DOMAIN
+    x, y, z = points[:, 0], points[:, 1], points[:, 2]
+    gradient = y - (ny - 1) / 2.0
+    vorticity = z - (nz - 1) / 2.0
+    return np.stack([x, (ny - 1) / 2.0 - vorticity, (nz - 1) / 2.0 + gradient], axis=1)
 
 
 def write_fluid(path, iteration, axis):

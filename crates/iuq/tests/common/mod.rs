@@ -159,6 +159,7 @@ pub fn hemocell_campaign_in(dir: &Path, n: usize) -> PathBuf {
         "config.xml",
         "RBC.xml",
         "RBC.pos",
+        "RBC-z-walls.pos",
         "run-hemocell.sh",
         "decode-el.py",
     ] {
