@@ -24,6 +24,12 @@ use crate::calibrate::forwarded_model;
 use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure, study_error};
 
+/// How long a Ctrl-C waits for the pipeline to reach its next check before the
+/// `KeyboardInterrupt` is raised anyway (the pipeline then stops on its own, and the next call
+/// waits for it): a GP fit or a sampler stage on hundreds of runs takes seconds, and a Ctrl-C
+/// must interrupt within a second.
+const INTERRUPT_GRACE: std::time::Duration = std::time::Duration::from_millis(400);
+
 /// A study file, loaded and checked.
 #[pyclass(name = "Study", module = "iuq._native", frozen)]
 pub struct NativeStudy {
@@ -167,6 +173,7 @@ impl NativeStudy {
             runs_only,
             recompute_rounds,
             callable: None,
+            interrupt_grace: Some(INTERRUPT_GRACE),
         };
         let mut observer = ProgressObserver::new(progress);
         let result =
@@ -208,6 +215,7 @@ impl NativeStudy {
             runs_only: false,
             recompute_rounds: false,
             callable: Some(shared),
+            interrupt_grace: Some(INTERRUPT_GRACE),
         };
         let result =
             py.allow_threads(|| iuq_study::pipeline::run(&self.study, &options, &mut observer));

@@ -320,6 +320,55 @@ def test_ctrl_c_interrupts_within_a_second_and_leaves_the_store_consistent(tmp_p
     assert counts.get("succeeded", 0) == 2 and counts.get("failed", 0) == 0, counts
 
 
+ENGINE_SCRIPT = textwrap.dedent(
+    """
+    import json, sys
+    import numpy as np
+    import iuq
+    X = np.linspace(0.5, 8.0, 40)
+    def model(theta):
+        with open(sys.argv[2], "a") as log:
+            log.write(f"{len(theta)}\\n")
+        return theta[:, 0:1] * np.exp(-theta[:, 1:2] * X[None, :])
+    rng = np.random.default_rng(11)
+    y = 2.0 * np.exp(-0.3 * X) + rng.normal(0, 0.05, X.size)
+    iuq.calibrate(model, {"a": (0.5, 4.0), "k": (0.05, 0.8)}, y, np.full(X.size, 0.05), x=X,
+                  modelling_error=None, initial_runs=400, seed=3, store=sys.argv[1],
+                  progress=False, sensitivity=0)
+    """
+)
+
+
+def test_ctrl_c_interrupts_the_engine_within_a_second(tmp_path):
+    # 400 initial runs of a cheap 40-point curve, then the engine's work on them: 40 GP fits on
+    # 400 runs, several seconds without a check of the pipeline's (without the grace, the
+    # KeyboardInterrupt waited for them: 5-7 s here). The interrupt arrives there.
+    script = tmp_path / "calibrate_engine.py"
+    script.write_text(ENGINE_SCRIPT)
+    store, log = tmp_path / "store", tmp_path / "calls.log"
+    process = subprocess.Popen([sys.executable, str(script), str(store), str(log)], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while sum(map(int, log.read_text().split())) < 400 if log.exists() else True:
+        assert process.poll() is None and time.time() < deadline, "the initial runs did not finish"
+        time.sleep(0.02)
+    time.sleep(0.5)
+    assert process.poll() is None
+    sent = time.time()
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    elapsed = time.time() - sent
+    assert "KeyboardInterrupt" in stderr, stderr[-2000:]
+    assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
+    database = store / "calibration.campaign" / "campaign.sqlite"
+    con = sqlite3.connect(database)
+    try:
+        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
+        counts = dict(con.execute("select status, count(*) from runs group by status").fetchall())
+    finally:
+        con.close()
+    assert counts.get("succeeded", 0) == 400, counts
+
+
 def test_to_arviz_round_trips_through_arviz_summary(calibrated):
     az = pytest.importorskip("arviz")
     result, y = calibrated

@@ -5,7 +5,7 @@ posteriors.
 
     python3 -m venv .venv-adaptive && .venv-adaptive/bin/pip install -r scripts/bench/requirements-adaptive.txt
     cargo build --release -p iuq
-    .venv-adaptive/bin/python scripts/bench/adaptive_calibration.py [--problems cooling,logistic,oscillator] [--skip-gpry]
+    .venv-adaptive/bin/python scripts/bench/adaptive_calibration.py [--problems cooling,logistic,oscillator] [--skip-gpry] [--skip-lhs] [--skip-adaptive]
 
 Each problem is a model y(θ, x) evaluated at the data's abscissae in one run (the "curve" shape:
 one run per parameter vector returns every data point as one array, `output.array`), with
@@ -275,6 +275,7 @@ def main():
     parser.add_argument("--skip-gpry", action="store_true")
     parser.add_argument("--work", default=str(ROOT / "target" / "bench-adaptive"))
     parser.add_argument("--skip-lhs", action="store_true", help="leave out the one-shot designs")
+    parser.add_argument("--skip-adaptive", action="store_true", help="leave out iuq's adaptive engine")
     parser.add_argument("--results", help="append each row to this CSV as it is measured")
     args = parser.parse_args()
     if args.model:
@@ -311,8 +312,8 @@ def main():
         truth = {k: (t["mean"][k], t["std"][k]) for k in PROBLEMS[problem]["parameters"]}
         print(f"\n{problem}: truth " + ", ".join(f"{k} = {m:.5g} ± {s:.3g}" for k, (m, s) in truth.items()))
 
-        variants = [("iuq adaptive", False)]
-        if len(PROBLEMS[problem]["x"]) >= REDUCED_BASIS_MIN_POINTS:
+        variants = [] if args.skip_adaptive else [("iuq adaptive", False)]
+        if not args.skip_adaptive and len(PROBLEMS[problem]["x"]) >= REDUCED_BASIS_MIN_POINTS:
             variants.append(("iuq adaptive, reduced basis", True))
         for method, reduced in variants:
             name = "adaptive-rb" if reduced else "adaptive"

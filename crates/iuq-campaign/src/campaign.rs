@@ -434,6 +434,9 @@ impl Campaign {
         let mut last_report: Option<Instant> = None;
         loop {
             let interrupted = self.interrupt.as_ref().is_some_and(Interrupt::is_raised);
+            if interrupted {
+                self.executor.stop_starting();
+            }
             let free = if interrupted {
                 0
             } else {

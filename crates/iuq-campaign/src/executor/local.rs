@@ -6,6 +6,7 @@
 //! kernel start time, so a reused pid is never mistaken for them), kills their process groups
 //! and declares those attempts lost; tasks whose `result.json` was written are ingested instead.
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, Sender, channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -23,7 +24,7 @@ use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
 };
 use crate::in_process::{SharedModel, execute_in_process};
-use crate::outcome::{OutcomeKind, host_name, unix_now};
+use crate::outcome::{OutcomeKind, RunResult, TaskReport, host_name, unix_now};
 use crate::study::ExecutorKind;
 use crate::supervised_process::signal_group;
 use crate::worker::{CompiledSpec, execute_task, process_start_ticks, read_status};
@@ -38,6 +39,8 @@ pub struct LocalExecutor {
     tasks: Option<Sender<SubmittedTask>>,
     events: Receiver<(bool, Vec<ExecutorEvent>)>,
     threads: Vec<JoinHandle<()>>,
+    /// Raised by [`Executor::stop_starting`]: the workers start no more tasks.
+    stop_starting: Arc<AtomicBool>,
 }
 
 impl std::fmt::Debug for LocalExecutor {
@@ -68,6 +71,7 @@ impl LocalExecutor {
         let task_rx = Arc::new(Mutex::new(task_rx));
         let spec = Arc::new(spec);
         let host = host_name();
+        let stop_starting = Arc::new(AtomicBool::new(false));
         let threads = (0..capacity)
             .map(|_| {
                 let task_rx = Arc::clone(&task_rx);
@@ -75,6 +79,7 @@ impl LocalExecutor {
                 let spec = Arc::clone(&spec);
                 let host = host.clone();
                 let in_process = in_process.clone();
+                let stop_starting = Arc::clone(&stop_starting);
                 std::thread::spawn(move || {
                     loop {
                         let next = match task_rx.lock() {
@@ -82,13 +87,17 @@ impl LocalExecutor {
                             Err(_) => return,
                         };
                         let Ok(task) = next else { return };
-                        let report = execute_task_with_start(
-                            &spec,
-                            in_process.as_ref(),
-                            &task,
-                            &event_tx,
-                            &host,
-                        );
+                        let report = if stop_starting.load(Ordering::SeqCst) {
+                            report_events(&task, not_started(&task, &host))
+                        } else {
+                            execute_task_with_start(
+                                &spec,
+                                in_process.as_ref(),
+                                &task,
+                                &event_tx,
+                                &host,
+                            )
+                        };
                         if event_tx.send((true, report)).is_err() {
                             return;
                         }
@@ -103,7 +112,35 @@ impl LocalExecutor {
             tasks: Some(task_tx),
             events: event_rx,
             threads,
+            stop_starting,
         }
+    }
+}
+
+/// The report of a task the worker did not start: every run lost.
+fn not_started(task: &SubmittedTask, host: &str) -> TaskReport {
+    let now = unix_now();
+    TaskReport {
+        runs: task
+            .task
+            .runs
+            .iter()
+            .map(|run| {
+                RunResult::failure(
+                    run.run_id,
+                    run.attempt,
+                    OutcomeKind::Lost,
+                    "interrupted before it started",
+                )
+            })
+            .collect(),
+        exit_code: None,
+        signal: None,
+        host: host.to_string(),
+        pid: None,
+        started_at: now,
+        finished_at: now,
+        stderr_tail: String::new(),
     }
 }
 
@@ -169,6 +206,10 @@ impl Executor for LocalExecutor {
 
     fn in_flight(&self) -> usize {
         self.in_flight
+    }
+
+    fn stop_starting(&mut self) {
+        self.stop_starting.store(true, Ordering::SeqCst);
     }
 
     fn submit(&mut self, tasks: Vec<SubmittedTask>) -> Result<Vec<(i64, String)>> {

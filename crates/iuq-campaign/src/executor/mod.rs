@@ -83,6 +83,12 @@ pub trait Executor: Send {
     /// were not found: keep tracking those still running, and return events for the others
     /// (finished, or lost).
     fn reattach(&mut self, tasks: Vec<OpenTask>) -> Result<Vec<ExecutorEvent>>;
+
+    /// Start none of the submitted tasks that have not started yet (the campaign was asked to
+    /// stop): each is reported finished with its runs lost, "interrupted before it started",
+    /// so that a later campaign runs them; tasks under way go on. An executor whose tasks
+    /// start elsewhere (a scheduler's queue) has nothing to hold back.
+    fn stop_starting(&mut self) {}
 }
 
 /// Events for every run of `task` from its worker report; runs missing from the report fail as

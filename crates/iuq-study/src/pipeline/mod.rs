@@ -96,6 +96,13 @@ pub struct PipelineOptions {
     /// The model of a study whose `[model]` is of kind `callable`: supplied by the program that
     /// runs the study (the Python package's `iuq.calibrate`), evaluated in this process.
     pub callable: Option<SharedModel>,
+    /// How long [`run`] waits, once its observer asked it to stop, for the pipeline to reach its
+    /// next check (between model runs, sampler stages, adaptive rounds). Past it, `run` returns
+    /// [`StudyError::Interrupted`] at once and leaves the pipeline's thread to stop on its own
+    /// (a GP fit or a sampler stage on many runs can take seconds); the next [`run`] in this
+    /// process waits for such a thread before it starts, so two pipelines never share a store.
+    /// `None` (the CLI's): wait for the thread.
+    pub interrupt_grace: Option<std::time::Duration>,
 }
 
 /// What the pipeline reports while it works.
@@ -229,44 +236,80 @@ pub fn run(
     options: &PipelineOptions,
     observer: &mut dyn PipelineObserver,
 ) -> Result<PipelineOutcome> {
+    wait_for_interrupted_pipelines(observer);
     let (sender, receiver) = mpsc::channel();
     let interrupt = Interrupt::default();
     let stages_interrupt = interrupt.clone();
-    std::thread::scope(|scope| {
-        let stages = std::thread::Builder::new()
-            .name("iuq-pipeline".into())
-            // as much stack as a main thread gets
-            .stack_size(8 << 20)
-            .spawn_scoped(scope, move || {
-                run_stages(
-                    study,
-                    options,
-                    &Events {
-                        sender,
-                        interrupt: stages_interrupt,
-                    },
-                )
-            })
-            .map_err(|e| StudyError::Failure(format!("cannot start the pipeline's thread: {e}")))?;
-        // Ends when the stages are done and every sender (the campaign's progress observer's
-        // too) is dropped.
-        loop {
-            match receiver.recv_timeout(POLL_INTERVAL) {
-                Ok(event) => observer.event(&event.borrowed()),
-                Err(mpsc::RecvTimeoutError::Timeout) => {}
-                Err(mpsc::RecvTimeoutError::Disconnected) => break,
-            }
-            // Asked every time, also once raised: the observer may serve the model (a Python
-            // function evaluated on this thread) and must go on answering the runs under way.
-            if observer.interrupted() {
-                interrupt.raise();
-            }
+    let (stages_study, stages_options) = (study.clone(), options.clone());
+    let stages = std::thread::Builder::new()
+        .name("iuq-pipeline".into())
+        // as much stack as a main thread gets
+        .stack_size(8 << 20)
+        .spawn(move || {
+            run_stages(
+                &stages_study,
+                &stages_options,
+                &Events {
+                    sender,
+                    interrupt: stages_interrupt,
+                },
+            )
+        })
+        .map_err(|e| StudyError::Failure(format!("cannot start the pipeline's thread: {e}")))?;
+    let mut asked_to_stop: Option<std::time::Instant> = None;
+    // Ends when the stages are done and every sender (the campaign's progress observer's too)
+    // is dropped.
+    loop {
+        match receiver.recv_timeout(POLL_INTERVAL) {
+            Ok(event) => observer.event(&event.borrowed()),
+            Err(mpsc::RecvTimeoutError::Timeout) => {}
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
         }
-        match stages.join() {
-            Ok(result) => result,
-            Err(panic) => std::panic::resume_unwind(panic),
+        // Asked every time, also once raised: the observer may serve the model (a Python
+        // function evaluated on this thread) and must go on answering the runs under way.
+        if observer.interrupted() {
+            interrupt.raise();
+            asked_to_stop.get_or_insert_with(std::time::Instant::now);
         }
-    })
+        if let (Some(asked), Some(grace)) = (asked_to_stop, options.interrupt_grace)
+            && asked.elapsed() >= grace
+        {
+            INTERRUPTED_PIPELINES
+                .lock()
+                .unwrap_or_else(std::sync::PoisonError::into_inner)
+                .push(stages);
+            return Err(StudyError::Interrupted);
+        }
+    }
+    match stages.join() {
+        Ok(result) => result,
+        Err(panic) => std::panic::resume_unwind(panic),
+    }
+}
+
+/// The threads of pipelines that [`run`] returned from before they stopped
+/// ([`PipelineOptions::interrupt_grace`]), each stopping at its next check.
+static INTERRUPTED_PIPELINES: std::sync::Mutex<
+    Vec<std::thread::JoinHandle<Result<PipelineOutcome>>>,
+> = std::sync::Mutex::new(Vec::new());
+
+/// Wait until every pipeline thread an interrupted [`run`] left behind has stopped (they may
+/// hold the same campaign store), telling `observer` when there is one to wait for.
+fn wait_for_interrupted_pipelines(observer: &mut dyn PipelineObserver) {
+    let waiting: Vec<_> = INTERRUPTED_PIPELINES
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+        .drain(..)
+        .collect();
+    if waiting.iter().any(|t| !t.is_finished()) {
+        observer.event(&PipelineEvent::Message(
+            "waiting for the interrupted pipeline to reach its next check and stop",
+        ));
+    }
+    for thread in waiting {
+        // Its outcome is an interruption or an error nobody asked for any more.
+        let _ = thread.join();
+    }
 }
 
 /// An event on its way from the pipeline's thread to the observer.

@@ -30,7 +30,7 @@ use toml::{Table, Value};
 use iuq_campaign::campaign_model::ProgressObserver;
 use iuq_campaign::{
     CampaignModel, CampaignOptions, CampaignStudy, InProcessError, InProcessModel,
-    InProcessOutputs, SharedModel,
+    InProcessOutputs, Interrupt, SharedModel,
 };
 use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
 
@@ -67,6 +67,9 @@ pub struct ModelRuns {
     /// A command model's `[model]` table, the study file and the length its arrays must have,
     /// for the input error of an array of another length.
     array_check: Option<(Table, String, String)>,
+    /// Raised when the pipeline's observer asked it to stop: the campaign's error is then the
+    /// interruption.
+    interrupt: Interrupt,
 }
 
 /// A [`Model`] evaluated one point at a time as an in-process campaign model.
@@ -397,6 +400,7 @@ impl ModelRuns {
                 )),
                 _ => None,
             },
+            interrupt: events.interrupt.clone(),
         })
     }
 
@@ -482,7 +486,16 @@ impl ModelRuns {
                 x
             })
             .collect();
-        let outcomes = self.campaign.evaluate_labelled(label, &points)?;
+        let outcomes = self
+            .campaign
+            .evaluate_labelled(label, &points)
+            .map_err(|e| {
+                if self.interrupt.is_raised() {
+                    StudyError::Interrupted
+                } else {
+                    StudyError::from(e)
+                }
+            })?;
         if let Some((model, file, expected)) = &self.array_check {
             super::array_outputs::check_lengths(file, Some(model), &outcomes, expected)?;
         }

@@ -92,6 +92,8 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
         runs_only: args.runs_only,
         recompute_rounds: args.recompute_rounds,
         callable: None,
+        // The process ends on a Ctrl-C anyway; a stop asked otherwise waits for the pipeline.
+        interrupt_grace: None,
     };
     let outcome = iuq_study::pipeline::run(&study, &options, &mut StderrObserver::default())?;
     let out = &outcome.out;
