@@ -252,6 +252,8 @@ def calibrate(
     With ``store`` (a directory), every evaluation is stored as it completes in
     ``store/calibration.campaign/campaign.sqlite``; calling again with the same store reuses them
     and continues where the last call stopped (after a crash, a kill or a ``KeyboardInterrupt``).
+    A Ctrl-C raises ``KeyboardInterrupt`` within a second, also while the engine computes (its
+    work then stops in the background at its next check, and the next call waits for that).
     ``report`` is where the report and every table and figure go (default ``store/report``, or a
     temporary directory). Up to ``batch_size`` runs waiting at once are evaluated in one call of
     ``model``. ``description`` names the model in the store (default: its name and a digest of
