@@ -47,6 +47,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from gpry_reference import gpry_posterior, raised_initial_budget  # noqa: E402
 # Extra keys of `[surrogate] adaptive` (e.g. ", log_likelihood_tolerance = 0.05"), for experiments.
 ADAPTIVE_EXTRA = os.environ.get("IUQ_BENCH_ADAPTIVE_EXTRA", "")
 # The adaptive study's initial maximin LHS (then batches of 2 per round).
@@ -234,38 +236,21 @@ def worst(moments, truth):
 
 
 def gpry_run(problem, truth, seed=1, options=None):
-    import numpy as np
-    from gpry import Runner
-
+    """GPry on the problem's exact log-likelihood: (calls, moments by name, seconds)."""
     p = PROBLEMS[problem]
     obs = data(problem)
     noise = p["noise"]
-    count = [0]
 
     def log_likelihood(theta):
-        count[0] += 1
         y = curve(problem, list(theta))
         if y is None:
-            return -np.inf
+            return -math.inf
         return -0.5 * sum(((yo - ym) / noise) ** 2 for (_, yo), ym in zip(obs, y))
 
     names = list(p["parameters"])
-    # GPry reads the parameters from the likelihood's signature: one named argument each.
-    namespace = {"_log_likelihood": log_likelihood}
-    exec(f"def loglike({', '.join(names)}):\n    return _log_likelihood([{', '.join(names)}])", namespace)
-    loglike = namespace["loglike"]
-    bounds = [list(p["parameters"][n]) for n in names]
-    runner = Runner(loglike, bounds=bounds, params=names, seed=seed, verbose=0, options=options)
-    started = time.time()
-    runner.run()
-    runner.generate_mc_sample()
-    s = runner.last_mc_samples()
-    X = s["X"]
-    w = s["w"] if s["w"] is not None else np.ones(len(X))
-    mean = np.average(X, axis=0, weights=w)
-    std = np.sqrt(np.average((X - mean) ** 2, axis=0, weights=w))
-    moments = {n: (mean[i], std[i]) for i, n in enumerate(names)}
-    return count[0], moments, time.time() - started
+    calls, mean, std, seconds = gpry_posterior(
+        log_likelihood, names, [p["parameters"][n] for n in names], seed=seed, options=options)
+    return calls, {n: (mean[i], std[i]) for i, n in enumerate(names)}, seconds
 
 
 def main():
@@ -371,12 +356,9 @@ def main():
             except Exception as e:  # report, do not hide
                 rows.append((problem, "GPry", "failed", False, float("nan"), float("nan"), repr(e)[:120]))
                 print(f"  GPry failed: {e!r}")
-                # Where a failing region starves GPry's initial design, the workaround its
-                # message names: ten times its default budget of initial evaluations.
-                if "initial" in str(e):
-                    d = len(PROBLEMS[problem]["parameters"])
-                    max_initial = int(10 * 30 * d ** 1.5)
-                    options = {"max_initial": max_initial, "max_total": max(max_initial, int(70 * d ** 1.5))}
+                options = raised_initial_budget(e, len(PROBLEMS[problem]["parameters"]))
+                if options is not None:
+                    max_initial = options["max_initial"]
                     try:
                         evals, m, seconds = gpry_run(problem, truth, options=options)
                         dm, ds = worst(m, truth)

@@ -26,9 +26,14 @@ the Python thread, the model, which is cheap here, and storing the result).
 
 import argparse
 import math
+import os
+import sys
 import time
 
 import numpy as np
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from gpry_reference import gpry_posterior, raised_initial_budget  # noqa: E402
 
 PROBLEMS = {
     "decay": {
@@ -138,29 +143,14 @@ def run_iuq(problem, y):
 
 
 def run_gpry(problem, y, options=None):
-    from gpry import Runner
-
+    """GPry on the problem's exact log-likelihood: (calls, mean, std, seconds)."""
     p = PROBLEMS[problem]
     names = list(p["priors"])
-    calls = [0]
 
     def ll(theta):
-        calls[0] += 1
         return float(log_likelihood(problem, y, np.asarray([theta]))[0])
 
-    namespace = {"_ll": ll}
-    exec(f"def loglike({', '.join(names)}):\n    return _ll([{', '.join(names)}])", namespace)
-    bounds = [list(p["priors"][n]) for n in names]
-    started = time.time()
-    runner = Runner(namespace["loglike"], bounds=bounds, params=names, seed=1, verbose=0, options=options)
-    runner.run()
-    runner.generate_mc_sample()
-    s = runner.last_mc_samples()
-    X = s["X"]
-    w = s["w"] if s["w"] is not None else np.ones(len(X))
-    mean = np.average(X, axis=0, weights=w)
-    std = np.sqrt(np.average((X - mean) ** 2, axis=0, weights=w))
-    return calls[0], mean, std, time.time() - started
+    return gpry_posterior(ll, names, [p["priors"][n] for n in names], seed=1, options=options)
 
 
 def overhead(sizes):
@@ -213,12 +203,9 @@ def main():
             except Exception as e:  # report, do not hide
                 rows.append((problem, "GPry Runner", "failed", False, math.nan, math.nan, math.nan, repr(e)[:100]))
                 print(f"  GPry failed: {e!r}", flush=True)
-                if "initial" in str(e):
-                    # The workaround GPry's message names: ten times its default budget of
-                    # initial evaluations.
-                    d = len(PROBLEMS[problem]["priors"])
-                    max_initial = int(10 * 30 * d**1.5)
-                    options = {"max_initial": max_initial, "max_total": max(max_initial, int(70 * d**1.5))}
+                options = raised_initial_budget(e, len(PROBLEMS[problem]["priors"]))
+                if options is not None:
+                    max_initial = options["max_initial"]
                     try:
                         calls, mean, std, seconds = run_gpry(problem, y, options)
                         ok, dm, ds = judge(mean, std, exact)
