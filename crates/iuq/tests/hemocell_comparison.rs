@@ -351,6 +351,30 @@ fn the_decoder_reads_both_wall_layouts_and_fails_cells_deleted_or_out_of_the_box
     assert!(last.contains("HemoCell deleted the cell"), "{last}");
     assert!(last.contains("Particle ID:0"), "{last}");
 
+    // A cell HemoCell 2.7 deleted without its warning: from then on its outputs hold no
+    // vertices.
+    let o = write_and_decode(
+        &dir.join("silently-deleted"),
+        &files,
+        &[
+            "--fluid",
+            "z",
+            "--layout",
+            "z-walls",
+            "--drop-vertices",
+            "190:642",
+        ],
+        &[],
+    );
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
+    let last = last_stderr_line(&o);
+    assert!(
+        last.contains(
+            "iteration 190: no membrane vertices in the output (HemoCell deleted the cell"
+        ),
+        "{last}"
+    );
+
     // A frame with fewer vertices than the cell's first output.
     let o = write_and_decode(
         &dir.join("lost-vertices"),
