@@ -290,6 +290,23 @@ def test_killed_and_called_again_it_repeats_no_finished_run_and_gives_the_same_r
     assert json.loads(again.stdout.splitlines()[-1]) == json.loads(uninterrupted.stdout.splitlines()[-1])
 
 
+def _interrupt_within_a_second(process, store: Path, timeout: float) -> dict:
+    """Send SIGINT to `process`; check that it raised KeyboardInterrupt within a second and left
+    its store intact; the store's run counts by status."""
+    sent = time.time()
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=timeout)
+    elapsed = time.time() - sent
+    assert "KeyboardInterrupt" in stderr, stderr[-2000:]
+    assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
+    con = sqlite3.connect(store / "calibration.campaign" / "campaign.sqlite")
+    try:
+        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
+        return dict(con.execute("select status, count(*) from runs group by status").fetchall())
+    finally:
+        con.close()
+
+
 def test_ctrl_c_interrupts_within_a_second_and_leaves_the_store_consistent(tmp_path):
     script = tmp_path / "calibrate_decay.py"
     script.write_text(SCRIPT)
@@ -302,19 +319,7 @@ def test_ctrl_c_interrupts_within_a_second_and_leaves_the_store_consistent(tmp_p
     while len(_logged(log)) < 3 and process.poll() is None and time.time() < deadline:
         time.sleep(0.02)
     assert process.poll() is None
-    sent = time.time()
-    process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=30)
-    elapsed = time.time() - sent
-    assert "KeyboardInterrupt" in stderr, stderr[-2000:]
-    assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
-    database = store / "calibration.campaign" / "campaign.sqlite"
-    con = sqlite3.connect(database)
-    try:
-        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
-        counts = dict(con.execute("select status, count(*) from runs group by status").fetchall())
-    finally:
-        con.close()
+    counts = _interrupt_within_a_second(process, store, timeout=30)
     # Two runs finished (2 s each) before the interrupt; the third was under way: not a
     # failure, it runs again next time.
     assert counts.get("succeeded", 0) == 2 and counts.get("failed", 0) == 0, counts
@@ -353,19 +358,7 @@ def test_ctrl_c_interrupts_the_engine_within_a_second(tmp_path):
         time.sleep(0.02)
     time.sleep(0.5)
     assert process.poll() is None
-    sent = time.time()
-    process.send_signal(signal.SIGINT)
-    _, stderr = process.communicate(timeout=120)
-    elapsed = time.time() - sent
-    assert "KeyboardInterrupt" in stderr, stderr[-2000:]
-    assert elapsed < 1.0, f"took {elapsed:.2f} s to stop"
-    database = store / "calibration.campaign" / "campaign.sqlite"
-    con = sqlite3.connect(database)
-    try:
-        assert con.execute("pragma integrity_check").fetchone()[0] == "ok"
-        counts = dict(con.execute("select status, count(*) from runs group by status").fetchall())
-    finally:
-        con.close()
+    counts = _interrupt_within_a_second(process, store, timeout=120)
     assert counts.get("succeeded", 0) == 400, counts
 
 
