@@ -10,39 +10,77 @@
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
 use std::process::{Child, Command};
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicI32, AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use crate::outcome::unix_now;
 
-/// Process group of the command this process supervises now (0: none). Read by the signal
-/// handler of [`forward_termination_signals`].
-static SUPERVISED_GROUP: AtomicU32 = AtomicU32::new(0);
+/// Slots of [`SUPERVISED_GROUPS`]: more commands than this at once in one process (a local
+/// executor's `max_parallel`) are supervised as before but not reached by the signal handler.
+const GROUP_SLOTS: usize = 1024;
 
-/// The handler of [`forward_termination_signals`]: the signal goes on to the supervised group,
-/// which gets a second to stop before SIGKILL, and then this process dies of it.
+/// Process groups of the commands this process supervises now (0: a free slot). Read by the
+/// signal handler of [`forward_termination_signals`]; a slot is taken right after the spawn and
+/// freed before the reap, while the group id cannot yet be reused.
+static SUPERVISED_GROUPS: [AtomicU32; GROUP_SLOTS] = [const { AtomicU32::new(0) }; GROUP_SLOTS];
+
+/// Takes a free slot for `group`; `None` when every slot is taken.
+fn register_group(group: u32) -> Option<usize> {
+    SUPERVISED_GROUPS.iter().position(|slot| {
+        slot.compare_exchange(0, group, Ordering::SeqCst, Ordering::SeqCst)
+            .is_ok()
+    })
+}
+
+/// The signal the handler of [`forward_termination_signals`] received (0: none yet).
+static TERMINATING: AtomicI32 = AtomicI32::new(0);
+
+/// The termination signal this process is dying of, once the handler of
+/// [`forward_termination_signals`] has run: the commands it stops then ended by the process's
+/// stop, not by a fault of their own (the worker files their runs as lost, to be retried).
+pub fn termination_signal() -> Option<i32> {
+    Some(TERMINATING.load(Ordering::SeqCst)).filter(|&s| s != 0)
+}
+
+/// The handler of [`forward_termination_signals`]: the signal goes on to every supervised
+/// group, which get a second to stop before SIGKILL, and then this process dies of it.
 extern "C" fn forward_and_exit(signal: libc::c_int) {
-    let group = SUPERVISED_GROUP.load(Ordering::SeqCst);
-    // SAFETY: kill, nanosleep, signal and raise are async-signal-safe; nothing else is called.
+    // SAFETY: kill, nanosleep, signal and raise are async-signal-safe; nothing else is called
+    // (atomic loads are lock-free).
     unsafe {
-        if group != 0 {
-            libc::kill(-(group as libc::pid_t), signal);
+        TERMINATING.store(signal, Ordering::SeqCst);
+        let mut any = false;
+        for slot in &SUPERVISED_GROUPS {
+            let group = slot.load(Ordering::SeqCst);
+            if group != 0 {
+                libc::kill(-(group as libc::pid_t), signal);
+                any = true;
+            }
+        }
+        if any {
             let grace = libc::timespec {
                 tv_sec: 1,
                 tv_nsec: 0,
             };
             libc::nanosleep(&grace, std::ptr::null_mut());
-            libc::kill(-(group as libc::pid_t), libc::SIGKILL);
+            for slot in &SUPERVISED_GROUPS {
+                let group = slot.load(Ordering::SeqCst);
+                if group != 0 {
+                    libc::kill(-(group as libc::pid_t), libc::SIGKILL);
+                }
+            }
         }
         libc::signal(signal, libc::SIG_DFL);
         libc::raise(signal);
     }
 }
 
-/// Make SIGTERM, SIGINT and SIGHUP stop the supervised command with this process: a scheduler
-/// that stops a worker (HyperQueue's time limit or cancel, Slurm's `scancel`) signals the
-/// worker's process group, and the command runs in a group of its own, so without this it
-/// would run on, orphaned. For processes that supervise one command at a time (`iuq worker`).
+/// Make SIGTERM, SIGINT and SIGHUP stop the supervised commands with this process. Each command
+/// runs in a process group of its own, so a signal meant for this process (Ctrl-C in a terminal
+/// reaches the foreground group only; a scheduler that stops a worker — HyperQueue's time
+/// limit or cancel, Slurm's `scancel` — signals the worker's group; `kill` reaches one process)
+/// would otherwise leave them running on, orphaned. For `iuq worker` and for the coordinator of
+/// a local campaign; a later run of the campaign files the stopped runs as lost and retries them.
 pub fn forward_termination_signals() {
     let handler = forward_and_exit as extern "C" fn(libc::c_int) as libc::sighandler_t;
     for signal in [libc::SIGTERM, libc::SIGINT, libc::SIGHUP] {
@@ -216,7 +254,7 @@ pub fn run_supervised(
     let start = Instant::now();
     let mut child: Child = command.spawn()?;
     let pid = child.id();
-    SUPERVISED_GROUP.store(pid, Ordering::SeqCst);
+    let slot = register_group(pid);
     on_start(pid);
     let mut pipes = [
         child.stdout.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
@@ -338,7 +376,9 @@ pub fn run_supervised(
     signal_group(pid, libc::SIGKILL);
     drop(waiter);
     // Before the reap: the group id cannot be reused while the handler may still signal it.
-    let _ = SUPERVISED_GROUP.compare_exchange(pid, 0, Ordering::SeqCst, Ordering::SeqCst);
+    if let Some(slot) = slot {
+        SUPERVISED_GROUPS[slot].store(0, Ordering::SeqCst);
+    }
     let status = child.wait()?;
     if tail.len() > logs.tail_bytes {
         tail.drain(..tail.len() - logs.tail_bytes);

@@ -280,7 +280,18 @@ pub fn execute_task(compiled: &CompiledSpec, task: &Task, durable: bool) -> Task
     let hint = last_line(&report.stderr_tail)
         .map(|l| format!(" (stderr: {})", l.chars().take(200).collect::<String>()))
         .unwrap_or_default();
-    report.runs = if exit.timed_out {
+    let stopped_with_process = crate::supervised_process::termination_signal()
+        .filter(|_| exit.signal.is_some() || exit.exit_code != Some(0));
+    report.runs = if let Some(stop) = stopped_with_process {
+        all_runs(
+            task,
+            OutcomeKind::Lost,
+            &format!(
+                "stopped by {} with the process that ran it",
+                signal_name(stop)
+            ),
+        )
+    } else if exit.timed_out {
         all_runs(
             task,
             OutcomeKind::Timeout,

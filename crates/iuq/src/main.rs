@@ -62,6 +62,9 @@ enum Command {
 
 fn main() {
     let cli = Cli::parse();
+    // Ctrl-C, `kill` or a scheduler's stop take the model commands this process runs with it
+    // (each runs in a process group of its own and would otherwise run on, orphaned).
+    iuq_campaign::supervised_process::forward_termination_signals();
     let result = match &cli.command {
         Command::Pipeline(args) => commands::pipeline::run(args, cli.json),
         Command::Design(args) => commands::design::run(args, cli.json),

@@ -915,3 +915,143 @@ n = 1
         "the model runs on after its worker stopped"
     );
 }
+
+/// Ctrl-C (SIGINT) or `kill` (SIGTERM) of `iuq run` on a local campaign stops the model
+/// commands it runs, each in a process group of its own (a terminal's Ctrl-C reaches only the
+/// foreground group): before, they ran on, orphaned, while the next run started them again.
+/// The next run files the stopped runs as lost and makes them once more.
+#[test]
+fn an_interrupted_coordinator_takes_its_running_model_commands_with_it() {
+    for (signal, number) in [("INT", 2), ("TERM", 15)] {
+        let dir = scratch("cli-campaign", &format!("interrupted-{signal}"));
+        let hold = dir.join("hold");
+        std::fs::write(&hold, "").unwrap();
+        let pids = dir.join("pids");
+        // The model and the `sleep` it waits for both record their pids.
+        executable(
+            &dir.join("slow.sh"),
+            &format!(
+                "#!/bin/sh\nif [ -f '{hold}' ]; then sleep 60 & echo $$ $! >> '{pids}'; wait; fi\n\
+                 echo \"{{\\\"f\\\": $1}}\" > result.json\n",
+                hold = hold.display(),
+                pids = pids.display()
+            ),
+        );
+        std::fs::write(dir.join("points.csv"), "x\n0.25\n0.75\n").unwrap();
+        let path = dir.join("study.toml");
+        std::fs::write(
+            &path,
+            format!(
+                r#"name = "slow"
+[parameters]
+x = {{ uniform = [0, 1] }}
+[model]
+kind = "command"
+command = ["{}", "{{{{ x }}}}"]
+outputs = ["f"]
+output = {{ file = "result.json", format = "json" }}
+timeout = "120s"
+[design]
+kind = "file"
+file = "points.csv"
+[executor]
+max_parallel = 2
+"#,
+                dir.join("slow.sh").display()
+            ),
+        )
+        .unwrap();
+        let p = path.to_str().unwrap();
+        let mut coordinator = Command::new(env!("CARGO_BIN_EXE_iuq"))
+            .args(["run", p, "--json"])
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap();
+        let started = Instant::now();
+        let model_pids: Vec<u32> = loop {
+            let text = std::fs::read_to_string(&pids).unwrap_or_default();
+            let found: Vec<u32> = text
+                .split_whitespace()
+                .filter_map(|t| t.parse().ok())
+                .collect();
+            if found.len() == 4 {
+                break found;
+            }
+            assert!(
+                started.elapsed() < Duration::from_secs(30),
+                "the models did not start: {text:?}"
+            );
+            std::thread::sleep(Duration::from_millis(20));
+        };
+        // A process that is gone, or a zombie waiting for a reaper, has stopped.
+        let running = |pid: u32| {
+            std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+                s.rsplit(')')
+                    .next()
+                    .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
+            })
+        };
+        assert!(model_pids.iter().all(|&pid| running(pid)));
+        let status = Command::new("kill")
+            .args([&format!("-{signal}"), &coordinator.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(status.success());
+        let exit = coordinator.wait().unwrap();
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(
+            exit.signal(),
+            Some(number),
+            "the coordinator dies of SIG{signal}: {exit:?}"
+        );
+        let stopped = Instant::now();
+        while model_pids.iter().any(|&pid| running(pid))
+            && stopped.elapsed() < Duration::from_secs(5)
+        {
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let survivors: Vec<u32> = model_pids.into_iter().filter(|&p| running(p)).collect();
+        assert!(
+            survivors.is_empty(),
+            "SIG{signal}: model processes {survivors:?} run on after their coordinator stopped"
+        );
+
+        std::fs::remove_file(&hold).unwrap();
+        let o = iuq(&["run", p, "--json"]);
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let v = json_of(&o);
+        assert_eq!(v["counts"]["succeeded"], 2, "{v}");
+        let store = store_of(&dir);
+        // Each stopped execution is lost (retried by the default policy), not a failed run;
+        // whether the coordinator filed it before it died or the next run found it unfinished.
+        let first: Vec<(String, String)> = store
+            .connection()
+            .prepare("SELECT outcome_kind, COALESCE(reason, '') FROM attempts WHERE number = 1")
+            .unwrap()
+            .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(first.len(), 2);
+        for (kind, reason) in &first {
+            assert_eq!(kind, "lost", "{first:?}");
+            assert!(
+                *reason == format!("stopped by SIG{signal} with the process that ran it")
+                    || reason.ends_with("the run was executing, and it left no result"),
+                "{first:?}"
+            );
+        }
+        let values: Vec<f64> = store
+            .connection()
+            .prepare("SELECT value FROM outputs ORDER BY value")
+            .unwrap()
+            .query_map([], |r| r.get(0))
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap();
+        assert_eq!(values, [0.25, 0.75]);
+        drop(store);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -39,8 +39,8 @@ pub fn run(args: &WorkerArgs, json: bool) -> Result<()> {
             .map_err(|_| input_error(format!("--index-env: {var} is not an index")))?,
         (None, None) => return Err(input_error("--index or --index-env is needed")),
     };
-    // A scheduler stops a worker by signalling it; the model it runs goes with it.
-    iuq_campaign::supervised_process::forward_termination_signals();
+    // A scheduler stops a worker by signalling it; the model it runs goes with it (the
+    // handler `main` installs for every command).
     let report = run_manifest_task(&args.manifest, index).map_err(campaign_error)?;
     let value = json!({
         "index": index,
