@@ -18,7 +18,8 @@ use crate::report_output::emit;
 /// Arguments of `iuq pipeline`.
 #[derive(Debug, Args)]
 pub struct PipelineArgs {
-    /// The study file (TOML) with a `[model]` of kind "rbc-shear" and a `[likelihood]` with data.
+    /// The study file (TOML): `[parameters]`, a `[model]` of any kind and a `[likelihood]` with
+    /// data (docs/pipeline-study-file.md).
     pub study: PathBuf,
     /// Output directory of the report and every stage's results (default: `<study stem>-report`
     /// in the current directory).
@@ -27,8 +28,10 @@ pub struct PipelineArgs {
     /// Model runs at once (overrides `executor.max_parallel`; default: the number of cores).
     #[arg(long)]
     pub max_parallel: Option<usize>,
-    /// Also sample the posterior directly on the cell model through the campaign, with
-    /// `[model_sampler]` (expensive: samples × stages × stresses runs).
+    /// Also compute the model's own posterior through the campaign, with `[model_posterior]`:
+    /// by default from the surrogate's, by importance stages certified with Pareto-smoothed k̂
+    /// (a few hundred model runs); `method = "basis"` samples the model with plain BASIS and
+    /// `[model_sampler]` (samples × stages × run groups runs).
     #[arg(long)]
     pub model_posterior: bool,
     /// Recompute every model run: move the campaign directory aside (to `<dir>.previous-N`)
