@@ -885,41 +885,51 @@ n = 1
         );
         std::thread::sleep(Duration::from_millis(20));
     };
-    // A process that is gone, or a zombie waiting for a reaper, has stopped.
-    let running = |pid: u32| {
-        std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
-            s.rsplit(')')
-                .next()
-                .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
-        })
-    };
-    assert!(running(model_pid));
-    let status = Command::new("kill")
-        .args(["-TERM", &worker.id().to_string()])
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let exit = worker.wait().unwrap();
-    use std::os::unix::process::ExitStatusExt;
+    assert!(is_running(model_pid));
     assert_eq!(
-        exit.signal(),
+        signal_and_wait(&mut worker, "TERM"),
         Some(15),
-        "the worker dies of the signal: {exit:?}"
+        "the worker dies of the signal"
     );
-    let stopped = Instant::now();
-    while running(model_pid) && stopped.elapsed() < Duration::from_secs(5) {
-        std::thread::sleep(Duration::from_millis(20));
-    }
     assert!(
-        !running(model_pid),
+        still_running_after_grace(&[model_pid]).is_empty(),
         "the model runs on after its worker stopped"
     );
 }
 
+/// Whether process `pid` runs: one that is gone, or a zombie waiting for a reaper, has stopped.
+fn is_running(pid: u32) -> bool {
+    std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
+        s.rsplit(')')
+            .next()
+            .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
+    })
+}
+
+/// Sends SIG`signal` (e.g. "TERM") to `child` with `kill` and returns the signal it died of.
+fn signal_and_wait(child: &mut std::process::Child, signal: &str) -> Option<i32> {
+    use std::os::unix::process::ExitStatusExt;
+    let status = Command::new("kill")
+        .args([&format!("-{signal}"), &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    child.wait().unwrap().signal()
+}
+
+/// The processes of `pids` still running after waiting up to 5 s for them to stop.
+fn still_running_after_grace(pids: &[u32]) -> Vec<u32> {
+    let stopped = Instant::now();
+    while pids.iter().any(|&p| is_running(p)) && stopped.elapsed() < Duration::from_secs(5) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    pids.iter().copied().filter(|&p| is_running(p)).collect()
+}
+
 /// Ctrl-C (SIGINT) or `kill` (SIGTERM) of `iuq run` on a local campaign stops the model
 /// commands it runs, each in a process group of its own (a terminal's Ctrl-C reaches only the
-/// foreground group): before, they ran on, orphaned, while the next run started them again.
-/// The next run files the stopped runs as lost and makes them once more.
+/// foreground group): before, they ran on, orphaned, until the next run of the campaign killed
+/// them. The stopped runs are lost, not failed, and the next run makes them once more.
 #[test]
 fn an_interrupted_coordinator_takes_its_running_model_commands_with_it() {
     for (signal, number) in [("INT", 2), ("TERM", 15)] {
@@ -984,34 +994,13 @@ max_parallel = 2
             );
             std::thread::sleep(Duration::from_millis(20));
         };
-        // A process that is gone, or a zombie waiting for a reaper, has stopped.
-        let running = |pid: u32| {
-            std::fs::read_to_string(format!("/proc/{pid}/stat")).is_ok_and(|s| {
-                s.rsplit(')')
-                    .next()
-                    .is_some_and(|rest| !rest.trim_start().starts_with('Z'))
-            })
-        };
-        assert!(model_pids.iter().all(|&pid| running(pid)));
-        let status = Command::new("kill")
-            .args([&format!("-{signal}"), &coordinator.id().to_string()])
-            .status()
-            .unwrap();
-        assert!(status.success());
-        let exit = coordinator.wait().unwrap();
-        use std::os::unix::process::ExitStatusExt;
+        assert!(model_pids.iter().all(|&pid| is_running(pid)));
         assert_eq!(
-            exit.signal(),
+            signal_and_wait(&mut coordinator, signal),
             Some(number),
-            "the coordinator dies of SIG{signal}: {exit:?}"
+            "the coordinator dies of SIG{signal}"
         );
-        let stopped = Instant::now();
-        while model_pids.iter().any(|&pid| running(pid))
-            && stopped.elapsed() < Duration::from_secs(5)
-        {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        let survivors: Vec<u32> = model_pids.into_iter().filter(|&p| running(p)).collect();
+        let survivors = still_running_after_grace(&model_pids);
         assert!(
             survivors.is_empty(),
             "SIG{signal}: model processes {survivors:?} run on after their coordinator stopped"
