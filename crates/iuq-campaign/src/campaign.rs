@@ -331,7 +331,24 @@ impl Campaign {
         }
         let mut events = Vec::new();
         let mut to_reattach = Vec::new();
+        let mut foreign = 0;
         for (_, (executor, external_id, task)) in groups {
+            if !task.task.directory.starts_with(&self.directory) {
+                // A copy (or a moved) store names the run directories of the campaign it was
+                // copied from, whose coordinator may still run them: reading results there or
+                // stopping "orphans" would take or kill that campaign's runs.
+                foreign += task.attempt_ids.len() as u64;
+                events.extend(crate::executor::failure_events(
+                    &task,
+                    OutcomeKind::Lost,
+                    &format!(
+                        "its run directory {} is not in this campaign's directory {} (the store was copied or moved while the run was open); nothing there was read or stopped",
+                        task.task.directory.display(),
+                        self.directory.display()
+                    ),
+                ));
+                continue;
+            }
             if let Some(report) =
                 read_report(&task.task.directory).filter(|r| report_matches(&task, r))
             {
@@ -359,7 +376,7 @@ impl Campaign {
             .iter()
             .filter(|e| matches!(e, ExecutorEvent::Finished { result, .. } if result.kind == OutcomeKind::Lost))
             .count() as u64;
-        summary.lost = closed;
+        summary.lost = closed + foreign;
         summary.reattached = reattach_count.saturating_sub(
             reattach_events
                 .iter()

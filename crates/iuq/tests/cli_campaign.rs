@@ -936,64 +936,9 @@ fn an_interrupted_coordinator_takes_its_running_model_commands_with_it() {
         let dir = scratch("cli-campaign", &format!("interrupted-{signal}"));
         let hold = dir.join("hold");
         std::fs::write(&hold, "").unwrap();
-        let pids = dir.join("pids");
-        // The model and the `sleep` it waits for both record their pids.
-        executable(
-            &dir.join("slow.sh"),
-            &format!(
-                "#!/bin/sh\nif [ -f '{hold}' ]; then sleep 60 & echo $$ $! >> '{pids}'; wait; fi\n\
-                 echo \"{{\\\"f\\\": $1}}\" > result.json\n",
-                hold = hold.display(),
-                pids = pids.display()
-            ),
-        );
-        std::fs::write(dir.join("points.csv"), "x\n0.25\n0.75\n").unwrap();
-        let path = dir.join("study.toml");
-        std::fs::write(
-            &path,
-            format!(
-                r#"name = "slow"
-[parameters]
-x = {{ uniform = [0, 1] }}
-[model]
-kind = "command"
-command = ["{}", "{{{{ x }}}}"]
-outputs = ["f"]
-output = {{ file = "result.json", format = "json" }}
-timeout = "120s"
-[design]
-kind = "file"
-file = "points.csv"
-[executor]
-max_parallel = 2
-"#,
-                dir.join("slow.sh").display()
-            ),
-        )
-        .unwrap();
+        let path = slow_study(&dir);
         let p = path.to_str().unwrap();
-        let mut coordinator = Command::new(env!("CARGO_BIN_EXE_iuq"))
-            .args(["run", p, "--json"])
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap();
-        let started = Instant::now();
-        let model_pids: Vec<u32> = loop {
-            let text = std::fs::read_to_string(&pids).unwrap_or_default();
-            let found: Vec<u32> = text
-                .split_whitespace()
-                .filter_map(|t| t.parse().ok())
-                .collect();
-            if found.len() == 4 {
-                break found;
-            }
-            assert!(
-                started.elapsed() < Duration::from_secs(30),
-                "the models did not start: {text:?}"
-            );
-            std::thread::sleep(Duration::from_millis(20));
-        };
+        let (mut coordinator, model_pids) = start_held_campaign(&dir, p);
         assert!(model_pids.iter().all(|&pid| is_running(pid)));
         assert_eq!(
             signal_and_wait(&mut coordinator, signal),
@@ -1043,4 +988,128 @@ max_parallel = 2
         drop(store);
         let _ = std::fs::remove_dir_all(&dir);
     }
+}
+
+/// A study of two runs (x = 0.25, 0.75) of a model that, while the file `hold` of the study's
+/// directory exists, waits a minute and records its pid and its `sleep`'s in the file `pids`
+/// there; its output f is x. The study file is the same text in every directory (the model is
+/// an inline `sh` script: a path would make a copy in another directory another model).
+fn slow_study(dir: &Path) -> PathBuf {
+    std::fs::write(dir.join("points.csv"), "x\n0.25\n0.75\n").unwrap();
+    let path = dir.join("study.toml");
+    std::fs::write(
+        &path,
+        r#"name = "slow"
+[parameters]
+x = { uniform = [0, 1] }
+[model]
+kind = "command"
+command = ["sh", "-c", '''
+if [ -f "$IUQ_STUDY_DIR/hold" ]; then
+  sleep 60 & echo $$ $! >> "$IUQ_STUDY_DIR/pids"; wait
+fi
+echo "{\"f\": $1}" > result.json
+''', "slow", "{{ x }}"]
+outputs = ["f"]
+output = { file = "result.json", format = "json" }
+timeout = "120s"
+[design]
+kind = "file"
+file = "points.csv"
+[executor]
+max_parallel = 2
+"#,
+    )
+    .unwrap();
+    path
+}
+
+/// Starts `iuq run` on the slow study `study` of `dir` (held) and waits until both of its
+/// models run: the coordinator and the four pids (models and their `sleep`s).
+/// (The child is returned to the caller, which waits for it.)
+#[allow(clippy::zombie_processes)]
+fn start_held_campaign(dir: &Path, study: &str) -> (std::process::Child, Vec<u32>) {
+    let mut coordinator = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(["run", study, "--json"])
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    loop {
+        let text = std::fs::read_to_string(dir.join("pids")).unwrap_or_default();
+        let found: Vec<u32> = text
+            .split_whitespace()
+            .filter_map(|t| t.parse().ok())
+            .collect();
+        if found.len() == 4 {
+            return (coordinator, found);
+        }
+        if started.elapsed() > Duration::from_secs(30) {
+            let _ = coordinator.kill();
+            let _ = coordinator.wait();
+            panic!("the models did not start: {text:?}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+/// A copy of a running campaign's store (say, a backup taken while it runs) names the run
+/// directories of the original. Running the copy must neither stop the original's models as
+/// "orphans" nor read their results: the copy's open runs are lost and made again in its own
+/// directory. (Found when a copied red-cell store killed a live cell-model run.)
+#[test]
+fn a_copied_store_leaves_the_original_campaigns_runs_alone() {
+    let dir = scratch("cli-campaign", "original");
+    let hold = dir.join("hold");
+    std::fs::write(&hold, "").unwrap();
+    let original = slow_study(&dir);
+    let (mut coordinator, model_pids) = start_held_campaign(&dir, original.to_str().unwrap());
+
+    let copy = scratch("cli-campaign", "copy");
+    std::fs::create_dir_all(copy.join("study.campaign")).unwrap();
+    let backup = copy.join("study.campaign/campaign.sqlite");
+    store_of(&dir)
+        .connection()
+        .execute("VACUUM INTO ?1", [backup.to_str().unwrap()])
+        .unwrap();
+    // The copy's own model does not wait (its hold file does not exist).
+    let study = slow_study(&copy);
+    let o = iuq(&["run", study.to_str().unwrap(), "--json"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let v = json_of(&o);
+    assert_eq!(v["counts"]["succeeded"], 2, "{v}");
+    assert_eq!(v["resumed"]["lost"], 2, "{v}");
+    assert_eq!(v["resumed"]["ingested"], 0, "{v}");
+    let running: Vec<u32> = model_pids
+        .iter()
+        .copied()
+        .filter(|&p| is_running(p))
+        .collect();
+    assert_eq!(
+        running, model_pids,
+        "the copy stopped the original's models"
+    );
+    let store = iuq_campaign::CampaignStore::open_existing(&backup).unwrap();
+    let reasons: Vec<String> = store
+        .connection()
+        .prepare("SELECT reason FROM attempts WHERE number = 1")
+        .unwrap()
+        .query_map([], |r| r.get(0))
+        .unwrap()
+        .collect::<Result<_, _>>()
+        .unwrap();
+    assert_eq!(reasons.len(), 2);
+    assert!(
+        reasons
+            .iter()
+            .all(|r| r.contains("is not in this campaign's directory")),
+        "{reasons:?}"
+    );
+    drop(store);
+
+    assert_eq!(signal_and_wait(&mut coordinator, "TERM"), Some(15));
+    assert!(still_running_after_grace(&model_pids).is_empty());
+    let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_dir_all(&copy);
 }
