@@ -308,19 +308,40 @@ fn bad_pipeline_settings_are_input_errors() {
 /// store, checking that it makes no model run; returns its `--json` summary and the copy's
 /// directory (the report in `report/`).
 fn replay_shipped_study(name: &str) -> (serde_json::Value, std::path::PathBuf) {
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let dir = scratch("pipeline", &format!("shipped-{name}"));
-    let study = format!("examples/{name}.toml");
     let store = format!("examples/{name}.campaign/campaign.sqlite");
-    for file in [
-        study.as_str(),
-        store.as_str(),
-        "data/ektacytometry_gutierrez2018.csv",
+    replay_study(&format!("shipped-{name}"), name, &store, &|text| {
+        text.to_string()
+    })
+}
+
+/// Replays the study `examples/<name>.toml`, its text passed through `edit`, from the store
+/// `store` (a path in the repository) in the scratch directory `label`, and checks that no model
+/// run was made: the pipeline's `--json` summary and the directory.
+fn replay_study(
+    label: &str,
+    name: &str,
+    store: &str,
+    edit: &dyn Fn(&str) -> String,
+) -> (serde_json::Value, std::path::PathBuf) {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let dir = scratch("pipeline", label);
+    let study = format!("examples/{name}.toml");
+    for (source, target) in [
+        (
+            store.to_string(),
+            format!("examples/{name}.campaign/campaign.sqlite"),
+        ),
+        (
+            "data/ektacytometry_gutierrez2018.csv".into(),
+            "data/ektacytometry_gutierrez2018.csv".into(),
+        ),
     ] {
-        let target = dir.join(file);
+        let target = dir.join(target);
         std::fs::create_dir_all(target.parent().unwrap()).unwrap();
-        std::fs::copy(root.join(file), &target).unwrap();
+        std::fs::copy(root.join(source), &target).unwrap();
     }
+    let text = std::fs::read_to_string(root.join(&study)).unwrap();
+    std::fs::write(dir.join(&study), edit(&text)).unwrap();
     let out = dir.join("report");
     let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_iuq"))
         .args([
@@ -339,7 +360,12 @@ fn replay_shipped_study(name: &str) -> (serde_json::Value, std::path::PathBuf) {
     let started = std::time::Instant::now();
     while child.try_wait().unwrap().is_none() {
         if started.elapsed() > std::time::Duration::from_secs(600) {
-            child.kill().unwrap();
+            // SIGTERM, which the pipeline forwards to the model runs it started (SIGKILL would
+            // leave them running).
+            let _ = std::process::Command::new("kill")
+                .args(["-TERM", &child.id().to_string()])
+                .status();
+            let _ = child.wait();
             panic!("the pipeline did not finish from the shipped runs within 10 minutes");
         }
         std::thread::sleep(std::time::Duration::from_millis(200));
@@ -560,4 +586,45 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
         replayed["report"]["cell_portraits"],
         report["report"]["cell_portraits"]
     );
+}
+
+/// The healthy study made from an empty campaign with the engine of 2026-11-27 (its posterior
+/// check left out), replayed from its store `data/rbc_healthy_fresh_engine.sqlite`: converged at
+/// round 8 with 324 runs, the posterior of `data/rbc_healthy_fresh_engine.md`.
+#[test]
+fn the_healthy_study_made_from_scratch_replays_to_its_324_runs() {
+    let (summary, _) = replay_study(
+        "healthy-from-scratch",
+        "rbc-healthy-hemocell",
+        "data/rbc_healthy_fresh_engine.sqlite",
+        &|text| {
+            text.lines()
+                .filter(|l| !l.starts_with("posterior_check"))
+                .collect::<Vec<_>>()
+                .join("\n")
+        },
+    );
+    assert_eq!(summary["runs"], 324, "{}", summary["adaptive"]);
+    assert_eq!(summary["rounds"], 8);
+    assert_eq!(summary["converged"], true);
+    assert_eq!(summary["failed"], 0);
+    let gp = &summary["posterior"][0];
+    assert_eq!(gp["source"], "GP surrogate");
+    // The table of data/rbc_healthy_fresh_engine.md (mean / std, as rounded there).
+    for (name, mean, std, digits) in [
+        ("kLink", 38.77, 4.09, 2),
+        ("kBend", 236.3, 76.5, 1),
+        ("viscosityRatio", 5.72, 1.59, 2),
+        ("sigma_m", 0.0323, 0.0193, 4),
+    ] {
+        let p = gp["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["parameter"] == name)
+            .unwrap_or_else(|| panic!("{name} in {gp}"));
+        let round = |x: f64| (x * 10f64.powi(digits)).round() / 10f64.powi(digits);
+        assert_eq!(round(p["mean"].as_f64().unwrap()), mean, "{name}: {p}");
+        assert_eq!(round(p["std"].as_f64().unwrap()), std, "{name}: {p}");
+    }
 }
