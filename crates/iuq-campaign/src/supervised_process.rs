@@ -42,6 +42,23 @@ pub fn termination_signal() -> Option<i32> {
     Some(TERMINATING.load(Ordering::SeqCst)).filter(|&s| s != 0)
 }
 
+/// Sends `signal` to every supervised group; whether there was one. Async-signal-safe (`kill`
+/// and lock-free atomic loads only), for [`forward_and_exit`].
+fn signal_supervised_groups(signal: libc::c_int) -> bool {
+    let mut any = false;
+    for slot in &SUPERVISED_GROUPS {
+        let group = slot.load(Ordering::SeqCst);
+        if group != 0 {
+            // SAFETY: kill is async-signal-safe and takes no pointers.
+            unsafe {
+                libc::kill(-(group as libc::pid_t), signal);
+            }
+            any = true;
+        }
+    }
+    any
+}
+
 /// The handler of [`forward_termination_signals`]: the signal goes on to every supervised
 /// group, which get a second to stop before SIGKILL, and then this process dies of it.
 extern "C" fn forward_and_exit(signal: libc::c_int) {
@@ -49,26 +66,13 @@ extern "C" fn forward_and_exit(signal: libc::c_int) {
     // (atomic loads are lock-free).
     unsafe {
         TERMINATING.store(signal, Ordering::SeqCst);
-        let mut any = false;
-        for slot in &SUPERVISED_GROUPS {
-            let group = slot.load(Ordering::SeqCst);
-            if group != 0 {
-                libc::kill(-(group as libc::pid_t), signal);
-                any = true;
-            }
-        }
-        if any {
+        if signal_supervised_groups(signal) {
             let grace = libc::timespec {
                 tv_sec: 1,
                 tv_nsec: 0,
             };
             libc::nanosleep(&grace, std::ptr::null_mut());
-            for slot in &SUPERVISED_GROUPS {
-                let group = slot.load(Ordering::SeqCst);
-                if group != 0 {
-                    libc::kill(-(group as libc::pid_t), libc::SIGKILL);
-                }
-            }
+            signal_supervised_groups(libc::SIGKILL);
         }
         libc::signal(signal, libc::SIG_DFL);
         libc::raise(signal);
