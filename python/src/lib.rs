@@ -7,6 +7,8 @@
 //! CLI's bit for bit. Rust work runs with the GIL released; a Python callable (a model or a
 //! log-likelihood) is called with the GIL held, one 2-D array per batch (see [`callable`]).
 
+#![warn(missing_docs)]
+
 use pyo3::prelude::*;
 
 mod arrays;

@@ -8,16 +8,31 @@ use thiserror::Error;
 pub enum CoreError {
     /// A prior whose parameters make no distribution (e.g. `lower >= upper`, `std <= 0`).
     #[error("invalid prior for `{parameter}`: {reason}")]
-    InvalidPrior { parameter: String, reason: String },
+    InvalidPrior {
+        /// The parameter's name.
+        parameter: String,
+        /// What is wrong with its prior.
+        reason: String,
+    },
     /// A parameter space that cannot be used (no parameters, duplicate names).
     #[error("invalid parameter space: {0}")]
     InvalidParameterSpace(String),
     /// An analytic expression that does not parse or names an unknown variable.
     #[error("expression `{expression}`: {reason}")]
-    InvalidExpression { expression: String, reason: String },
+    InvalidExpression {
+        /// The expression's text.
+        expression: String,
+        /// Why it cannot be evaluated.
+        reason: String,
+    },
     /// A point whose length does not match the dimension it is used with.
     #[error("dimension mismatch: expected {expected} values, got {actual}")]
-    DimensionMismatch { expected: usize, actual: usize },
+    DimensionMismatch {
+        /// The dimension the point is used with.
+        expected: usize,
+        /// The point's length.
+        actual: usize,
+    },
     /// Input to a statistic that does not define it (empty data, negative weights, singular covariance).
     #[error("invalid statistical input: {0}")]
     InvalidStatisticInput(String),

@@ -4,6 +4,8 @@
 //!
 //! This crate does no I/O: every stage of the data flow builds on it.
 
+#![warn(missing_docs)]
+
 pub mod error;
 pub mod model;
 pub mod random;

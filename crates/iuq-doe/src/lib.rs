@@ -18,6 +18,8 @@
 //!
 //! Designs are returned as `Vec<Vec<f64>>`, one inner vector (of `d` coordinates) per point.
 
+#![warn(missing_docs)]
+
 pub mod direction_numbers;
 pub mod distance;
 pub mod error;

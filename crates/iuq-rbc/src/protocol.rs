@@ -166,8 +166,8 @@ pub struct ShearExperiment {
 /// whether any crosses it (`data/hemocell_vs_native.md`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum MeshOrientation {
-    /// The icosahedron's own axes (iuq's orientation until 2026-11-25, which the shipped studies'
-    /// runs used).
+    /// The icosahedron's own axes (iuq's orientation until 2026-11-25; the studies made before
+    /// used it, the shipped ones use [`MeshOrientation::Hemocell`]).
     #[default]
     Unrotated,
     /// HemoCell's: turned by 90° in the disk plane.

@@ -164,7 +164,7 @@ fn validation_table_scaled_protocol() {
 }
 
 #[test]
-#[ignore = "validation: seven reference-protocol runs (up to 330k steps each; an hour or more)"]
+#[ignore = "validation: seven reference-protocol runs (up to 330k steps each, about a million in all)"]
 fn validation_table_reference_protocol() {
     print_shear_table(Protocol::Reference);
 }

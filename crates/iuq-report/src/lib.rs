@@ -14,6 +14,8 @@
 //! - the charts (one module per kind) are private; colours are fixed per source (GP surrogate
 //!   blue, cell model and model runs orange, measurements black).
 
+#![warn(missing_docs)]
+
 mod axis;
 mod charts;
 mod derived;

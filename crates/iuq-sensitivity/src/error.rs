@@ -14,8 +14,11 @@ pub enum SensitivityError {
     /// Too many base points lost to failed runs for an estimate.
     #[error("output `{output}`: only {usable} of {total} base points have no failed run")]
     TooManyFailures {
+        /// The output's name.
         output: String,
+        /// Base points whose runs all succeeded.
         usable: usize,
+        /// Base points of the design.
         total: usize,
     },
     /// Invalid analysis options (sample size, confidence level, replicate count).

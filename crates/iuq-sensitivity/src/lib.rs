@@ -6,6 +6,8 @@
 //! - [`confidence`]: bootstrap and replicate intervals;
 //! - [`analysis`]: a whole analysis of a [`iuq_core::Model`] over a parameter space.
 
+#![warn(missing_docs)]
+
 pub mod analysis;
 pub mod confidence;
 pub mod error;

@@ -44,7 +44,8 @@ pub struct BasisArgs {
     /// Population size N (default from `[sampler] samples`, else 1000).
     #[arg(long)]
     pub samples: Option<usize>,
-    /// Burn-in steps n_burn of every chain (default from `[sampler] burn`, else 0).
+    /// Burn-in steps n_burn of every chain, at a fixed proposal scale (default from `[sampler] burn`,
+    /// else "auto": each chain moves until it decorrelates from its start).
     #[arg(long)]
     pub burn: Option<usize>,
     /// Maximum chain length l_max (default from `[sampler] max_chain`, else 1).

@@ -97,7 +97,8 @@ impl From<PastSingularityArg> for PastSingularity {
 /// How the mesh starts in the disk plane.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum OrientationArg {
-    /// The icosahedron's own axes (iuq's orientation so far; the shipped studies' runs).
+    /// The icosahedron's own axes (iuq's orientation until 2026-11-25; the default, so that stores
+    /// made before keep their meaning).
     Unrotated,
     /// Turned 90° in the disk plane, as HemoCell's mesh generator and RBC.pos leave it.
     Hemocell,
