@@ -19,15 +19,15 @@ use std::time::{Duration, Instant};
 
 use serde_json::Value;
 
-use crate::atomic_file::write_atomically;
 use crate::error::{CampaignError, Result};
+use crate::executor::job_array::{ArrayTask, write_manifest};
 use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
     report_matches, sleep_until_poll_due,
 };
-use crate::outcome::{OutcomeKind, unix_now};
+use crate::outcome::OutcomeKind;
 use crate::study::ExecutorKind;
-use crate::worker::{ArrayManifest, read_report};
+use crate::worker::read_report;
 
 /// Polls after which a task that finished (or vanished) without a worker result is given up.
 const MISSING_POLLS_BEFORE_LOST: u32 = 3;
@@ -188,18 +188,11 @@ pub fn parse_task_states(text: &str) -> Option<HashMap<String, HqTaskState>> {
     Some(out)
 }
 
-#[derive(Debug, Clone)]
-struct Tracked {
-    task: SubmittedTask,
-    started: bool,
-    missing_polls: u32,
-}
-
 /// Runs tasks as HyperQueue task arrays.
 #[derive(Debug)]
 pub struct HyperQueueExecutor {
     settings: HyperQueueSettings,
-    tracked: HashMap<String, Tracked>,
+    tracked: HashMap<String, ArrayTask>,
     submitted_arrays: usize,
     /// Consecutive polls whose scheduler query failed.
     failed_polls: u32,
@@ -304,20 +297,10 @@ impl HyperQueueExecutor {
                 Some("waiting") => tracked.missing_polls = 0,
                 Some("running") => {
                     tracked.missing_polls = 0;
-                    if !tracked.started {
-                        tracked.started = true;
-                        let host = state
-                            .and_then(|s| s.worker)
-                            .map(|w| format!("hq-worker-{w}"));
-                        for &attempt_id in &tracked.task.attempt_ids {
-                            events.push(ExecutorEvent::Started {
-                                attempt_id,
-                                external_id: Some(id.clone()),
-                                host: host.clone(),
-                                started_at: unix_now(),
-                            });
-                        }
-                    }
+                    let host = state
+                        .and_then(|s| s.worker)
+                        .map(|w| format!("hq-worker-{w}"));
+                    events.extend(tracked.start(id, host));
                 }
                 _ => {
                     // Ended (or unknown) without a worker result: the result may still be on
@@ -361,19 +344,13 @@ impl Executor for HyperQueueExecutor {
         let dir = self.settings.campaign_dir.join("hyperqueue");
         std::fs::create_dir_all(&dir).map_err(|e| CampaignError::io(&dir, e))?;
         self.submitted_arrays += 1;
-        let stem = format!(
-            "array-{}-{}",
-            (unix_now() * 1000.0) as u64,
-            self.submitted_arrays
-        );
-        let manifest_path = dir.join(format!("{stem}.json"));
-        let manifest = ArrayManifest {
-            spec: self.settings.spec_path.clone(),
-            tasks: tasks.iter().map(|t| t.task.clone()).collect(),
-        };
-        let text = serde_json::to_vec(&manifest)
-            .map_err(|e| CampaignError::executor("hyperqueue", e.to_string()))?;
-        write_atomically(&manifest_path, &text, true)?;
+        let (_, manifest_path) = write_manifest(
+            "hyperqueue",
+            &dir,
+            self.submitted_arrays,
+            &self.settings.spec_path,
+            &tasks,
+        )?;
         let mut args = vec![
             "submit".to_string(),
             format!("--array=0-{}", tasks.len() - 1),
@@ -403,14 +380,7 @@ impl Executor for HyperQueueExecutor {
             for &attempt_id in &task.attempt_ids {
                 external.push((attempt_id, id.clone()));
             }
-            self.tracked.insert(
-                id,
-                Tracked {
-                    task,
-                    started: false,
-                    missing_polls: 0,
-                },
-            );
+            self.tracked.insert(id, ArrayTask::new(task));
         }
         Ok(external)
     }
@@ -432,14 +402,7 @@ impl Executor for HyperQueueExecutor {
             match open.external_id {
                 Some(id) => {
                     any = true;
-                    self.tracked.insert(
-                        id,
-                        Tracked {
-                            task: open.submitted,
-                            started: false,
-                            missing_polls: 0,
-                        },
-                    );
+                    self.tracked.insert(id, ArrayTask::new(open.submitted));
                 }
                 None => events.extend(failure_events(
                     &open.submitted,

@@ -9,6 +9,7 @@
 //! | [`hyperqueue`] | `hq submit --array` task arrays running `iuq worker` | `hq --output-mode=json job info`, the workers' `result.json` |
 
 pub mod hyperqueue;
+mod job_array;
 pub mod local;
 pub mod slurm;
 

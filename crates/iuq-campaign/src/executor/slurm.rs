@@ -15,13 +15,14 @@ use std::time::{Duration, Instant};
 
 use crate::atomic_file::write_atomically;
 use crate::error::{CampaignError, Result};
+use crate::executor::job_array::{ArrayTask, write_manifest};
 use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
     report_matches, run_cli, shell_quote, sleep_until_poll_due,
 };
-use crate::outcome::{OutcomeKind, unix_now};
+use crate::outcome::OutcomeKind;
 use crate::study::ExecutorKind;
-use crate::worker::{ArrayManifest, read_report};
+use crate::worker::read_report;
 
 /// Polls without a result after which a task that left the queue is declared lost.
 const MISSING_POLLS_BEFORE_LOST: u32 = 3;
@@ -50,18 +51,11 @@ pub struct SlurmSettings {
     pub poll_interval: Duration,
 }
 
-#[derive(Debug, Clone)]
-struct Tracked {
-    task: SubmittedTask,
-    started: bool,
-    missing_polls: u32,
-}
-
 /// Runs tasks as Slurm job arrays.
 #[derive(Debug)]
 pub struct SlurmExecutor {
     settings: SlurmSettings,
-    tracked: HashMap<String, Tracked>,
+    tracked: HashMap<String, ArrayTask>,
     max_array_size: Option<usize>,
     /// Consecutive polls whose scheduler query failed.
     failed_polls: u32,
@@ -243,17 +237,9 @@ impl SlurmExecutor {
             match queue.get(id) {
                 Some((state, nodes)) => {
                     tracked.missing_polls = 0;
-                    if !tracked.started && state == "RUNNING" {
-                        tracked.started = true;
-                        let started_at = unix_now();
-                        for &attempt_id in &tracked.task.attempt_ids {
-                            events.push(ExecutorEvent::Started {
-                                attempt_id,
-                                external_id: Some(id.clone()),
-                                host: Some(nodes.clone()).filter(|n| !n.is_empty()),
-                                started_at,
-                            });
-                        }
+                    if state == "RUNNING" {
+                        let host = Some(nodes.clone()).filter(|n| !n.is_empty());
+                        events.extend(tracked.start(id, host));
                     }
                 }
                 None => {
@@ -304,19 +290,13 @@ impl Executor for SlurmExecutor {
         let mut external = Vec::new();
         for group in tasks.chunks(chunk) {
             self.submitted_arrays += 1;
-            let stem = format!(
-                "array-{}-{}",
-                (unix_now() * 1000.0) as u64,
-                self.submitted_arrays
-            );
-            let manifest_path = arrays_dir.join(format!("{stem}.json"));
-            let manifest = ArrayManifest {
-                spec: self.settings.spec_path.clone(),
-                tasks: group.iter().map(|t| t.task.clone()).collect(),
-            };
-            let text = serde_json::to_vec(&manifest)
-                .map_err(|e| CampaignError::executor("slurm", e.to_string()))?;
-            write_atomically(&manifest_path, &text, true)?;
+            let (stem, manifest_path) = write_manifest(
+                "slurm",
+                &arrays_dir,
+                self.submitted_arrays,
+                &self.settings.spec_path,
+                group,
+            )?;
             let mut script = String::from("#!/bin/sh\nexec");
             for part in &self.settings.worker_command {
                 script.push(' ');
@@ -360,14 +340,7 @@ impl Executor for SlurmExecutor {
                 for &attempt_id in &task.attempt_ids {
                     external.push((attempt_id, id.clone()));
                 }
-                self.tracked.insert(
-                    id,
-                    Tracked {
-                        task: task.clone(),
-                        started: false,
-                        missing_polls: 0,
-                    },
-                );
+                self.tracked.insert(id, ArrayTask::new(task.clone()));
             }
         }
         Ok(external)
@@ -390,14 +363,7 @@ impl Executor for SlurmExecutor {
             match open.external_id {
                 Some(id) => {
                     reattached.push(id.clone());
-                    self.tracked.insert(
-                        id,
-                        Tracked {
-                            task: open.submitted,
-                            started: false,
-                            missing_polls: 0,
-                        },
-                    );
+                    self.tracked.insert(id, ArrayTask::new(open.submitted));
                 }
                 None => events.extend(failure_events(
                     &open.submitted,
