@@ -134,6 +134,8 @@ def test_a_result_of_the_wrong_shape_is_a_value_error():
                       "dists": ["triang", "unif"]}), r"^bounds: dists\[0\] = 'triang' is not supported"),
         (dict(bounds=[{"normal": [0, -1]}, (0, 1)]), "^bounds: .*x1.*scale -1 must be positive"),
         (dict(bounds=[{"gamma": [1, 1]}, (0, 1)]), "^bounds: prior 0: `gamma` is not one of"),
+        # Counts that would overflow or exhaust memory are errors, not a PanicException.
+        (dict(resamples=2**63), "at most 1048576 bootstrap resamples"),
     ],
 )
 def test_bad_input_is_a_value_error_naming_the_argument(kwargs, match):

@@ -30,6 +30,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::{BasisError, Result};
 use crate::sampler::BasisState;
+use crate::settings::MAX_STEPS;
 
 /// The `format` field of a checkpoint.
 pub const CHECKPOINT_FORMAT: &str = "iuq-basis-checkpoint";
@@ -138,6 +139,12 @@ fn validate(state: &BasisState) -> Result<()> {
         return bad(format!(
             "exponent {} must lie in [0, 1] and the log-evidence {} be finite",
             state.exponent, state.log_evidence
+        ));
+    }
+    if state.stage > MAX_STEPS || state.evaluations > usize::MAX / 2 {
+        return bad(format!(
+            "stage {} or evaluations {} out of range (stages at most {MAX_STEPS})",
+            state.stage, state.evaluations
         ));
     }
     if state.diagnostics.len() != state.stage + 1 {

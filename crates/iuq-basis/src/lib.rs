@@ -73,7 +73,7 @@ pub use prediction_error::{
 pub use proposal::{CovarianceFactor, Proposal};
 pub use sampler::{Basis, BasisRun, BasisState, Control, Observer, Silent, StopReason};
 pub use settings::{
-    BasisSettings, CheckedSettings, MAX_MIXING_LEVEL, MinStepAction, Mixing, Resampling,
+    BasisSettings, CheckedSettings, MAX_MIXING_LEVEL, MAX_STEPS, MinStepAction, Mixing, Resampling,
 };
 pub use summary::{
     Marginal1d, Marginal2d, PosteriorSummary, marginal_1d, marginal_2d, marginal_range,

@@ -153,10 +153,16 @@ impl Default for BasisSettings {
 /// The largest population accepted (2^32 − 1 members would already need ~100 GB).
 pub const MAX_SAMPLES: usize = 1 << 31;
 
+/// The most MCMC steps per chain and stage (`burn_in`, `max_burn_in`, `max_chain_length`) and the
+/// most stages (`max_stages`): 2²⁰, beyond any affordable run, low enough that the step counts
+/// and their sums never overflow.
+pub const MAX_STEPS: usize = 1 << 20;
+
 impl BasisSettings {
     /// Validate every setting and return the checked settings the sampler accepts.
     ///
-    /// Rules: `samples` ≥ 2 (and below [`MAX_SAMPLES`]); `max_chain_length` ≥ 1; `cv_target`
+    /// Rules: `samples` ≥ 2 (and below [`MAX_SAMPLES`]); `max_chain_length` ≥ 1; `burn_in`,
+    /// `max_chain_length`, `max_burn_in` and `max_stages` at most [`MAX_STEPS`]; `cv_target`
     /// finite and > 0; `proposal_scale` finite and > 0; `min_step` in (0, 1); `max_stages` ≥ 1;
     /// with [`Mixing::Adaptive`], `correlation` in (0, 1) and `max_burn_in` ≥ max(1, `burn_in`).
     pub fn check(self) -> Result<CheckedSettings> {
@@ -177,6 +183,15 @@ impl BasisSettings {
         }
         if self.max_chain_length < 1 {
             return invalid("max_chain_length", "must be at least 1, got 0".into());
+        }
+        for (setting, steps) in [
+            ("burn_in", self.burn_in),
+            ("max_chain_length", self.max_chain_length),
+            ("max_stages", self.max_stages),
+        ] {
+            if steps > MAX_STEPS {
+                return invalid(setting, format!("at most {MAX_STEPS}, got {steps}"));
+            }
         }
         if !(self.cv_target.is_finite() && self.cv_target > 0.0) {
             return invalid(
@@ -208,6 +223,12 @@ impl BasisSettings {
                 return invalid(
                     "correlation",
                     format!("must lie strictly between 0 and 1, got {correlation}"),
+                );
+            }
+            if max_burn_in > MAX_STEPS {
+                return invalid(
+                    "max_burn_in",
+                    format!("at most {MAX_STEPS}, got {max_burn_in}"),
                 );
             }
             if max_burn_in < self.burn_in.max(1) {

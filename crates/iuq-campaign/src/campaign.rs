@@ -193,6 +193,10 @@ fn job_name(study: &CampaignStudy) -> String {
     format!("iuq-{clean}-{}", &dir_hash[..8])
 }
 
+/// The most runs the local executor makes at once: it keeps one thread per run, and an operating
+/// system refuses threads long before a count that a study could mistype.
+pub const MAX_LOCAL_PARALLEL: usize = 1024;
+
 impl Campaign {
     /// Open the campaign of `study`: create its directory and store, write the worker
     /// specification, build the executor, and resume whatever an earlier coordinator left open.
@@ -206,6 +210,18 @@ impl Campaign {
         let spec_path = write_spec(&directory, &study.model)?;
         let compiled = CompiledSpec::new(study.model.clone())?;
         let max_parallel = options.max_parallel.or(study.executor.max_parallel);
+        if study.executor.kind == ExecutorKind::Local
+            && let Some(n) = max_parallel.filter(|&n| n > MAX_LOCAL_PARALLEL)
+        {
+            let key = if options.max_parallel.is_some() {
+                "--max-parallel".to_string()
+            } else {
+                format!("{}: key `executor.max_parallel`", study.path.display())
+            };
+            return Err(CampaignError::BadInput(format!(
+                "{key}: {n} runs at once is more than the local executor's {MAX_LOCAL_PARALLEL} (one thread each)"
+            )));
+        }
         let poll = Duration::from_secs_f64(
             options
                 .poll_interval

@@ -257,15 +257,29 @@ pub fn hex_sha256(bytes: &[u8]) -> String {
     digest.iter().map(|b| format!("{b:02x}")).collect()
 }
 
-/// Parse a duration: a number of seconds, or a text such as `"30m"`, `"1h30m"`, `"45s"`, `"500ms"`, `"2d"`.
+/// The longest duration a study may name, in seconds (about 31.7 years): every timeout, grace
+/// period and poll interval becomes a `std::time::Duration` added to the clock, which longer
+/// values would overflow.
+pub const MAX_DURATION_SECONDS: f64 = 1e9;
+
+/// Check that `seconds` is a duration a study may name: finite, ≥ 0 and at most
+/// [`MAX_DURATION_SECONDS`].
+pub fn check_duration(seconds: f64) -> std::result::Result<f64, String> {
+    if seconds.is_finite() && (0.0..=MAX_DURATION_SECONDS).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!(
+            "{seconds} s is not a duration from 0 to {MAX_DURATION_SECONDS:e} s"
+        ))
+    }
+}
+
+/// Parse a duration: a number of seconds, or a text such as `"30m"`, `"1h30m"`, `"45s"`, `"500ms"`, `"2d"`
+/// (at most [`MAX_DURATION_SECONDS`]).
 pub fn parse_duration(text: &str) -> std::result::Result<f64, String> {
     let t = text.trim();
     if let Ok(v) = t.parse::<f64>() {
-        return if v.is_finite() && v >= 0.0 {
-            Ok(v)
-        } else {
-            Err(format!("`{text}` is not a non-negative duration"))
-        };
+        return check_duration(v).map_err(|reason| format!("`{text}`: {reason}"));
     }
     let mut total = 0.0;
     let mut rest = t;
@@ -294,7 +308,7 @@ pub fn parse_duration(text: &str) -> std::result::Result<f64, String> {
         total += number * factor;
         rest = unit_str[unit_end..].trim_start();
     }
-    Ok(total)
+    check_duration(total).map_err(|reason| format!("`{text}`: {reason}"))
 }
 
 fn relative_to(base: &Path, p: &str) -> PathBuf {

@@ -11,7 +11,11 @@ use std::sync::LazyLock;
 use toml::{Table, Value};
 
 use crate::error::{CampaignError, Result};
-use crate::study::parse_duration;
+use crate::study::{check_duration, parse_duration};
+
+/// The largest count a study may give (2³¹ − 1): sizes, samples, runs and steps beyond it would
+/// overflow the products made of them or ask for more memory than any machine has.
+pub const MAX_COUNT: usize = (1 << 31) - 1;
 
 static EMPTY: LazyLock<Table> = LazyLock::new(Table::new);
 
@@ -147,10 +151,14 @@ impl<'a> StudySection<'a> {
         }
     }
 
-    /// An integer of at least `min`.
+    /// An integer of at least `min` and at most [`MAX_COUNT`].
     pub fn count(&mut self, key: &str, min: usize) -> Result<Option<usize>> {
         match self.value(key) {
             None => Ok(None),
+            Some(Value::Integer(i)) if *i > MAX_COUNT as i64 => Err(self.error(
+                key,
+                format!("{i} is too large (a count is at most {MAX_COUNT})"),
+            )),
             Some(Value::Integer(i)) if *i >= 0 && *i as u64 >= min as u64 => usize::try_from(*i)
                 .map(Some)
                 .map_err(|_| self.error(key, format!("{i} is too large"))),
@@ -158,6 +166,15 @@ impl<'a> StudySection<'a> {
                 key,
                 format!("expected an integer of at least {min}, found `{other}`"),
             )),
+        }
+    }
+
+    /// An integer from `min` to `max` (a count whose cost grows with it beyond reason sooner
+    /// than [`MAX_COUNT`]).
+    pub fn count_in(&mut self, key: &str, min: usize, max: usize) -> Result<Option<usize>> {
+        match self.count(key, min)? {
+            Some(v) if v > max => Err(self.error(key, format!("{v} is too large (at most {max})"))),
+            v => Ok(v),
         }
     }
 
@@ -237,8 +254,12 @@ impl<'a> StudySection<'a> {
         match self.value(key) {
             None => Ok(None),
             Some(Value::String(s)) => parse_duration(s).map(Some).map_err(|r| self.error(key, r)),
-            Some(Value::Integer(i)) if *i >= 0 => Ok(Some(*i as f64)),
-            Some(Value::Float(f)) if f.is_finite() && *f >= 0.0 => Ok(Some(*f)),
+            Some(Value::Integer(i)) if *i >= 0 => check_duration(*i as f64)
+                .map(Some)
+                .map_err(|r| self.error(key, r)),
+            Some(Value::Float(f)) if f.is_finite() && *f >= 0.0 => {
+                check_duration(*f).map(Some).map_err(|r| self.error(key, r))
+            }
             Some(other) => Err(self.error(
                 key,
                 format!("expected a duration such as \"30m\", found `{other}`"),

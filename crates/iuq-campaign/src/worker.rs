@@ -21,7 +21,7 @@ use crate::outcome::{OutcomeKind, RunResult, TaskReport, host_name, unix_now};
 use crate::run_directory::{
     RESULT_FILE, STATUS_FILE, STDERR_FILE, STDOUT_FILE, Task, prepare, run_values,
 };
-use crate::study::{CommandKind, CommandSpec};
+use crate::study::{CommandKind, CommandSpec, check_duration};
 use crate::supervised_process::{OutputLogs, run_supervised, signal_name};
 use crate::template::format_value;
 
@@ -40,6 +40,17 @@ pub struct CompiledSpec {
 impl CompiledSpec {
     /// Compile `spec`.
     pub fn new(spec: CommandSpec) -> Result<Self> {
+        for (name, seconds) in [
+            ("timeout", spec.timeout),
+            ("kill_grace", Some(spec.kill_grace)),
+        ] {
+            if let Some(seconds) = seconds {
+                check_duration(seconds).map_err(|reason| CampaignError::Format {
+                    path: "worker spec".into(),
+                    reason: format!("{name}: {reason}"),
+                })?;
+            }
+        }
         let derived = spec
             .derived_expressions()
             .map_err(|r| CampaignError::Format {

@@ -141,6 +141,10 @@ fn binary_function(name: &str) -> Option<fn(f64, f64) -> f64> {
     })
 }
 
+/// How deeply signs, exponents, parentheses and function calls may nest: the parser descends
+/// recursively, and a mistyped or hostile expression must become an error, not a stack overflow.
+const MAX_NESTING: usize = 256;
+
 struct Parser<'a> {
     source: &'a str,
     tokens: Vec<(Token, usize)>,
@@ -148,6 +152,8 @@ struct Parser<'a> {
     variables: &'a [String],
     program: Vec<Instruction>,
     used: Vec<bool>,
+    /// Nesting depth of the `unary` rule, through which every recursion passes.
+    nesting: usize,
 }
 
 impl Parser<'_> {
@@ -202,6 +208,19 @@ impl Parser<'_> {
 
     /// unary := ("-" | "+") unary | power
     fn unary(&mut self) -> std::result::Result<(), String> {
+        if self.nesting == MAX_NESTING {
+            return Err(format!(
+                "nested more than {MAX_NESTING} levels deep at position {}",
+                self.offset()
+            ));
+        }
+        self.nesting += 1;
+        let parsed = self.unary_unguarded();
+        self.nesting -= 1;
+        parsed
+    }
+
+    fn unary_unguarded(&mut self) -> std::result::Result<(), String> {
         match self.peek() {
             Some(Token::Minus) => {
                 self.position += 1;
@@ -307,6 +326,7 @@ impl Expression {
             variables,
             program: Vec::new(),
             used: vec![false; variables.len()],
+            nesting: 0,
         };
         parser.expression().map_err(invalid)?;
         if parser.position != parser.tokens.len() {
@@ -515,6 +535,29 @@ mod tests {
         for (src, expected) in cases {
             let e = Expression::parse(src, &vars).unwrap();
             assert!((e.evaluate(&[2.0, 3.0]) - expected).abs() < 1e-12, "{src}");
+        }
+    }
+
+    #[test]
+    fn deep_nesting_is_an_error_not_a_stack_overflow() {
+        let vars = names(&["x"]);
+        let depth = MAX_NESTING - 1;
+        let nested = format!("{}x{}", "(".repeat(depth), ")".repeat(depth));
+        assert_eq!(
+            Expression::parse(&nested, &vars).unwrap().evaluate(&[2.0]),
+            2.0
+        );
+        for source in [
+            format!("{}x", "-".repeat(100_000)),
+            format!("{}x{}", "(".repeat(100_000), ")".repeat(100_000)),
+            format!("{}x{}", "sin(".repeat(100_000), ")".repeat(100_000)),
+            format!("x{}", "^x".repeat(100_000)),
+        ] {
+            let err = Expression::parse(&source, &vars).unwrap_err().to_string();
+            assert!(
+                err.contains(&format!("nested more than {MAX_NESTING} levels")),
+                "{err}"
+            );
         }
     }
 

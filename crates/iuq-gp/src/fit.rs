@@ -92,9 +92,19 @@ impl FitOptions {
                 reason: "must be finite".into(),
             });
         }
+        if self.n_restarts > MAX_RESTARTS {
+            return Err(GpError::InvalidParameter {
+                what: "n_restarts",
+                reason: format!("at most {MAX_RESTARTS}, got {}", self.n_restarts),
+            });
+        }
         Ok(CheckedFitOptions(self))
     }
 }
+
+/// The most optimizer restarts a fit takes (each is a full L-BFGS-B run; scikit-learn's
+/// default is 0, iuq's 10).
+pub const MAX_RESTARTS: usize = 10_000;
 
 /// Fit options that passed [`FitOptions::check`]; read them through `Deref`.
 #[derive(Debug, Clone, Copy, PartialEq)]

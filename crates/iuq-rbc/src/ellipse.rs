@@ -32,8 +32,14 @@ impl Ellipse {
     }
 }
 
+/// The most x bins a contour may span: a cell is a few hundred bins long; a shape spanning more
+/// is in another unit or broken, and would ask for bins beyond memory.
+pub const MAX_CONTOUR_BINS: usize = 1 << 20;
+
 /// The contour points of the x–y projection of `vertices`: per x bin of width `bin_width`, the
-/// vertex with the largest and the one with the smallest y (once if they coincide).
+/// vertex with the largest and the one with the smallest y (once if they coincide). No points
+/// when the coordinates are not finite, the width is not positive or the shape spans more than
+/// [`MAX_CONTOUR_BINS`] bins.
 pub fn contour_points(vertices: &[[f64; 3]], bin_width: f64) -> Vec<[f64; 2]> {
     let x_min = vertices.iter().map(|v| v[0]).fold(f64::INFINITY, f64::min);
     let x_max = vertices
@@ -43,7 +49,11 @@ pub fn contour_points(vertices: &[[f64; 3]], bin_width: f64) -> Vec<[f64; 2]> {
     if !(x_min.is_finite() && x_max.is_finite() && bin_width > 0.0) {
         return Vec::new();
     }
-    let bins = ((x_max - x_min) / bin_width).floor() as usize + 1;
+    let span = ((x_max - x_min) / bin_width).floor();
+    if span >= MAX_CONTOUR_BINS as f64 {
+        return Vec::new();
+    }
+    let bins = span as usize + 1;
     let mut top: Vec<Option<usize>> = vec![None; bins];
     let mut bottom: Vec<Option<usize>> = vec![None; bins];
     for (i, v) in vertices.iter().enumerate() {
@@ -69,6 +79,17 @@ pub fn contour_points(vertices: &[[f64; 3]], bin_width: f64) -> Vec<[f64; 2]> {
 
 /// The elongation index of a shape: [`contour_points`] then [`fit_ellipse`].
 pub fn elongation_index(vertices: &[[f64; 3]], bin_width: f64) -> Result<f64> {
+    let extent = |k: usize| {
+        let values = vertices.iter().map(|v| v[k]);
+        values.clone().fold(f64::NEG_INFINITY, f64::max) - values.fold(f64::INFINITY, f64::min)
+    };
+    let span = extent(0) / bin_width;
+    if span.is_finite() && span >= MAX_CONTOUR_BINS as f64 {
+        return Err(RbcError::NoEllipse(format!(
+            "the shape spans {:.3e} lattice units along x, more than {MAX_CONTOUR_BINS} contour bins of {bin_width}: is the coordinate unit right?",
+            extent(0)
+        )));
+    }
     Ok(fit_ellipse(&contour_points(vertices, bin_width))?.elongation_index())
 }
 

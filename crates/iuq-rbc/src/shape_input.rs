@@ -42,6 +42,16 @@ pub fn vertices_from_vtk(text: &str) -> Result<Vec<[f64; 3]>, String> {
                 .next()
                 .and_then(|w| w.parse::<usize>().ok())
                 .ok_or_else(|| format!("line {}: expected `POINTS n type`", i + 1))?;
+            // Every coordinate takes at least one character of the file.
+            if count
+                .checked_mul(3)
+                .is_none_or(|wanted| wanted > text.len())
+            {
+                return Err(format!(
+                    "line {}: POINTS announces {count} points, more than the file holds",
+                    i + 1
+                ));
+            }
             break (i + 1, count);
         }
     };
@@ -127,6 +137,12 @@ pub fn vertices_from_ply(text: &str) -> Result<Vec<[f64; 3]>, String> {
             .iter()
             .position(|p| p == name)
             .ok_or_else(|| format!("bad header: the vertex element has no property `{name}`"))?;
+    }
+    // Every vertex takes at least one line of the file.
+    if count > text.len() {
+        return Err(format!(
+            "the header announces {count} vertices, more than the file holds"
+        ));
     }
     let mut vertices = Vec::with_capacity(count);
     for _ in 0..count {

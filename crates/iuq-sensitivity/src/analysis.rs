@@ -57,9 +57,15 @@ impl Default for SensitivityOptions {
     }
 }
 
+/// The most bootstrap resamples: each resample's random stream is keyed by its index in 20 bits.
+pub const MAX_RESAMPLES: usize = 1 << 20;
+
+/// The most independent scramblings for replicate intervals (each a whole Saltelli design).
+pub const MAX_REPLICATES: usize = 1 << 16;
+
 impl SensitivityOptions {
-    /// Checks the base points (at least 2), the interval method (at least 2 replicates, or at
-    /// least 1 bootstrap resample), the confidence level (in (0, 1)) and the usable fraction (in
+    /// Checks the base points (at least 2), the interval method (2 to [`MAX_REPLICATES`]
+    /// replicates, or 1 to [`MAX_RESAMPLES`] bootstrap resamples), the confidence level (in (0, 1)) and the usable fraction (in
     /// [0, 1]), and returns the options as the value [`analyse`] takes.
     ///
     /// # Errors
@@ -77,10 +83,20 @@ impl SensitivityOptions {
                     "at least 2 replicates are needed, got {count}"
                 )));
             }
+            IntervalMethod::Replicates { count } if count > MAX_REPLICATES => {
+                return Err(SensitivityError::InvalidOption(format!(
+                    "at most {MAX_REPLICATES} replicates, got {count}"
+                )));
+            }
             IntervalMethod::Bootstrap { resamples: 0 } => {
                 return Err(SensitivityError::InvalidOption(
                     "at least 1 bootstrap resample is needed".into(),
                 ));
+            }
+            IntervalMethod::Bootstrap { resamples } if resamples > MAX_RESAMPLES => {
+                return Err(SensitivityError::InvalidOption(format!(
+                    "at most {MAX_RESAMPLES} bootstrap resamples, got {resamples}"
+                )));
             }
             _ => {}
         }

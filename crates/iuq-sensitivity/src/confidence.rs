@@ -49,6 +49,12 @@ pub fn bootstrap_half_widths(
             "at least 2 bootstrap resamples are needed, got {resamples}"
         )));
     }
+    if resamples > crate::analysis::MAX_RESAMPLES {
+        return Err(SensitivityError::InvalidOption(format!(
+            "at most {} bootstrap resamples, got {resamples}",
+            crate::analysis::MAX_RESAMPLES
+        )));
+    }
     values.validate()?;
     let n = values.base_points();
     let estimates: Vec<SobolEstimate> = (0..resamples)

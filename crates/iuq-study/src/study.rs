@@ -181,10 +181,10 @@ impl SensitivitySection {
         let section = Self {
             n: s.count("n", 1)?,
             seed: s.seed("seed")?,
-            replicates: s.count("replicates", 1)?,
-            resamples: s.count("resamples", 1)?,
+            replicates: s.count_in("replicates", 1, iuq_sensitivity::analysis::MAX_REPLICATES)?,
+            resamples: s.count_in("resamples", 1, iuq_sensitivity::analysis::MAX_RESAMPLES)?,
             confidence: s.number("confidence")?,
-            model_n: s.count("model_n", 0)?,
+            model_n: s.count_in("model_n", 0, 1 << 20)?,
         };
         s.finish()?;
         Ok(section)

@@ -29,6 +29,11 @@ use serde_json::{Map, Value, json};
 /// The protocol version this crate speaks, answered by `/Info` as a JSON number.
 pub const PROTOCOL_VERSION: f64 = 1.0;
 
+/// The most input or output values a model may declare in all its vectors together (2²⁴): every
+/// value is a parameter or a data point of a study, and a server declaring more is taken to be
+/// broken rather than allocated for.
+pub const MAX_VALUES: usize = 1 << 24;
+
 /// `GET /Info`: protocol version and model names.
 pub const INFO: &str = "/Info";
 /// `POST /ModelInfo`: the features a model supports.
@@ -264,14 +269,23 @@ pub fn parse_sizes(body: &str, key: &str) -> Result<Vec<usize>, String> {
         .get(key)
         .and_then(Value::as_array)
         .ok_or_else(|| format!("no `{key}` array"))?;
-    sizes
+    let sizes: Vec<usize> = sizes
         .iter()
         .map(|s| {
             s.as_u64()
                 .and_then(|s| usize::try_from(s).ok())
                 .ok_or_else(|| format!("`{key}` entry {s} is not a size"))
         })
-        .collect()
+        .collect::<Result<_, _>>()?;
+    match sizes
+        .iter()
+        .try_fold(0usize, |total, &s| total.checked_add(s))
+    {
+        Some(total) if total <= MAX_VALUES => Ok(sizes),
+        _ => Err(format!(
+            "`{key}` {sizes:?} add up to more than the {MAX_VALUES} values iuq accepts"
+        )),
+    }
 }
 
 /// The body of a `/ModelInfo` request.

@@ -279,6 +279,33 @@ fn fake_model(path: &str) -> Option<(u16, String)> {
 }
 
 #[test]
+fn sizes_no_model_could_have_are_refused_not_allocated() {
+    for (endpoint, body) in [
+        (
+            "/InputSizes",
+            r#"{"inputSizes": [18446744073709551615, 2]}"#,
+        ),
+        ("/OutputSizes", r#"{"outputSizes": [100000000000000000]}"#),
+    ] {
+        let url = fake_server(move |path| {
+            if path == endpoint {
+                (200, body.to_string())
+            } else {
+                fake_model(path).unwrap_or((404, "{}".into()))
+            }
+        });
+        let e = UmBridgeModel::connect(&url, "m", names(&["x"]), fast_retries()).unwrap_err();
+        let message = e.to_string();
+        assert!(
+            matches!(e, UmBridgeError::InvalidResponse { .. })
+                && message.contains(endpoint)
+                && message.contains("add up to more than"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
 fn another_protocol_version_is_refused_with_a_clear_error() {
     for (info, found) in [
         (r#"{"protocolVersion": 0.9, "models": ["m"]}"#, "0.9"),

@@ -330,6 +330,14 @@ fn bad_adaptive_keys_exit_2_naming_the_file_and_key() {
             "surrogate.adaptive.log_likelihood_tolerance",
         ),
         ("adaptive = 3", "surrogate.adaptive"),
+        (
+            "adaptive = { replicates = 1000000 }",
+            "surrogate.adaptive.replicates",
+        ),
+        (
+            "adaptive = { max_runs = 9223372036854775807 }",
+            "surrogate.adaptive.max_runs",
+        ),
     ] {
         let path = dir.join("bad.toml");
         std::fs::write(&path, original.replace(&line, replacement)).unwrap();

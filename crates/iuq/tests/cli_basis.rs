@@ -372,6 +372,15 @@ samples = 500
             GAUSSIAN_2D.replace("seed = 4", "seed = 4\nmax_burn = 0"),
             "sampler.max_burn",
         ),
+        // Step counts no run could afford, which would overflow their sums: errors, not panics.
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nburn = 9223372036854775807"),
+            "sampler.burn",
+        ),
+        (
+            GAUSSIAN_2D.replace("seed = 4", "seed = 4\nmax_stages = 2000000"),
+            "sampler.max_stages",
+        ),
         (
             data_study.replace("data/line.csv", "data/missing.csv"),
             "likelihood.data.file",
@@ -446,5 +455,24 @@ samples = 500
             .as_str()
             .unwrap()
             .contains("--samples")
+    );
+    let o = iuq(&[
+        "basis",
+        s(&study),
+        "--burn",
+        "18446744073709551615",
+        "--json",
+    ]);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        json_of(&o)["error"]["message"]
+            .as_str()
+            .unwrap()
+            .contains("--burn")
     );
 }

@@ -237,6 +237,24 @@ fn bad_study_files_exit_2_naming_file_key_and_reason() {
             text.replace("file = \"points.csv\"", "file = \"nope.csv\""),
             "design.file",
         ),
+        // Durations and counts past what a clock or a machine holds are input errors, not
+        // panics or hung coordinators.
+        (
+            text.replace("timeout = \"1s\"", "timeout = 1e20"),
+            "model.timeout",
+        ),
+        (
+            text.replace("timeout = \"1s\"", "timeout = \"99999999999999999999d\""),
+            "model.timeout",
+        ),
+        (
+            text.replace("max_parallel = 2", "max_parallel = 100000"),
+            "executor.max_parallel",
+        ),
+        (
+            text.replace("max_parallel = 2", "max_parallel = 9223372036854775807"),
+            "executor.max_parallel",
+        ),
     ];
     for (body, key) in cases {
         std::fs::write(&path, body).unwrap();
@@ -249,6 +267,13 @@ fn bad_study_files_exit_2_naming_file_key_and_reason() {
     }
     let o = iuq(&["status", dir.join("missing.toml").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
+    std::fs::write(&path, &text).unwrap();
+    for interval in ["inf", "1e300", "0", "soon"] {
+        let o = iuq(&["run", path.to_str().unwrap(), "--log-interval", interval]);
+        assert_eq!(o.status.code(), Some(2), "--log-interval {interval}");
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(err.contains("--log-interval"), "{err}");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -376,7 +376,18 @@ fn bad_input_to_elongation_is_named_with_exit_code_2_and_no_ellipse_with_1() {
         "bad.ply",
         "ply\nformat binary_little_endian 1.0\nelement vertex 1\nproperty double x\nend_header\n",
     );
+    // Counts no file of this size could hold: an error, not an allocation that aborts.
+    let huge_vtk = write(
+        "huge.vtk",
+        "# vtk DataFile Version 3.0\nt\nASCII\nDATASET POLYDATA\nPOINTS 18446744073709551615 double\n0 0 0\n",
+    );
+    let huge_ply = write(
+        "huge.ply",
+        "ply\nformat ascii 1.0\nelement vertex 1000000000000000000\nproperty double x\nproperty double y\nproperty double z\nend_header\n0 0 0\n",
+    );
     for (file, reason) in [
+        (&huge_vtk, "more than the file holds"),
+        (&huge_ply, "more than the file holds"),
         (&missing, "cannot read"),
         (&bad_header, "no column `x`"),
         (&not_finite, "not a finite number"),
@@ -420,6 +431,24 @@ fn bad_input_to_elongation_is_named_with_exit_code_2_and_no_ellipse_with_1() {
         message.contains(&line) && message.contains("no ellipse"),
         "{message}"
     );
+    // A shape far wider than any cell (a wrong unit): a failed measurement that says so, not
+    // a contour of 10^30 bins; one beyond the range of numbers once converted: an input error.
+    let wide = write("wide.csv", &ellipse.replace("\n8,0,0\n", "\n1e30,0,0\n"));
+    let o = iuq(&["--json", "rbc", "elongation", &good, &wide]);
+    assert_eq!(o.status.code(), Some(1), "{}", stderr_of(&o));
+    let message = json_of(&o)["error"]["message"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(message.contains("contour bins"), "{message}");
+    let vast = write("vast.csv", &ellipse.replace("\n8,0,0\n", "\n1e305,0,0\n"));
+    let o = iuq(&["--json", "rbc", "elongation", "--unit", "m", &vast, &good]);
+    assert_eq!(o.status.code(), Some(2), "{}", stderr_of(&o));
+    let message = json_of(&o)["error"]["message"]
+        .as_str()
+        .unwrap()
+        .to_string();
+    assert!(message.contains("beyond the range"), "{message}");
     // --out: nothing is written when the measurement fails.
     let out = dir.join("el.json");
     let o = iuq(&[

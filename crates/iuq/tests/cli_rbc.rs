@@ -136,6 +136,10 @@ fn bad_values_are_input_errors_naming_the_flag() {
             "--lattice-shear-rate",
         ),
         (
+            vec!["--stress", "1", "--lattice-shear-rate", "1e-300"],
+            "--lattice-shear-rate",
+        ),
+        (
             vec!["--stress", "1", "--window-factor", "1"],
             "--window-factor",
         ),

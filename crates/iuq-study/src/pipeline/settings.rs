@@ -137,7 +137,7 @@ pub struct PosteriorCheckSettings {
 
 /// Read `[surrogate] posterior_check`.
 fn parse_posterior_check(mut s: StudySection<'_>) -> Result<PosteriorCheckSettings> {
-    let samples = s.count("samples", 2)?.unwrap_or(20);
+    let samples = s.count_in("samples", 2, 100_000)?.unwrap_or(20);
     let seed = s.seed("seed")?.unwrap_or(0);
     let significance = s.positive("significance")?.unwrap_or(0.01);
     if significance >= 1.0 {
@@ -235,10 +235,10 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         tolerance: s.positive("tolerance")?.unwrap_or(0.1),
         log_likelihood_tolerance: s.positive("log_likelihood_tolerance")?.unwrap_or(0.05),
         samples,
-        replicates: s.count("replicates", 1)?.unwrap_or(4),
+        replicates: s.count_in("replicates", 1, 64)?.unwrap_or(4),
         max_samples: s.count("max_samples", samples)?.unwrap_or(16 * samples),
         max_rounds: s.count("max_rounds", 1)?.unwrap_or(30),
-        candidates: s.count("candidates", 1)?.unwrap_or(1000),
+        candidates: s.count_in("candidates", 1, 1_000_000)?.unwrap_or(1000),
         acquisition: match s.choice("acquisition", &["density", "moments"])? {
             Some("moments") => Acquisition::Moments,
             _ => Acquisition::Density,

@@ -92,6 +92,13 @@ fn kde(args: &KdeBenchArgs, json: bool) -> Result<()> {
     if args.repeats == 0 || args.grid == 0 {
         return Err(input_error("--repeats and --grid must be at least 1"));
     }
+    if args.grid > 1 << 14 {
+        return Err(input_error(format!(
+            "--grid: {} is more than {} points per side",
+            args.grid,
+            1 << 14
+        )));
+    }
     let table = read_numeric_csv(&args.points, false)?;
     if table.columns.len() < 2 {
         return Err(input_error(format!(

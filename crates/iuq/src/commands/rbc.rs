@@ -512,6 +512,19 @@ fn bench(args: &BenchArgs, json: bool) -> Result<()> {
             "--steps, --repeats and --copy-mb must be positive",
         ));
     }
+    // A box of 4096³ nodes (19 populations of 8 bytes, two buffers) is 20 TB: larger is a typo.
+    if large.iter().any(|&n| n > 4096) {
+        return Err(input_error(format!(
+            "--large: {}: each size at most 4096 nodes",
+            args.large
+        )));
+    }
+    if args.copy_mb > 1 << 20 {
+        return Err(input_error(format!(
+            "--copy-mb: {} MB is more than a terabyte",
+            args.copy_mb
+        )));
+    }
     let copy_all = memory_copy_bandwidth(args.copy_mb << 20, args.repeats, true);
     let copy_one = memory_copy_bandwidth(args.copy_mb << 20, args.repeats, false);
     let mut rows: Vec<LatticeBenchmark> = Vec::new();

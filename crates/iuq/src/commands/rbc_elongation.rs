@@ -78,11 +78,17 @@ pub fn run(args: &ElongationArgs, json: bool) -> Result<()> {
     let bin_width = CONTOUR_BIN_WIDTH / LATTICE_SPACING_M;
     let mut el_frames = Vec::with_capacity(args.files.len());
     for path in &args.files {
-        let mut vertices = read_vertices(path)?;
-        for v in &mut vertices {
-            for c in v.iter_mut() {
-                *c *= scale;
-            }
+        let read = read_vertices(path)?;
+        let vertices: Vec<[f64; 3]> = read.iter().map(|v| v.map(|c| c * scale)).collect();
+        if let Some(i) = vertices
+            .iter()
+            .position(|v| v.iter().any(|c| !c.is_finite()))
+        {
+            return Err(input_error(format!(
+                "{}: vertex {i} ({:?} in the file's unit) is beyond the range of numbers in lattice units",
+                path.display(),
+                read[i]
+            )));
         }
         let el = elongation_index(&vertices, bin_width)
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;

@@ -25,7 +25,7 @@ pub struct RetryArgs {
     #[arg(long)]
     pub max_parallel: Option<usize>,
     /// Seconds between log lines when stderr is not a terminal.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = super::run::log_interval_seconds)]
     pub log_interval: f64,
 }
 

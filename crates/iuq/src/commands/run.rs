@@ -24,8 +24,21 @@ pub struct RunArgs {
     #[arg(long)]
     pub max_parallel: Option<usize>,
     /// Seconds between log lines when stderr is not a terminal.
-    #[arg(long, default_value_t = 5.0)]
+    #[arg(long, default_value_t = 5.0, value_parser = log_interval_seconds)]
     pub log_interval: f64,
+}
+
+/// `--log-interval`: seconds from 0.1 to a day (a value that is no duration is an input error).
+pub fn log_interval_seconds(text: &str) -> std::result::Result<f64, String> {
+    let seconds: f64 = text
+        .trim()
+        .parse()
+        .map_err(|_| format!("`{text}` is not a number of seconds"))?;
+    if (0.1..=86_400.0).contains(&seconds) {
+        Ok(seconds)
+    } else {
+        Err(format!("{seconds} s is not from 0.1 s to a day (86400 s)"))
+    }
 }
 
 /// Run every pending run of the campaign, showing progress on stderr: a progress bar with ETA
@@ -57,7 +70,7 @@ pub fn drive(campaign: &mut Campaign, json: bool, log_interval: f64) -> Result<S
         bar.finish();
         Ok(counts)
     } else {
-        let interval = Duration::from_secs_f64(log_interval.max(0.1));
+        let interval = Duration::from_secs_f64(log_interval);
         let counts = campaign
             .run(interval, &mut |p: &Progress| {
                 eprintln!("{}", progress_line(&name, p))
