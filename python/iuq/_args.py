@@ -15,13 +15,20 @@ import numpy as np
 __all__ = ["count", "seed_of", "matrix", "vector", "parameter_box", "parameter_priors"]
 
 
-def count(name: str, value: Any, minimum: int = 0) -> int:
-    """``value`` as an ``int`` of at least ``minimum`` (``bool`` is refused)."""
+#: The largest count any argument takes (2**31 - 1, as the study files): sizes beyond it would
+#: overflow the products made of them or ask for more memory than any machine has.
+MAX_COUNT = 2**31 - 1
+
+
+def count(name: str, value: Any, minimum: int = 0, maximum: int = MAX_COUNT) -> int:
+    """``value`` as an ``int`` from ``minimum`` to ``maximum`` (``bool`` is refused)."""
     if isinstance(value, bool) or not isinstance(value, numbers.Integral):
         raise TypeError(f"{name}: expected an integer, got {type(value).__name__}")
     value = int(value)
     if value < minimum:
         raise ValueError(f"{name}: must be at least {minimum}, got {value}")
+    if value > maximum:
+        raise ValueError(f"{name}: must be at most {maximum}, got {value}")
     return value
 
 

@@ -139,12 +139,12 @@ def basis(
         names,
         priors,
         count("samples", samples, 2),
-        None if burn is None else count("burn", burn, 0),
-        count("max_chain", max_chain, 1),
+        None if burn is None else count("burn", burn, 0, 2**20),
+        count("max_chain", max_chain, 1, 2**20),
         seed_of(seed),
         real("cv_target", cv_target),
         None if proposal_scale is None else real("proposal_scale", proposal_scale),
-        count("max_stages", max_stages, 1),
+        count("max_stages", max_stages, 1, 2**20),
         on_error,
     )
     return result_from_raw(raw)

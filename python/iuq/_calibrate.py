@@ -284,7 +284,7 @@ def calibrate(
         raise ValueError(f"tolerance: must be > 0, got {tolerance}")
     samples = count("samples", samples, 2)
     sensitivity = count("sensitivity", sensitivity, 0)
-    posterior_check = count("posterior_check", posterior_check, 0)
+    posterior_check = count("posterior_check", posterior_check, 0, 100_000)
     batch_size = count("batch_size", batch_size, 1)
     seed = seed_of(seed)
     if modelling_error is not None:

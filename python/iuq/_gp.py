@@ -71,7 +71,7 @@ class GaussianProcess:
         native = _native.GaussianProcess.fit(
             X,
             y,
-            count("restarts", restarts, 0),
+            count("restarts", restarts, 0, 10_000),
             seed_of(seed),
             str(kernel),
             bool(scale_inputs),

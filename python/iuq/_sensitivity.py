@@ -91,8 +91,8 @@ def sobol(
         raise ValueError(f"on_error: `{on_error}` is not one of raise, fail")
     confidence = real("confidence", confidence)
     if replicates is not None:
-        replicates = count("replicates", replicates, 2)
-    resamples = count("resamples", resamples, 2)
+        replicates = count("replicates", replicates, 2, 2**16)
+    resamples = count("resamples", resamples, 2, 2**20)
     function = None
     expressions = None
     if isinstance(model, str):

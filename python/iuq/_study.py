@@ -197,8 +197,8 @@ class Study:
         raw = self._native.sobol(
             None if n is None else count("n", n, 2),
             None if seed is None else seed_of(seed),
-            None if replicates is None else count("replicates", replicates, 2),
-            None if resamples is None else count("resamples", resamples, 2),
+            None if replicates is None else count("replicates", replicates, 2, 2**16),
+            None if resamples is None else count("resamples", resamples, 2, 2**20),
             None if confidence is None else real("confidence", confidence),
         )
         return _sobol_result(raw)

@@ -163,7 +163,7 @@ def test_with_on_error_fail_the_points_that_raise_are_rejected():
         (dict(log_likelihood="x1 +"), "^log_likelihood: "),
         (dict(log_likelihood=None, model=lambda x: x, data=[1.0, 2.0],
               computational_error="odd"), "^computational_error: `odd`"),
-        (dict(burn=2**64 - 1), "at most 1048576"),
+        (dict(burn=2**64 - 1), "^burn: must be at most 1048576"),
     ],
 )
 def test_bad_input_is_a_value_error_naming_the_argument(kwargs, match):

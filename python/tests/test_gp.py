@@ -115,7 +115,7 @@ def test_bad_input_names_the_argument(tmp_path):
         iuq.GaussianProcess.fit(x, y[:-1])
     with pytest.raises(ValueError, match="^kernel: `rbf` is not one of"):
         iuq.GaussianProcess.fit(x, y, kernel="rbf")
-    with pytest.raises(ValueError, match="at most 10000"):
+    with pytest.raises(ValueError, match="^restarts: must be at most 10000"):
         iuq.GaussianProcess.fit(x, y, restarts=2**63)
     gp = iuq.GaussianProcess.fit(x, y, restarts=0)
     with pytest.raises(ValueError, match="^X: expected 2 columns"):
