@@ -32,10 +32,12 @@ def fit_power_law(runs, errors):
     xs = [math.log(n) for n in runs]
     ys = [math.log(e) for e in errors]
     k = len(xs)
+    if k < 3:
+        raise ValueError(f"the fit needs at least 3 rounds, found {k}")
     mx, my = sum(xs) / k, sum(ys) / k
     sxx = sum((x - mx) ** 2 for x in xs)
-    if k < 3 or sxx == 0.0:
-        raise ValueError("the fit needs at least 3 rounds with different run counts")
+    if sxx == 0.0:
+        raise ValueError("the fit needs rounds with different run counts")
     b = sum((x - mx) * (y - my) for x, y in zip(xs, ys)) / sxx
     a = my - b * mx
     residuals = [y - (a + b * x) for x, y in zip(xs, ys)]
@@ -74,14 +76,14 @@ def main():
         a, b, sd = fit_power_law(
             [r["runs"] for r in later], [r["surrogate_error"] for r in later]
         )
+        at_tolerance = math.exp((math.log(args.tolerance) - a) / b) if b < 0 else float("inf")
+        print(
+            f"\nfit over {len(later)} rounds from {args.from_runs} runs: eps ~ n^{b:.2f} "
+            f"(residual std of ln eps {sd:.2f}); eps(200) = {math.exp(a) * 200 ** b:.3f}; "
+            f"eps = {args.tolerance} at n = {at_tolerance:.0f}"
+        )
     except ValueError as e:
-        sys.exit(f"error: rounds from {args.from_runs} runs on: {e}")
-    at_tolerance = math.exp((math.log(args.tolerance) - a) / b) if b < 0 else float("inf")
-    print(
-        f"\nfit over {len(later)} rounds from {args.from_runs} runs: eps ~ n^{b:.2f} "
-        f"(residual std of ln eps {sd:.2f}); eps(200) = {math.exp(a) * 200 ** b:.3f}; "
-        f"eps = {args.tolerance} at n = {at_tolerance:.0f}"
-    )
+        print(f"\nno power-law fit of the rounds from {args.from_runs} runs on (--from-runs): {e}")
 
     print(f"\n{'group':>12} {'runs':>5} {'noise std':>10} {'signal std':>10}")
     for name, gp in zip(names, bank["gps"]):

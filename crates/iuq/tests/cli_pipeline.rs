@@ -591,6 +591,60 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
 /// The healthy study made from an empty campaign with the engine of 2026-11-27 (its posterior
 /// check left out), replayed from its store `data/rbc_healthy_fresh_engine.sqlite`: converged at
 /// round 8 with 324 runs, the posterior of `data/rbc_healthy_fresh_engine.md`.
+/// The TBHP study made from an empty campaign with `acquisition = "moments"`
+/// (data/rbc_tbhp_moments_engine.md): converged at round 8 with 140 runs, and the cell model at
+/// that posterior (the MAP and 20 samples per stress, 126 runs) passed the check, where the
+/// shipped history's density acquisition also met the rule at 140 runs but failed the check.
+#[test]
+fn the_tbhp_study_with_moments_acquisition_replays_to_its_140_runs_and_passes_its_check() {
+    let (summary, _) = replay_study(
+        "tbhp-moments",
+        "rbc-tbhp-hemocell",
+        "data/rbc_tbhp_moments_engine.sqlite",
+        &|text| {
+            text.replace(
+                "max_rounds = 30 }",
+                "max_rounds = 30, acquisition = \"moments\" }",
+            )
+        },
+    );
+    assert_eq!(summary["runs"], 140, "{}", summary["adaptive"]);
+    assert_eq!(summary["rounds"], 8);
+    assert_eq!(summary["converged"], true);
+    assert_eq!(summary["failed"], 0);
+    assert!(
+        summary["adaptive"]["retrained_checks"]
+            .as_array()
+            .unwrap()
+            .is_empty(),
+        "the check passed: nothing retrained"
+    );
+    let check = summary["posterior_check"].as_array().unwrap();
+    assert_eq!(check.len(), 6, "one check per stress");
+    for point in check {
+        assert_eq!(point["passed"], true, "{point}");
+    }
+    let gp = &summary["posterior"][0];
+    assert_eq!(gp["source"], "GP surrogate");
+    // The table of data/rbc_tbhp_moments_engine.md (mean / std, as rounded there).
+    for (name, mean, std, digits) in [
+        ("kLink", 120.5, 15.1, 1),
+        ("kBend", 320.3, 62.4, 1),
+        ("viscosityRatio", 2.75, 1.80, 2),
+        ("sigma_m", 0.0470, 0.0203, 4),
+    ] {
+        let p = gp["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["parameter"] == name)
+            .unwrap_or_else(|| panic!("{name} in {gp}"));
+        let round = |x: f64| (x * 10f64.powi(digits)).round() / 10f64.powi(digits);
+        assert_eq!(round(p["mean"].as_f64().unwrap()), mean, "{name}: {p}");
+        assert_eq!(round(p["std"].as_f64().unwrap()), std, "{name}: {p}");
+    }
+}
+
 #[test]
 fn the_healthy_study_made_from_scratch_replays_to_its_324_runs() {
     let (summary, _) = replay_study(
