@@ -308,10 +308,19 @@ impl std::fmt::Debug for CampaignStore {
     }
 }
 
-fn decode_parameters(text: &str) -> Vec<f64> {
+/// A run's parameters as the store holds them (a JSON array; `null` reads as NaN). Text that is
+/// no such array is a corrupt store, an error of the row (column `column` of the query), never an
+/// empty parameter vector that a model would then be run with.
+fn decode_parameters(text: &str, column: usize) -> rusqlite::Result<Vec<f64>> {
     serde_json::from_str::<Vec<Option<f64>>>(text)
         .map(|v| v.into_iter().map(|x| x.unwrap_or(f64::NAN)).collect())
-        .unwrap_or_default()
+        .map_err(|e| {
+            rusqlite::Error::FromSqlConversionFailure(
+                column,
+                rusqlite::types::Type::Text,
+                format!("run parameters `{text}` are not a JSON array of numbers: {e}").into(),
+            )
+        })
 }
 
 fn encode_parameters(point: &[f64]) -> String {
@@ -549,7 +558,7 @@ impl CampaignStore {
         let rows = points
             .query_map([design], |r| r.get::<_, String>(0))
             .map_err(|e| self.err(e))?
-            .map(|t| t.map(|text| decode_parameters(&text)))
+            .map(|t| t.and_then(|text| decode_parameters(&text, 0)))
             .collect::<rusqlite::Result<Vec<_>>>()
             .map_err(|e| self.err(e))?;
         Ok(Some(rows))
@@ -628,7 +637,7 @@ impl CampaignStore {
             .query_map([limit.min(i64::MAX as usize) as i64], |r| {
                 Ok(PendingRun {
                     run_id: r.get(0)?,
-                    parameters: decode_parameters(&r.get::<_, String>(1)?),
+                    parameters: decode_parameters(&r.get::<_, String>(1)?, 1)?,
                     attempts: r.get(2)?,
                 })
             })
@@ -713,7 +722,7 @@ impl CampaignStore {
         stmt.query_map([], |r| {
             Ok(FailedRun {
                 run_id: r.get(0)?,
-                parameters: decode_parameters(&r.get::<_, String>(1)?),
+                parameters: decode_parameters(&r.get::<_, String>(1)?, 1)?,
                 attempts: r.get(2)?,
                 kind: r.get(3)?,
                 reason: r.get(4)?,
@@ -751,7 +760,7 @@ impl CampaignStore {
                 executor: r.get(3)?,
                 external_id: r.get(4)?,
                 directory: PathBuf::from(r.get::<_, String>(5)?),
-                parameters: decode_parameters(&r.get::<_, String>(6)?),
+                parameters: decode_parameters(&r.get::<_, String>(6)?, 6)?,
             })
         })
         .and_then(|rows| rows.collect())
@@ -877,7 +886,7 @@ impl CampaignStore {
                 Ok(ExportRow {
                     run_id: r.get(0)?,
                     status: r.get(1)?,
-                    parameters: decode_parameters(&r.get::<_, String>(2)?),
+                    parameters: decode_parameters(&r.get::<_, String>(2)?, 2)?,
                     outputs: Vec::new(),
                     std: None,
                     attempts: r.get(3)?,

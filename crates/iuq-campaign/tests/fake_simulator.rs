@@ -189,6 +189,35 @@ fn identical_vectors_are_not_run_twice_across_batches_and_sessions() {
 }
 
 #[test]
+fn a_run_whose_stored_parameters_do_not_parse_is_an_error_not_a_run_without_parameters() {
+    let dir = scratch("tampered");
+    let path = write_study(&dir, "");
+    let mut campaign = open(&path);
+    campaign.add_points("design", &[vec![0.0, 4.0]]).unwrap();
+    campaign
+        .store()
+        .connection()
+        .execute("UPDATE runs SET parameters = 'four'", [])
+        .unwrap();
+    let error = campaign
+        .run(std::time::Duration::from_secs(60), &mut |_| {})
+        .unwrap_err()
+        .to_string();
+    assert!(
+        error.contains("`four` are not a JSON array of numbers"),
+        "{error}"
+    );
+    // Nothing ran: no attempt, no run directory.
+    let attempts: i64 = campaign
+        .store()
+        .connection()
+        .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
+        .unwrap();
+    assert_eq!(attempts, 0);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn a_batch_runs_only_its_own_runs_and_leaves_an_abandoned_design_pending() {
     let dir = scratch("only");
     let path = write_study(&dir, "");
