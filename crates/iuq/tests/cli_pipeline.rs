@@ -591,6 +591,22 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
 /// The healthy study made from an empty campaign with the engine of 2026-11-27 (its posterior
 /// check left out), replayed from its store `data/rbc_healthy_fresh_engine.sqlite`: converged at
 /// round 8 with 324 runs, the posterior of `data/rbc_healthy_fresh_engine.md`.
+/// Every (parameter, mean, std, decimals) row of a data file's posterior table matches the
+/// summary's posterior `gp`, rounded as the table is.
+fn assert_posterior_table(gp: &serde_json::Value, rows: &[(&str, f64, f64, i32)]) {
+    for &(name, mean, std, digits) in rows {
+        let p = gp["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["parameter"] == name)
+            .unwrap_or_else(|| panic!("{name} in {gp}"));
+        let round = |x: f64| (x * 10f64.powi(digits)).round() / 10f64.powi(digits);
+        assert_eq!(round(p["mean"].as_f64().unwrap()), mean, "{name}: {p}");
+        assert_eq!(round(p["std"].as_f64().unwrap()), std, "{name}: {p}");
+    }
+}
+
 /// The TBHP study made from an empty campaign with `acquisition = "moments"`
 /// (data/rbc_tbhp_moments_engine.md): converged at round 8 with 140 runs, and the cell model at
 /// that posterior (the MAP and 20 samples per stress, 126 runs) passed the check, where the
@@ -627,22 +643,15 @@ fn the_tbhp_study_with_moments_acquisition_replays_to_its_140_runs_and_passes_it
     let gp = &summary["posterior"][0];
     assert_eq!(gp["source"], "GP surrogate");
     // The table of data/rbc_tbhp_moments_engine.md (mean / std, as rounded there).
-    for (name, mean, std, digits) in [
-        ("kLink", 120.5, 15.1, 1),
-        ("kBend", 320.3, 62.4, 1),
-        ("viscosityRatio", 2.75, 1.80, 2),
-        ("sigma_m", 0.0470, 0.0203, 4),
-    ] {
-        let p = gp["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["parameter"] == name)
-            .unwrap_or_else(|| panic!("{name} in {gp}"));
-        let round = |x: f64| (x * 10f64.powi(digits)).round() / 10f64.powi(digits);
-        assert_eq!(round(p["mean"].as_f64().unwrap()), mean, "{name}: {p}");
-        assert_eq!(round(p["std"].as_f64().unwrap()), std, "{name}: {p}");
-    }
+    assert_posterior_table(
+        gp,
+        &[
+            ("kLink", 120.5, 15.1, 1),
+            ("kBend", 320.3, 62.4, 1),
+            ("viscosityRatio", 2.75, 1.80, 2),
+            ("sigma_m", 0.0470, 0.0203, 4),
+        ],
+    );
 }
 
 #[test]
@@ -665,20 +674,13 @@ fn the_healthy_study_made_from_scratch_replays_to_its_324_runs() {
     let gp = &summary["posterior"][0];
     assert_eq!(gp["source"], "GP surrogate");
     // The table of data/rbc_healthy_fresh_engine.md (mean / std, as rounded there).
-    for (name, mean, std, digits) in [
-        ("kLink", 38.77, 4.09, 2),
-        ("kBend", 236.3, 76.5, 1),
-        ("viscosityRatio", 5.72, 1.59, 2),
-        ("sigma_m", 0.0323, 0.0193, 4),
-    ] {
-        let p = gp["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["parameter"] == name)
-            .unwrap_or_else(|| panic!("{name} in {gp}"));
-        let round = |x: f64| (x * 10f64.powi(digits)).round() / 10f64.powi(digits);
-        assert_eq!(round(p["mean"].as_f64().unwrap()), mean, "{name}: {p}");
-        assert_eq!(round(p["std"].as_f64().unwrap()), std, "{name}: {p}");
-    }
+    assert_posterior_table(
+        gp,
+        &[
+            ("kLink", 38.77, 4.09, 2),
+            ("kBend", 236.3, 76.5, 1),
+            ("viscosityRatio", 5.72, 1.59, 2),
+            ("sigma_m", 0.0323, 0.0193, 4),
+        ],
+    );
 }
