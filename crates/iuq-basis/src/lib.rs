@@ -61,7 +61,7 @@ pub use error::{BasisError, Result};
 pub use likelihood::{FnLikelihood, LogDensityLikelihood, LogLikelihood, PointLogLikelihood};
 pub use model_posterior::{
     ModelPosterior, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
-    SurrogatePopulation, model_posterior,
+    SurrogatePopulation, model_posterior, selected_members,
 };
 pub use pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,

@@ -37,6 +37,14 @@
 //!    rates are reported. Then the next stage.
 //! 5. After `max_stages` stages without reaching β = 1 (or a step below `min_step`) the run
 //!    stops uncertified, with the weights of the remaining step and their k̂.
+//! 6. **A noisy model** (`pseudo_marginal`: a chaotic or stochastic model, whose runs at nearly
+//!    equal parameters differ by more than their own reported spread): a run's likelihood is
+//!    then one unbiased draw of the likelihood averaged over the model's irregular part, the
+//!    weights exp(r) stay unbiased (pseudo-marginal importance sampling, Andrieu & Roberts
+//!    2009), and the estimate is the one full step, certified by k̂ alone. Steps 2–4 are left
+//!    out: a quadratic fit of a noisy r fits its mean, which by Jensen's inequality lies below
+//!    the log of the mean weight, and a Metropolis chain on a noisy ratio sticks where a lucky
+//!    run landed.
 //!
 //! The final population is summarised with its normalised smoothed weights w̄: mean
 //! μ = Σ w̄θ, std σ = √(Σ w̄(θ − μ)²), weighted quantiles; the Monte Carlo standard errors of
@@ -115,6 +123,15 @@ pub struct ModelPosteriorSettings {
     pub min_step: f64,
     /// The probabilities of the reported quantiles.
     pub probabilities: Vec<f64>,
+    /// The model's log-likelihood is a noisy estimate: a chaotic or stochastic model, whose
+    /// output moves by more than its own reported spread under a negligible change of the
+    /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
+    /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
+    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ alone; no
+    /// correction and no bridge, whose quadratic fits and Metropolis ratios assume a
+    /// reproducible r (a noisy r makes the chains stick where a lucky run landed).
+    #[serde(default)]
+    pub pseudo_marginal: bool,
 }
 
 impl Default for ModelPosteriorSettings {
@@ -131,6 +148,7 @@ impl Default for ModelPosteriorSettings {
             scale: 0.4,
             min_step: 1e-4,
             probabilities: vec![0.025, 0.05, 0.25, 0.5, 0.75, 0.95, 0.975],
+            pseudo_marginal: false,
         }
     }
 }
@@ -276,6 +294,9 @@ pub enum ModelPosteriorStop {
         /// β reached.
         beta: f64,
     },
+    /// A noisy (pseudo-marginal) model likelihood whose one full step's weights have k̂ above
+    /// the threshold: no bridge can follow a likelihood that does not repeat.
+    NoisyWeightsTail,
 }
 
 impl std::fmt::Display for ModelPosteriorStop {
@@ -292,6 +313,10 @@ impl std::fmt::Display for ModelPosteriorStop {
             Self::StepBelowMinimum { beta } => write!(
                 f,
                 "not certified: at β = {beta:.4} even the smallest step's weights have k̂ above the threshold (the surrogate posterior misses part of the model's; raise samples or improve the surrogate)"
+            ),
+            Self::NoisyWeightsTail => write!(
+                f,
+                "not certified: the model's likelihood is noisy (its output is not reproducible under a negligible change of the parameters) and the one full step's weights have k̂ above the threshold (raise samples; the noise of a single run's likelihood sets the weights' tail)"
             ),
         }
     }
@@ -400,6 +425,18 @@ fn evaluate(likelihood: &dyn LogLikelihood, points: &[Vec<f64>], what: &str) -> 
         .collect())
 }
 
+/// The indices (ascending) of the members of a surrogate population of `population_size` that
+/// [`model_posterior`] runs through the model first: `min(samples, population_size)` of them,
+/// drawn without replacement by `seed`. A caller that probes the model at the same members
+/// (e.g. whether its output is reproducible) gets the points the method will request anyway.
+pub fn selected_members(population_size: usize, settings: &ModelPosteriorSettings) -> Vec<usize> {
+    let s = settings.samples.min(population_size);
+    let mut selection_rng = stream(settings.seed, STREAM_BASE, 0);
+    let mut chosen = sample_indices(&mut selection_rng, population_size, s).into_vec();
+    chosen.sort_unstable();
+    chosen
+}
+
 /// The model's posterior from the surrogate's `population` (see the module documentation):
 /// `surrogate` and `model` are the two log-likelihoods of the same parameters on `space`;
 /// `on_stage` sees every stage as it ends (for progress reports).
@@ -447,9 +484,7 @@ pub fn model_posterior(
     }
     let s = settings.samples.min(n);
     let widths: Vec<f64> = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
-    let mut selection_rng = stream(settings.seed, STREAM_BASE, 0);
-    let mut chosen = sample_indices(&mut selection_rng, n, s).into_vec();
-    chosen.sort_unstable();
+    let chosen = selected_members(n, settings);
     let mut theta: Vec<Vec<f64>> = chosen
         .iter()
         .map(|&i| population.samples[i].clone())
@@ -477,7 +512,7 @@ pub fn model_posterior(
     let mut corrections = Vec::new();
     let corrected_holder: CorrectedLikelihood;
     let mut surrogate = surrogate;
-    if settings.corrections > 0 {
+    if settings.corrections > 0 && !settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
         let max_r = r
             .iter()
@@ -535,7 +570,7 @@ pub fn model_posterior(
             stage_evaluations = (s, batch_failures);
         }
     }
-    let (raw, smoothed, pareto_k, stop) = loop {
+    let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
         let max_r = r
             .iter()
@@ -543,179 +578,219 @@ pub fn model_posterior(
             .filter(|v| v.is_finite())
             .fold(f64::NEG_INFINITY, f64::max);
         if !max_r.is_finite() {
-            return Err(BasisError::NoFiniteLikelihood {
-                stage: stages.len() + 1,
-                failures: s,
-            });
+            return Err(BasisError::NoFiniteLikelihood { stage: 1, failures });
         }
-        let cv_target = if stages.is_empty() {
-            settings.cv_target
-        } else {
-            settings.bridge_cv_target
-        };
-        let rule = next_step(&r, beta, cv_target, max_r);
-        let mut step = rule.step;
-        let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
-        let mut smoothing = pareto_smooth(&scaled(step));
-        let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
-            smoothing.pareto_k <= threshold
-                || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV
-        };
-        while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
-            step /= 2.0;
-            smoothing = pareto_smooth(&scaled(step));
-        }
-        let reaches_one = rule.reaches_one && step == rule.step;
-        let next_beta = if reaches_one { 1.0 } else { beta + step };
-        let raw = scaled(step);
+        let smoothing = pareto_smooth(&r);
+        let cv = coefficient_of_variation(&r);
+        let certified = smoothing.pareto_k <= threshold || cv <= NEARLY_EQUAL_CV;
         let record = ModelPosteriorStage {
-            stage: stages.len() + 1,
-            beta: next_beta,
-            step,
-            cv: coefficient_of_variation(&raw),
+            stage: 1,
+            beta: 1.0,
+            step: 1.0,
+            cv,
             pareto_k: smoothing.pareto_k,
-            cv_step: rule.step,
+            cv_step: 1.0,
             effective_sample_size: effective_sample_size(&normalised_weights(
                 &smoothing.log_weights,
             )),
             model_evaluations: stage_evaluations.0,
             failures: stage_evaluations.1,
-            screen_acceptance: bridge_rates.0,
-            confirm_acceptance: bridge_rates.1,
+            screen_acceptance: None,
+            confirm_acceptance: None,
         };
         on_stage(&record);
         stages.push(record);
-        let certified_step = holds(&smoothing, step);
-        if reaches_one && certified_step {
-            log_evidence_ratio += log_evidence_increment(&r, step, max_r);
-            break (
-                raw,
-                smoothing.log_weights,
-                smoothing.pareto_k,
-                ModelPosteriorStop::Certified,
-            );
-        }
-        if !certified_step || stages.len() >= settings.max_stages {
-            // The rest of the way in one step, uncertified.
-            let rest = scaled(1.0 - beta);
-            log_evidence_ratio += log_evidence_increment(&r, 1.0 - beta, max_r);
-            let last = pareto_smooth(&rest);
-            let stop = if certified_step {
-                ModelPosteriorStop::MaxStages { beta: next_beta }
-            } else {
-                ModelPosteriorStop::StepBelowMinimum { beta }
-            };
-            break (rest, last.log_weights, last.pareto_k, stop);
-        }
-        log_evidence_ratio += log_evidence_increment(&r, step, max_r);
-        beta = next_beta;
-
-        // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
-        let stage_key = STREAM_BASE + stages.len() as u64;
-        let weights = normalised_weights(&smoothing.log_weights);
-        let proposal = Proposal::new(&theta, &weights, settings.scale, &widths)?;
-        let discrepancy = QuadraticFit::fit(&theta, &r);
-        let correction = |x: &[f64]| discrepancy.as_ref().map_or(0.0, |f| beta * f.predict(x));
-        let mut resampling_rng =
-            stream(settings.seed, stage_key, crate::sampler::RESAMPLING_STREAM);
-        let counts = resample(&weights, s, Resampling::Multinomial, &mut resampling_rng);
-        let mut chains: Vec<Chain> = Vec::with_capacity(s);
-        for (i, &c) in counts.iter().enumerate() {
-            for _ in 0..c {
-                let index = chains.len() as u64;
-                chains.push(Chain {
-                    theta: theta[i].clone(),
-                    surrogate: ls[i],
-                    model: lm[i],
-                    prior: lp[i],
-                    rng: stream(settings.seed, stage_key, index),
+        log_evidence_ratio += log_evidence_increment(&r, 1.0, max_r);
+        let stop = if certified {
+            ModelPosteriorStop::Certified
+        } else {
+            ModelPosteriorStop::NoisyWeightsTail
+        };
+        (r, smoothing.log_weights, smoothing.pareto_k, stop)
+    } else {
+        loop {
+            let r: Vec<f64> = log_ratios(&lm, &ls);
+            let max_r = r
+                .iter()
+                .copied()
+                .filter(|v| v.is_finite())
+                .fold(f64::NEG_INFINITY, f64::max);
+            if !max_r.is_finite() {
+                return Err(BasisError::NoFiniteLikelihood {
+                    stage: stages.len() + 1,
+                    failures: s,
                 });
             }
-        }
-        let (mut screened, mut screen_accepted) = (0usize, 0usize);
-        let (mut confirmed, mut confirm_accepted, mut confirm_failed) = (0usize, 0usize, 0usize);
-        for _ in 0..settings.moves {
-            // The surrogate subchain of every chain, one batch per step.
-            // (θ, ℓ_s, ln π, β·r̂) at each subchain's position.
-            let mut ends: Vec<(Vec<f64>, f64, f64, f64)> = chains
-                .iter()
-                .map(|c| (c.theta.clone(), c.surrogate, c.prior, correction(&c.theta)))
-                .collect();
-            for _ in 0..settings.subchain {
-                let proposals: Vec<(Vec<f64>, f64)> = chains
-                    .par_iter_mut()
-                    .zip(&ends)
-                    .map(|(chain, (at, _, _, _))| {
-                        let z: Vec<f64> = (0..d)
-                            .map(|_| StandardNormal.sample(&mut chain.rng))
-                            .collect();
-                        let u: f64 = chain.rng.random();
-                        (proposal.step(at, &z), u)
-                    })
+            let cv_target = if stages.is_empty() {
+                settings.cv_target
+            } else {
+                settings.bridge_cv_target
+            };
+            let rule = next_step(&r, beta, cv_target, max_r);
+            let mut step = rule.step;
+            let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
+            let mut smoothing = pareto_smooth(&scaled(step));
+            let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
+                smoothing.pareto_k <= threshold
+                    || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV
+            };
+            while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
+                step /= 2.0;
+                smoothing = pareto_smooth(&scaled(step));
+            }
+            let reaches_one = rule.reaches_one && step == rule.step;
+            let next_beta = if reaches_one { 1.0 } else { beta + step };
+            let raw = scaled(step);
+            let record = ModelPosteriorStage {
+                stage: stages.len() + 1,
+                beta: next_beta,
+                step,
+                cv: coefficient_of_variation(&raw),
+                pareto_k: smoothing.pareto_k,
+                cv_step: rule.step,
+                effective_sample_size: effective_sample_size(&normalised_weights(
+                    &smoothing.log_weights,
+                )),
+                model_evaluations: stage_evaluations.0,
+                failures: stage_evaluations.1,
+                screen_acceptance: bridge_rates.0,
+                confirm_acceptance: bridge_rates.1,
+            };
+            on_stage(&record);
+            stages.push(record);
+            let certified_step = holds(&smoothing, step);
+            if reaches_one && certified_step {
+                log_evidence_ratio += log_evidence_increment(&r, step, max_r);
+                break (
+                    raw,
+                    smoothing.log_weights,
+                    smoothing.pareto_k,
+                    ModelPosteriorStop::Certified,
+                );
+            }
+            if !certified_step || stages.len() >= settings.max_stages {
+                // The rest of the way in one step, uncertified.
+                let rest = scaled(1.0 - beta);
+                log_evidence_ratio += log_evidence_increment(&r, 1.0 - beta, max_r);
+                let last = pareto_smooth(&rest);
+                let stop = if certified_step {
+                    ModelPosteriorStop::MaxStages { beta: next_beta }
+                } else {
+                    ModelPosteriorStop::StepBelowMinimum { beta }
+                };
+                break (rest, last.log_weights, last.pareto_k, stop);
+            }
+            log_evidence_ratio += log_evidence_increment(&r, step, max_r);
+            beta = next_beta;
+
+            // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
+            let stage_key = STREAM_BASE + stages.len() as u64;
+            let weights = normalised_weights(&smoothing.log_weights);
+            let proposal = Proposal::new(&theta, &weights, settings.scale, &widths)?;
+            let discrepancy = QuadraticFit::fit(&theta, &r);
+            let correction = |x: &[f64]| discrepancy.as_ref().map_or(0.0, |f| beta * f.predict(x));
+            let mut resampling_rng =
+                stream(settings.seed, stage_key, crate::sampler::RESAMPLING_STREAM);
+            let counts = resample(&weights, s, Resampling::Multinomial, &mut resampling_rng);
+            let mut chains: Vec<Chain> = Vec::with_capacity(s);
+            for (i, &c) in counts.iter().enumerate() {
+                for _ in 0..c {
+                    let index = chains.len() as u64;
+                    chains.push(Chain {
+                        theta: theta[i].clone(),
+                        surrogate: ls[i],
+                        model: lm[i],
+                        prior: lp[i],
+                        rng: stream(settings.seed, stage_key, index),
+                    });
+                }
+            }
+            let (mut screened, mut screen_accepted) = (0usize, 0usize);
+            let (mut confirmed, mut confirm_accepted, mut confirm_failed) =
+                (0usize, 0usize, 0usize);
+            for _ in 0..settings.moves {
+                // The surrogate subchain of every chain, one batch per step.
+                // (θ, ℓ_s, ln π, β·r̂) at each subchain's position.
+                let mut ends: Vec<(Vec<f64>, f64, f64, f64)> = chains
+                    .iter()
+                    .map(|c| (c.theta.clone(), c.surrogate, c.prior, correction(&c.theta)))
                     .collect();
-                let inside: Vec<usize> = (0..chains.len())
-                    .filter(|&c| space.in_support(&proposals[c].0))
+                for _ in 0..settings.subchain {
+                    let proposals: Vec<(Vec<f64>, f64)> = chains
+                        .par_iter_mut()
+                        .zip(&ends)
+                        .map(|(chain, (at, _, _, _))| {
+                            let z: Vec<f64> = (0..d)
+                                .map(|_| StandardNormal.sample(&mut chain.rng))
+                                .collect();
+                            let u: f64 = chain.rng.random();
+                            (proposal.step(at, &z), u)
+                        })
+                        .collect();
+                    let inside: Vec<usize> = (0..chains.len())
+                        .filter(|&c| space.in_support(&proposals[c].0))
+                        .collect();
+                    let points: Vec<Vec<f64>> =
+                        inside.iter().map(|&c| proposals[c].0.clone()).collect();
+                    let values = evaluate(surrogate, &points, "the surrogate in a bridge")?;
+                    screened += chains.len();
+                    for (&c, v) in inside.iter().zip(values) {
+                        let prior = space
+                            .log_prior(&proposals[c].0)
+                            .unwrap_or(f64::NEG_INFINITY);
+                        let (_, ls_at, lp_at, rc_at) = &ends[c];
+                        let rc = correction(&proposals[c].0);
+                        let log_ratio = (v + prior + rc) - (ls_at + lp_at + rc_at);
+                        if v.is_finite() && prior.is_finite() && proposals[c].1.ln() < log_ratio {
+                            ends[c] = (proposals[c].0.clone(), v, prior, rc);
+                            screen_accepted += 1;
+                        }
+                    }
+                }
+                // The model confirms the subchains that moved, in one batch.
+                let confirm_u: Vec<f64> = chains.iter_mut().map(|c| c.rng.random()).collect();
+                let moved: Vec<usize> = (0..chains.len())
+                    .filter(|&c| ends[c].0 != chains[c].theta)
                     .collect();
-                let points: Vec<Vec<f64>> =
-                    inside.iter().map(|&c| proposals[c].0.clone()).collect();
-                let values = evaluate(surrogate, &points, "the surrogate in a bridge")?;
-                screened += chains.len();
-                for (&c, v) in inside.iter().zip(values) {
-                    let prior = space
-                        .log_prior(&proposals[c].0)
-                        .unwrap_or(f64::NEG_INFINITY);
-                    let (_, ls_at, lp_at, rc_at) = &ends[c];
-                    let rc = correction(&proposals[c].0);
-                    let log_ratio = (v + prior + rc) - (ls_at + lp_at + rc_at);
-                    if v.is_finite() && prior.is_finite() && proposals[c].1.ln() < log_ratio {
-                        ends[c] = (proposals[c].0.clone(), v, prior, rc);
-                        screen_accepted += 1;
+                let points: Vec<Vec<f64>> = moved.iter().map(|&c| ends[c].0.clone()).collect();
+                let values = evaluate(model, &points, "the model in a bridge")?;
+                evaluations += points.len();
+                confirmed += points.len();
+                best.offer(
+                    &points,
+                    &values,
+                    &moved.iter().map(|&c| ends[c].2).collect::<Vec<_>>(),
+                );
+                for (&c, v) in moved.iter().zip(values) {
+                    if !v.is_finite() {
+                        confirm_failed += 1;
+                        continue;
+                    }
+                    let (at, ls_at, lp_at, rc_at) = &ends[c];
+                    let chain = &chains[c];
+                    let log_ratio = (beta * (v - ls_at) - rc_at)
+                        - (beta * (chain.model - chain.surrogate) - correction(&chain.theta));
+                    if confirm_u[c].ln() < log_ratio {
+                        let chain = &mut chains[c];
+                        chain.theta = at.clone();
+                        chain.surrogate = *ls_at;
+                        chain.prior = *lp_at;
+                        chain.model = v;
+                        confirm_accepted += 1;
                     }
                 }
             }
-            // The model confirms the subchains that moved, in one batch.
-            let confirm_u: Vec<f64> = chains.iter_mut().map(|c| c.rng.random()).collect();
-            let moved: Vec<usize> = (0..chains.len())
-                .filter(|&c| ends[c].0 != chains[c].theta)
-                .collect();
-            let points: Vec<Vec<f64>> = moved.iter().map(|&c| ends[c].0.clone()).collect();
-            let values = evaluate(model, &points, "the model in a bridge")?;
-            evaluations += points.len();
-            confirmed += points.len();
-            best.offer(
-                &points,
-                &values,
-                &moved.iter().map(|&c| ends[c].2).collect::<Vec<_>>(),
+            failures += confirm_failed;
+            stage_evaluations = (confirmed, confirm_failed);
+            bridge_rates = (
+                Some(screen_accepted as f64 / screened.max(1) as f64),
+                Some(confirm_accepted as f64 / confirmed.max(1) as f64),
             );
-            for (&c, v) in moved.iter().zip(values) {
-                if !v.is_finite() {
-                    confirm_failed += 1;
-                    continue;
-                }
-                let (at, ls_at, lp_at, rc_at) = &ends[c];
-                let chain = &chains[c];
-                let log_ratio = (beta * (v - ls_at) - rc_at)
-                    - (beta * (chain.model - chain.surrogate) - correction(&chain.theta));
-                if confirm_u[c].ln() < log_ratio {
-                    let chain = &mut chains[c];
-                    chain.theta = at.clone();
-                    chain.surrogate = *ls_at;
-                    chain.prior = *lp_at;
-                    chain.model = v;
-                    confirm_accepted += 1;
-                }
-            }
+            theta = chains.iter().map(|c| c.theta.clone()).collect();
+            ls = chains.iter().map(|c| c.surrogate).collect();
+            lm = chains.iter().map(|c| c.model).collect();
+            lp = chains.iter().map(|c| c.prior).collect();
         }
-        failures += confirm_failed;
-        stage_evaluations = (confirmed, confirm_failed);
-        bridge_rates = (
-            Some(screen_accepted as f64 / screened.max(1) as f64),
-            Some(confirm_accepted as f64 / confirmed.max(1) as f64),
-        );
-        theta = chains.iter().map(|c| c.theta.clone()).collect();
-        ls = chains.iter().map(|c| c.surrogate).collect();
-        lm = chains.iter().map(|c| c.model).collect();
-        lp = chains.iter().map(|c| c.prior).collect();
     };
     let weights = normalised_weights(&smoothed);
     let mut mean = vec![0.0; d];

@@ -327,3 +327,68 @@ fn a_gaussian_surrogate_of_a_curved_six_parameter_posterior_is_corrected() {
     assert!(result.certified());
     assert_matches(&result, &mean, &std, "curved, d = 6");
 }
+
+/// SplitMix64: a deterministic hash of a point's bits, the "irregular part" of a chaotic model.
+fn splitmix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// A standard normal draw keyed by the exact bits of `x` and the output `k`: equal points give
+/// equal draws, points a bit apart unrelated ones (as a chaotic simulator's window mean).
+fn irregular_normal(x: &[f64], k: usize) -> f64 {
+    let key = x.iter().fold(k as u64, |h, v| splitmix(h ^ v.to_bits()));
+    let (a, b) = (splitmix(key), splitmix(key ^ 0x5555));
+    let u1 = ((a >> 11) as f64 + 0.5) / (1u64 << 53) as f64;
+    let u2 = (b >> 11) as f64 / (1u64 << 53) as f64;
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+#[test]
+fn a_noisy_models_posterior_is_its_average_over_the_noise_in_one_certified_step() {
+    // A chaotic model: output k is θ_k + τ·z_k(θ), z_k a standard normal that no two distinct
+    // points share; data y with measurement std σ. One run's likelihood N(y; θ + τz, σ²) is a
+    // draw whose mean over z is N(y; θ, σ² + τ²): the model's posterior averaged over its
+    // irregular part is N(y, σ² + τ²) per axis (the prior's truncation is below 1e-20).
+    let (y, sigma, tau): (Vec<f64>, f64, f64) = (vec![1.0, -2.0], 1.0, 0.5);
+    let total: f64 = (sigma * sigma + tau * tau).sqrt();
+    let model = FnLikelihood::new(2, {
+        let y = y.clone();
+        move |x: &[f64]| {
+            -0.5 * (0..2)
+                .map(|k| ((y[k] - x[k] - tau * irregular_normal(x, k)) / sigma).powi(2))
+                .sum::<f64>()
+        }
+    });
+    let std = vec![total; 2];
+    // The surrogate's posterior: a third of a std off and 30 % wider, as a GP with a noise term
+    // fitted to such runs would be.
+    let s_mean: Vec<f64> = y.iter().map(|m| m + total / 3.0).collect();
+    let s_std: Vec<f64> = std.iter().map(|s| 1.3 * s).collect();
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        pseudo_marginal: true,
+        ..Default::default()
+    };
+    let result = run(2, &s_mean, &s_std, &model, &settings);
+    println!("{:#?}", result.stages);
+    assert_eq!(result.stop, ModelPosteriorStop::Certified);
+    assert_eq!(result.stages.len(), 1);
+    assert_eq!(result.stages[0].beta, 1.0);
+    assert!(result.corrections.is_empty());
+    assert_eq!(result.model_evaluations, 400);
+    assert_matches(&result, &y, &std, "noisy model");
+    // The surrogate's own mean is off by more than the test's tolerance.
+    assert!((s_mean[0] - y[0]).abs() > 4.0 * result.mcse_mean[0]);
+
+    // A tail the one step cannot carry is reported, never bridged: a surrogate half as wide.
+    let narrow: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
+    let result = run(2, &y, &narrow, &model, &settings);
+    assert_eq!(result.stop, ModelPosteriorStop::NoisyWeightsTail);
+    assert!(!result.certified());
+    assert_eq!(result.stages.len(), 1);
+    assert!(result.pareto_k > result.pareto_k_threshold);
+    assert_eq!(result.model_evaluations, 400);
+}

@@ -110,6 +110,16 @@ pub struct ModelPosteriorReport {
     /// stages (each a batch of `samples` evaluations).
     #[serde(default)]
     pub corrections: usize,
+    /// Members rerun with their parameters nudged by a billionth of their ranges to see whether
+    /// the model's outputs repeat (0: no probe).
+    #[serde(default)]
+    pub probe_pairs: usize,
+    /// The outputs that did not repeat (irregular: a chaotic or stochastic model).
+    #[serde(default)]
+    pub irregular_outputs: Vec<String>,
+    /// The likelihood was taken as a noisy estimate: one importance step, certified by k̂ alone.
+    #[serde(default)]
+    pub pseudo_marginal: bool,
     /// One row per parameter.
     pub parameters: Vec<ComparedParameter>,
     /// The final stage's log-weights Δβ·(ℓ_model − ℓ_surrogate) of the members whose model run

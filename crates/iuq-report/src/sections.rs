@@ -358,7 +358,7 @@ pub(crate) fn build_sections(
             "model-posterior",
             "The model's own posterior",
             format!(
-                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
+                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{corrected}{probe} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
                 model = m.model_source,
                 surrogate = m.surrogate_source,
                 samples = m.samples,
@@ -372,6 +372,7 @@ pub(crate) fn build_sections(
                 } else {
                     String::new()
                 },
+                probe = probe_sentence(m),
             ),
         );
         section.tables.push(build::model_posterior_comparison(m));
@@ -496,6 +497,36 @@ pub(crate) fn build_sections(
     runs.tables.push(build::stage_times(report, derived));
     sections.push(runs);
     Ok(sections)
+}
+
+/// What the reproducibility probe found, as a sentence of the model posterior's section.
+fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+    let model = &m.model_source;
+    match (
+        m.probe_pairs,
+        m.irregular_outputs.is_empty(),
+        m.pseudo_marginal,
+    ) {
+        (0, _, false) => String::new(),
+        (0, _, true) => format!(
+            " The study declares the {model}'s likelihood noisy: the weights are those of one importance step (pseudo-marginal), certified by k̂ alone."
+        ),
+        (pairs, true, false) => format!(
+            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs repeated: the {model} is reproducible."
+        ),
+        (pairs, true, true) => format!(
+            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs repeated, but the study declares the {model}'s likelihood noisy: one importance step (pseudo-marginal), certified by k̂ alone."
+        ),
+        (pairs, false, pseudo_marginal) => format!(
+            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs did not repeat at {}: there the {model} is irregular (chaotic or stochastic), a run's likelihood is one draw of its average over that irregular part, and {}.",
+            m.irregular_outputs.join(", "),
+            if pseudo_marginal {
+                "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂ alone"
+            } else {
+                "the study nevertheless treats the likelihood as reproducible (`noisy = false`)"
+            }
+        ),
+    }
 }
 
 /// The convergence section: the stopping rule and its outcome, and, when there were rounds, the

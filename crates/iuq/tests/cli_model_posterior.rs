@@ -22,6 +22,11 @@ fn cooling(suite_name: &str) -> PathBuf {
 /// The cooling study per measurement time with the closed-form curve as an expression model, a
 /// 6-run one-shot design and `[model_posterior]` lines `extra`.
 fn expression_study(dir: &Path, extra: &str) -> PathBuf {
+    expression_study_of(dir, "20 + (T0 - 20) * exp(-k * t)", extra)
+}
+
+/// The same study with the output `curve` (an expression of k, T0 and t).
+fn expression_study_of(dir: &Path, curve: &str, extra: &str) -> PathBuf {
     let text = format!(
         r#"name = "cooling-model-posterior"
 [parameters]
@@ -33,7 +38,7 @@ modelling_error = false
 [model]
 kind = "expression"
 abscissa = "t"
-outputs = {{ T = "20 + (T0 - 20) * exp(-k * t)" }}
+outputs = {{ T = "{curve}" }}
 [surrogate]
 design = {{ kind = "lhs", n = 6, seed = 1 }}
 test = {{ kind = "sobol", n = 0 }}
@@ -75,10 +80,16 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     assert_eq!(m["certified"], true, "{m}");
     assert_eq!(m["samples"], 300);
     assert!(m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap());
+    // The closed-form curve repeats under a nudge of its parameters: the probe's 4 members
+    // left the method as it is.
+    assert_eq!(m["probe"]["pairs"], 4, "{m}");
+    assert_eq!(m["probe"]["model_evaluations"], 4);
+    assert_eq!(m["probe"]["irregular"], false);
+    assert_eq!(m["pseudo_marginal"], false);
     // Every evaluation is a run at each of the 8 times.
     assert_eq!(
         m["model_runs"].as_u64().unwrap(),
-        8 * m["model_evaluations"].as_u64().unwrap()
+        8 * (m["model_evaluations"].as_u64().unwrap() + 4)
     );
     let exact = iuq(&[
         "basis",
@@ -153,6 +164,69 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     let v = pipeline(&basis, &out, &[]);
     assert!(v["model_posterior"].is_null());
     assert!(out.join("basis-model/summary.json").is_file());
+}
+
+/// A chaotic cooling curve: the closed form plus a term uniform in [−1, 1] that any change of
+/// k or T0 in their 9th digit redraws (a hash of them), as a chaotic simulator's window mean.
+const CHAOTIC_CURVE: &str = "20 + (T0 - 20) * exp(-k * t) + 2 * (43758.5453 * sin(1e9 * k + 1e7 * T0 + t) - floor(43758.5453 * sin(1e9 * k + 1e7 * T0 + t)) - 0.5)";
+
+#[test]
+fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_one_step() {
+    let dir = cooling("chaotic");
+    let study = expression_study_of(&dir, CHAOTIC_CURVE, "samples = 100\nseed = 4");
+    let out = dir.join("report");
+    let v = pipeline(&study, &out, &[]);
+    let m = &v["model_posterior"];
+    assert_eq!(m["probe"]["irregular"], true, "{m}");
+    let outputs = m["probe"]["outputs"].as_array().unwrap();
+    assert_eq!(outputs.len(), 8);
+    for o in outputs {
+        // The model reports no spread of its own: any change beyond 1e-6 of the value is
+        // irregular.
+        assert_eq!(o["irregular"], true, "{o}");
+        assert!(o["largest_change"].as_f64().unwrap() > 1e-3, "{o}");
+        assert_eq!(o["own_std"].as_f64().unwrap_or(0.0), 0.0, "{o}");
+    }
+    // A noisy likelihood: one importance step to β = 1, no correction, no bridge.
+    assert_eq!(m["pseudo_marginal"], true);
+    assert_eq!(m["corrections"].as_array().unwrap().len(), 0);
+    let stages = m["stages"].as_array().unwrap();
+    assert_eq!(stages.len(), 1);
+    assert_eq!(stages[0]["beta"], 1.0);
+    assert!(stages[0]["screen_acceptance"].is_null());
+    assert_eq!(m["model_evaluations"], 100);
+    assert_eq!(m["model_runs"], 8 * (100 + 4));
+    assert_eq!(
+        m["certified"],
+        m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap()
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let section = &report["report"]["model_posterior"];
+    assert_eq!(section["pseudo_marginal"], true);
+    assert_eq!(section["irregular_outputs"].as_array().unwrap().len(), 8);
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(html.contains("did not repeat"), "the report says so");
+
+    // `noisy = false` overrides the probe (which still reports what it saw).
+    let study = expression_study_of(
+        &dir,
+        CHAOTIC_CURVE,
+        "samples = 100\nseed = 4\nnoisy = false",
+    );
+    let v = pipeline(&study, &dir.join("declared"), &[]);
+    let m = &v["model_posterior"];
+    assert_eq!(m["probe"]["irregular"], true);
+    assert_eq!(m["pseudo_marginal"], false);
+
+    // `probe = 0` runs no probe; `noisy = true` then makes the likelihood noisy by itself.
+    let dir = cooling("no-probe");
+    let study = expression_study(&dir, "samples = 100\nseed = 4\nprobe = 0\nnoisy = true");
+    let v = pipeline(&study, &dir.join("report"), &[]);
+    let m = &v["model_posterior"];
+    assert!(m["probe"].is_null(), "{m}");
+    assert_eq!(m["pseudo_marginal"], true);
+    assert_eq!(m["model_runs"], 8 * 100);
 }
 
 #[test]
@@ -275,6 +349,8 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
         ("method = \"mcmc\"", "model_posterior.method"),
         ("cv_target = -1", "model_posterior.cv_target"),
         ("min_step = 2.0", "model_posterior.min_step"),
+        ("samples = 30\nprobe = 31", "model_posterior.probe"),
+        ("noisy = \"yes\"", "model_posterior.noisy"),
         (
             "method = \"basis\"\nsamples = 300",
             "model_posterior.samples",

@@ -333,6 +333,9 @@ pub fn synthetic_report(
             model_runs: 1600,
             failures: 2,
             corrections: 0,
+            probe_pairs: 4,
+            irregular_outputs: vec!["y_3".into()],
+            pseudo_marginal: true,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()
                 .enumerate()

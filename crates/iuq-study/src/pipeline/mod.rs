@@ -40,6 +40,7 @@ pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;
 pub mod report_data;
+pub mod reproducibility_probe;
 pub mod run_groups;
 pub mod settings;
 pub mod surrogate;
@@ -877,8 +878,8 @@ fn run_stages(
             let stage = Instant::now();
             events.message(format!(
                 "the model's posterior from the surrogate's: {} samples, {} runs at first (results already stored are reused)",
-                settings.samples,
-                settings.samples * group_count
+                settings.method.samples,
+                settings.method.samples * group_count
             ));
             let outcome = model_posterior::reweight_to_model(
                 study,

@@ -18,11 +18,14 @@ use std::sync::Mutex;
 
 use serde_json::{Value, json};
 
-use iuq_basis::{ModelPosterior, ModelPosteriorSettings, SurrogatePopulation, model_posterior};
+use iuq_basis::{
+    ModelPosterior, ModelPosteriorSettings, SurrogatePopulation, model_posterior, selected_members,
+};
 use iuq_campaign::study_section::StudySection;
 use iuq_core::{Model, Outcome};
 
 use super::model_runs::ModelRuns;
+use super::reproducibility_probe::{RELATIVE_NUDGE, ReproducibilityProbe, probe_reproducibility};
 use super::surrogate::Surrogate;
 use crate::error::{Context, Result, StudyError};
 use crate::posterior::{SampledPosterior, build_posterior_with};
@@ -36,15 +39,31 @@ pub const MODEL_POSTERIOR_DESIGN: &str = "model-posterior";
 #[derive(Debug, Clone, PartialEq)]
 pub enum ModelPosteriorMethod {
     /// From the surrogate's posterior by certified importance stages (the default).
-    Reweight(ModelPosteriorSettings),
+    Reweight(ReweightSettings),
     /// Plain BASIS on the model with `[model_sampler]`.
     Basis,
 }
 
+/// `[model_posterior]` with `method = "reweight"`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReweightSettings {
+    /// The method's settings (`pseudo_marginal` is set from `noisy` or the probe).
+    pub method: ModelPosteriorSettings,
+    /// Members of the first batch rerun with nudged parameters to see whether the model's
+    /// outputs repeat ([`super::reproducibility_probe`]; 0: no probe).
+    pub probe: usize,
+    /// Whether the model's likelihood is noisy, when the study says so (else the probe decides;
+    /// without a probe, not noisy).
+    pub noisy: Option<bool>,
+}
+
+/// Members probed by default.
+pub const DEFAULT_PROBE: usize = 4;
+
 /// Read `[model_posterior]` (defaults when absent): `method` ("reweight" or "basis"), and for
 /// "reweight" `samples` (300), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
 /// `max_stages` (6), `corrections` (1), `moves` (1), `subchain` (20), `scale` (0.4), `min_step`
-/// (1e-4).
+/// (1e-4), `probe` (4, at most `samples`) and `noisy` (true/false; absent: the probe decides).
 pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     let file = study.path.display().to_string();
     let mut s = StudySection::optional(study.model_posterior.as_ref(), "model_posterior", &file);
@@ -70,12 +89,21 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
         scale: s.positive("scale")?.unwrap_or(d.scale),
         min_step: s.positive("min_step")?.unwrap_or(d.min_step),
         probabilities: d.probabilities,
+        pseudo_marginal: false,
     };
+    let probe = s
+        .count_in("probe", 0, settings.samples)?
+        .unwrap_or(DEFAULT_PROBE.min(settings.samples));
+    let noisy = s.boolean("noisy")?;
     s.finish()?;
     if let Err(iuq_basis::BasisError::InvalidSettings { setting, reason }) = settings.check() {
         return Err(s.error(setting, reason).into());
     }
-    Ok(ModelPosteriorMethod::Reweight(settings))
+    Ok(ModelPosteriorMethod::Reweight(ReweightSettings {
+        method: settings,
+        probe,
+        noisy,
+    }))
 }
 
 /// The model at the data with every batch recorded as `model-posterior-<k>`.
@@ -120,6 +148,10 @@ pub struct ModelPosteriorOutcome {
     pub map_runs: Vec<(Option<f64>, Option<f64>)>,
     /// The surrogate posterior's MAP (model parameters).
     pub surrogate_map: Vec<f64>,
+    /// Whether the model's outputs repeated under a nudge of the parameters (`None`: no probe).
+    pub probe: Option<ReproducibilityProbe>,
+    /// Whether the likelihood was taken as noisy (pseudo-marginal: one step, certified by k̂).
+    pub pseudo_marginal: bool,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -150,6 +182,8 @@ impl ModelPosteriorOutcome {
             "map_runs": self.map_runs.iter().map(|(s, m)| json!({"at_surrogate_map": s, "at_model_map": m})).collect::<Vec<_>>(),
             "failures": p.failures,
             "corrections": p.corrections,
+            "pseudo_marginal": self.pseudo_marginal,
+            "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
             "stages": p.stages.iter().map(|s| json!({
                 "stage": s.stage,
                 "beta": s.beta,
@@ -174,18 +208,55 @@ pub fn reweight_to_model(
     gp_posterior: &SampledPosterior,
     surrogate: &Surrogate,
     model_runs: &ModelRuns,
-    settings: &ModelPosteriorSettings,
+    reweight: &ReweightSettings,
     out: &Path,
     message: &mut dyn FnMut(String),
 ) -> Result<ModelPosteriorOutcome> {
     let started = std::time::Instant::now();
+    let d = model_runs.parameters().len();
+    let state = &gp_posterior.run.state;
+    let probe = if reweight.probe > 0 {
+        let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &reweight.method)
+            .into_iter()
+            .take(reweight.probe)
+            .map(|i| state.samples[i][..d].to_vec())
+            .collect();
+        let probe = probe_reproducibility(model_runs, &members, &study.space.ranges())?;
+        let irregular: Vec<&str> = probe
+            .outputs
+            .iter()
+            .filter(|o| o.irregular)
+            .map(|o| o.name.as_str())
+            .collect();
+        message(format!(
+            "the model's outputs under a nudge of the parameters by {RELATIVE_NUDGE:e} of their ranges ({} members): {}",
+            probe.pairs,
+            if irregular.is_empty() {
+                "they repeat".to_string()
+            } else {
+                format!(
+                    "irregular at {} (the likelihood is a noisy estimate: one importance step, certified by k̂ alone)",
+                    irregular.join(", ")
+                )
+            }
+        ));
+        Some(probe)
+    } else {
+        None
+    };
+    let pseudo_marginal = reweight
+        .noisy
+        .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
+    let settings = &ModelPosteriorSettings {
+        pseudo_marginal,
+        ..reweight.method.clone()
+    };
     let surrogate_posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
     let model = LabelledModel {
         runs: model_runs.clone(),
         batches: Mutex::new(0),
     };
     let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
-    let state = &gp_posterior.run.state;
     let population = SurrogatePopulation {
         samples: &state.samples,
         log_likelihood: &state.log_likelihood,
@@ -227,7 +298,6 @@ pub fn reweight_to_model(
     })?;
     // The model at both MAPs (the surrogate's is usually stored by the posterior check, the
     // model's by the stages).
-    let d = model_runs.parameters().len();
     let surrogate_map = gp_posterior.summary.map[..d].to_vec();
     let maps = [surrogate_map.clone(), posterior.map[..d].to_vec()];
     let at_maps = model_runs
@@ -251,7 +321,11 @@ pub fn reweight_to_model(
         map_runs,
         surrogate_map,
         log_evidence: state.log_evidence + posterior.log_evidence_ratio,
-        model_runs: posterior.model_evaluations * groups,
+        model_runs: (posterior.model_evaluations
+            + probe.as_ref().map_or(0, |p| p.model_evaluations))
+            * groups,
+        probe,
+        pseudo_marginal,
         seconds: started.elapsed().as_secs_f64(),
         posterior,
     };

@@ -256,6 +256,20 @@ fn model_posterior_report(
         model_runs: outcome.model_runs,
         failures: p.failures,
         corrections: p.corrections.len(),
+        probe_pairs: outcome.probe.as_ref().map_or(0, |probe| probe.pairs),
+        irregular_outputs: outcome
+            .probe
+            .as_ref()
+            .map(|probe| {
+                probe
+                    .outputs
+                    .iter()
+                    .filter(|o| o.irregular)
+                    .map(|o| o.name.clone())
+                    .collect()
+            })
+            .unwrap_or_default(),
+        pseudo_marginal: outcome.pseudo_marginal,
         parameters,
         log_weights: p
             .raw_log_weights
