@@ -150,6 +150,51 @@ pub struct ErrorModel {
     pub modelling_error: Option<Prior>,
 }
 
+impl ErrorModel {
+    /// ln f of one datum: −½[(ŷ − q)²/Σ + ln(2πΣ)], Σ = σ_d² + c(q, s, ŷ) + σ_m²·ŷ², with σ_d
+    /// the datum's measurement std (used when [`ErrorModel::measurement_error`] is set), s the
+    /// model's computational std of that output and σ_m the modelling error (0 when not
+    /// estimated). A non-positive or non-finite Σ is a failure naming datum `j`.
+    pub fn datum_log_likelihood(
+        &self,
+        j: usize,
+        y: f64,
+        measurement_std: Option<f64>,
+        q: f64,
+        s: f64,
+        sigma_m: f64,
+    ) -> std::result::Result<f64, EvaluationFailure> {
+        Ok(-0.5 * self.datum_deviance(j, y, measurement_std, q, s, sigma_m)?)
+    }
+
+    /// −2 ln f of one datum, (ŷ − q)²/Σ + ln(2πΣ) (summed over the data before the factor −½,
+    /// as the likelihood always has, so that its values do not change in the last bit).
+    fn datum_deviance(
+        &self,
+        j: usize,
+        y: f64,
+        measurement_std: Option<f64>,
+        q: f64,
+        s: f64,
+        sigma_m: f64,
+    ) -> std::result::Result<f64, EvaluationFailure> {
+        let sd = if self.measurement_error {
+            measurement_std.unwrap_or(0.0)
+        } else {
+            0.0
+        };
+        let variance =
+            sd * sd + self.computational_error.variance(q, s, y)? + sigma_m * sigma_m * y * y;
+        if !(variance > 0.0 && variance.is_finite()) {
+            return Err(EvaluationFailure::new(format!(
+                "variance of observation {j} is {variance} (no positive error term)"
+            )));
+        }
+        let r = y - q;
+        Ok(r * r / variance + LN_2PI + variance.ln())
+    }
+}
+
 impl Default for ErrorModel {
     fn default() -> Self {
         Self {
@@ -271,28 +316,14 @@ impl<M: Model> PredictionErrorLikelihood<M> {
         if !evaluation.is_finite() {
             return Err(EvaluationFailure::new("model returned a non-finite output"));
         }
-        let measurement = match (
-            &self.observations.measurement_std,
-            self.errors.measurement_error,
-        ) {
-            (Some(s), true) => Some(s),
-            _ => None,
-        };
+        let measurement = self.observations.measurement_std.as_deref();
         let stds = evaluation.computational_std.as_deref();
         let mut sum = 0.0;
         for (j, (&yj, &qj)) in y.iter().zip(&evaluation.outputs).enumerate() {
-            let sd = measurement.map_or(0.0, |s| s[j]);
             let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
-            let variance = sd * sd
-                + self.errors.computational_error.variance(qj, sc, yj)?
-                + sigma_m * sigma_m * yj * yj;
-            if !(variance > 0.0 && variance.is_finite()) {
-                return Err(EvaluationFailure::new(format!(
-                    "variance of observation {j} is {variance} (no positive error term)"
-                )));
-            }
-            let r = yj - qj;
-            sum += r * r / variance + LN_2PI + variance.ln();
+            sum += self
+                .errors
+                .datum_deviance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)?;
         }
         Ok(-0.5 * sum)
     }

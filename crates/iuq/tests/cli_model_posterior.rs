@@ -229,6 +229,125 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     assert_eq!(m["model_runs"], 8 * 100);
 }
 
+/// erfc(x) with fractional error below 1.2e-7 (Numerical Recipes, `erfcc`): the exact reference
+/// below needs Φ, and a quadrature reference of 1e-7 is far finer than the test's tolerance.
+fn erfc(x: f64) -> f64 {
+    let z = x.abs();
+    let t = 1.0 / (1.0 + 0.5 * z);
+    let poly = -z * z - 1.265_512_23
+        + t * (1.000_023_68
+            + t * (0.374_091_96
+                + t * (0.096_784_18
+                    + t * (-0.186_288_06
+                        + t * (0.278_868_07
+                            + t * (-1.135_203_98
+                                + t * (1.488_515_87 + t * (-0.822_152_23 + t * 0.170_872_77))))))));
+    let r = t * poly.exp();
+    if x >= 0.0 { r } else { 2.0 - r }
+}
+
+/// Mean and std of k and T0 under the chaotic cooling curve's posterior averaged over its
+/// irregular term n ~ U(−1, 1): per datum E_n N(y; g + n, σ²) = [Φ((y − g + 1)/σ) − Φ((y − g −
+/// 1)/σ)]/2, on a 600 × 600 midpoint grid over the uniform prior.
+fn chaotic_cooling_exact(data: &[(f64, f64, f64)]) -> [(f64, f64); 2] {
+    let phi = |z: f64| 0.5 * erfc(-z / std::f64::consts::SQRT_2);
+    let n = 600;
+    let (mut w_sum, mut m, mut m2) = (0.0, [0.0; 2], [0.0; 2]);
+    let mut log_l = vec![0.0; n * n];
+    for a in 0..n {
+        let k = 0.05 + 0.75 * (a as f64 + 0.5) / n as f64;
+        for b in 0..n {
+            let t0 = 60.0 + 40.0 * (b as f64 + 0.5) / n as f64;
+            log_l[a * n + b] = data
+                .iter()
+                .map(|&(t, y, s)| {
+                    let g = 20.0 + (t0 - 20.0) * (-k * t).exp();
+                    (0.5 * (phi((y - g + 1.0) / s) - phi((y - g - 1.0) / s))).ln()
+                })
+                .sum();
+        }
+    }
+    let max = log_l.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    for a in 0..n {
+        let k = 0.05 + 0.75 * (a as f64 + 0.5) / n as f64;
+        for b in 0..n {
+            let t0 = 60.0 + 40.0 * (b as f64 + 0.5) / n as f64;
+            let w = (log_l[a * n + b] - max).exp();
+            w_sum += w;
+            for (i, v) in [k, t0].into_iter().enumerate() {
+                m[i] += w * v;
+                m2[i] += w * v * v;
+            }
+        }
+    }
+    [0, 1].map(|i| {
+        let mean = m[i] / w_sum;
+        (mean, (m2[i] / w_sum - mean * mean).sqrt())
+    })
+}
+
+#[test]
+fn a_noisy_models_posterior_with_replicate_runs_is_its_average_over_the_noise() {
+    let dir = cooling("replicates");
+    let data: Vec<(f64, f64, f64)> = std::fs::read_to_string(dir.join("cooling.csv"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("t_min"))
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            (v[0], v[1], v[2])
+        })
+        .collect();
+    let exact = chaotic_cooling_exact(&data);
+    let study_with = |replicates: usize| {
+        let path = expression_study_of(
+            &dir,
+            CHAOTIC_CURVE,
+            &format!("samples = 200\nseed = 2\nreplicates = {replicates}"),
+        );
+        // A surrogate of 20 runs per time, so that its posterior covers the model's.
+        let text = std::fs::read_to_string(&path)
+            .unwrap()
+            .replace("n = 6, seed = 1", "n = 20, seed = 1");
+        std::fs::write(&path, text).unwrap();
+        path
+    };
+    let mut ess = Vec::new();
+    for replicates in [1, 4] {
+        let study = study_with(replicates);
+        let v = pipeline(&study, &dir.join(format!("report-{replicates}")), &[]);
+        let m = &v["model_posterior"];
+        assert_eq!(m["pseudo_marginal"], true, "{m}");
+        assert_eq!(m["replicates"], replicates);
+        // Every output is irregular, so each of the 8 times is repeated: 200 members × 3 more.
+        let replicate_runs = if replicates == 4 { 200 * 3 * 8 } else { 0 };
+        assert_eq!(m["replicate_runs"], replicate_runs);
+        assert_eq!(m["model_runs"], 8 * (200 + 4) + replicate_runs);
+        assert_eq!(m["certified"], true, "{m}");
+        for (i, p) in ["k", "T0"].into_iter().enumerate() {
+            let (em, es) = exact[i];
+            let (mean, std) = (
+                m["mean"][p].as_f64().unwrap(),
+                m["std"][p].as_f64().unwrap(),
+            );
+            let (mcse_mean, mcse_std) = (
+                m["mcse_mean"][p].as_f64().unwrap(),
+                m["mcse_std"][p].as_f64().unwrap(),
+            );
+            println!(
+                "replicates {replicates}, {p}: {mean} ± {mcse_mean}, std {std} ± {mcse_std}; averaged exactly {em}, {es}"
+            );
+            assert!(mcse_mean < 0.2 * es && mcse_std < 0.2 * es, "{p}");
+            assert!((mean - em).abs() <= 4.0 * mcse_mean, "{p} mean");
+            assert!((std - es).abs() <= 4.0 * mcse_std, "{p} std");
+        }
+        ess.push(m["effective_sample_size"].as_f64().unwrap());
+    }
+    // Four runs per datum quarter the noise of each likelihood: a larger effective sample.
+    println!("ESS with 1 and 4 replicates: {ess:?}");
+    assert!(ess[1] > ess[0], "{ess:?}");
+}
+
 #[test]
 fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
     let dir = cooling("resume");
@@ -351,6 +470,8 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
         ("min_step = 2.0", "model_posterior.min_step"),
         ("samples = 30\nprobe = 31", "model_posterior.probe"),
         ("noisy = \"yes\"", "model_posterior.noisy"),
+        ("replicates = 65", "model_posterior.replicates"),
+        ("replicates = 0", "model_posterior.replicates"),
         (
             "method = \"basis\"\nsamples = 300",
             "model_posterior.samples",

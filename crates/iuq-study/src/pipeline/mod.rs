@@ -39,6 +39,7 @@ pub mod emulator;
 pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;
+pub mod replicated_likelihood;
 pub mod report_data;
 pub mod reproducibility_probe;
 pub mod run_groups;

@@ -15,19 +15,23 @@
 
 use std::path::Path;
 use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde_json::{Value, json};
 
 use iuq_basis::{
-    ModelPosterior, ModelPosteriorSettings, SurrogatePopulation, model_posterior, selected_members,
+    ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorSettings, SurrogatePopulation,
+    model_posterior, selected_members,
 };
 use iuq_campaign::study_section::StudySection;
 use iuq_core::{Model, Outcome};
 
 use super::model_runs::ModelRuns;
+use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood};
 use super::reproducibility_probe::{RELATIVE_NUDGE, ReproducibilityProbe, probe_reproducibility};
 use super::surrogate::Surrogate;
 use crate::error::{Context, Result, StudyError};
+use crate::likelihood_section::{LikelihoodSection, parse_likelihood};
 use crate::posterior::{SampledPosterior, build_posterior_with};
 use crate::study::Study;
 use crate::table_io::{write_atomically, write_numeric_csv};
@@ -55,6 +59,9 @@ pub struct ReweightSettings {
     /// Whether the model's likelihood is noisy, when the study says so (else the probe decides;
     /// without a probe, not noisy).
     pub noisy: Option<bool>,
+    /// Runs per member at each irregular data point of a noisy likelihood, the member's own
+    /// included ([`super::replicated_likelihood`]; 1: none repeated).
+    pub replicates: usize,
 }
 
 /// Members probed by default.
@@ -63,7 +70,8 @@ pub const DEFAULT_PROBE: usize = 4;
 /// Read `[model_posterior]` (defaults when absent): `method` ("reweight" or "basis"), and for
 /// "reweight" `samples` (300), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
 /// `max_stages` (6), `corrections` (1), `moves` (1), `subchain` (20), `scale` (0.4), `min_step`
-/// (1e-4), `probe` (4, at most `samples`) and `noisy` (true/false; absent: the probe decides).
+/// (1e-4), `probe` (4, at most `samples`), `noisy` (true/false; absent: the probe decides) and
+/// `replicates` (1, at most 64).
 pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     let file = study.path.display().to_string();
     let mut s = StudySection::optional(study.model_posterior.as_ref(), "model_posterior", &file);
@@ -95,6 +103,7 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
         .count_in("probe", 0, settings.samples)?
         .unwrap_or(DEFAULT_PROBE.min(settings.samples));
     let noisy = s.boolean("noisy")?;
+    let replicates = s.count_in("replicates", 1, MAX_REPLICATES)?.unwrap_or(1);
     s.finish()?;
     if let Err(iuq_basis::BasisError::InvalidSettings { setting, reason }) = settings.check() {
         return Err(s.error(setting, reason).into());
@@ -103,6 +112,7 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
         method: settings,
         probe,
         noisy,
+        replicates,
     }))
 }
 
@@ -152,6 +162,10 @@ pub struct ModelPosteriorOutcome {
     pub probe: Option<ReproducibilityProbe>,
     /// Whether the likelihood was taken as noisy (pseudo-marginal: one step, certified by k̂).
     pub pseudo_marginal: bool,
+    /// Runs per member at each irregular data point (1: none repeated).
+    pub replicates: usize,
+    /// Replicate runs requested (beyond each member's own; stored runs included).
+    pub replicate_runs: usize,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -183,6 +197,8 @@ impl ModelPosteriorOutcome {
             "failures": p.failures,
             "corrections": p.corrections,
             "pseudo_marginal": self.pseudo_marginal,
+            "replicates": self.replicates,
+            "replicate_runs": self.replicate_runs,
             "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
             "stages": p.stages.iter().map(|s| json!({
                 "stage": s.stage,
@@ -257,6 +273,42 @@ pub fn reweight_to_model(
         batches: Mutex::new(0),
     };
     let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
+    let replicated = match (
+        pseudo_marginal && reweight.replicates > 1,
+        parse_likelihood(study)?,
+    ) {
+        (true, LikelihoodSection::Data(data)) => {
+            let all: Vec<usize> = (0..model_runs.output_names().len()).collect();
+            let irregular = match &probe {
+                Some(p) if p.irregular() => (0..p.outputs.len())
+                    .filter(|&j| p.outputs[j].irregular)
+                    .collect(),
+                _ => all,
+            };
+            Some((data, irregular))
+        }
+        _ => None,
+    };
+    let replicated_likelihood = replicated
+        .as_ref()
+        .map(|(data, irregular)| ReplicatedLikelihood {
+            base: model_posterior_likelihood.likelihood.as_ref(),
+            runs: model_runs,
+            observations: &data.observations,
+            errors: ErrorModel {
+                measurement_error: data.measurement_error,
+                computational_error: data.computational_error,
+                modelling_error: data.modelling_error,
+            },
+            irregular: irregular.clone(),
+            replicates: reweight.replicates,
+            ranges: study.space.ranges(),
+            replicate_runs: AtomicUsize::new(0),
+        });
+    let model_likelihood: &dyn LogLikelihood = match &replicated_likelihood {
+        Some(r) => r,
+        None => model_posterior_likelihood.likelihood.as_ref(),
+    };
     let population = SurrogatePopulation {
         samples: &state.samples,
         log_likelihood: &state.log_likelihood,
@@ -268,7 +320,7 @@ pub fn reweight_to_model(
         &surrogate_posterior.space,
         population,
         surrogate_posterior.likelihood.as_ref(),
-        model_posterior_likelihood.likelihood.as_ref(),
+        model_likelihood,
         settings,
         &mut |stage| {
             message(format!(
@@ -296,6 +348,9 @@ pub fn reweight_to_model(
         )),
         e => StudyError::Failure(format!("the model posterior: {e}")),
     })?;
+    let replicate_runs = replicated_likelihood
+        .as_ref()
+        .map_or(0, |r| r.replicate_runs.load(Ordering::Relaxed));
     // The model at both MAPs (the surrogate's is usually stored by the posterior check, the
     // model's by the stages).
     let surrogate_map = gp_posterior.summary.map[..d].to_vec();
@@ -323,7 +378,14 @@ pub fn reweight_to_model(
         log_evidence: state.log_evidence + posterior.log_evidence_ratio,
         model_runs: (posterior.model_evaluations
             + probe.as_ref().map_or(0, |p| p.model_evaluations))
-            * groups,
+            * groups
+            + replicate_runs,
+        replicate_runs,
+        replicates: if replicated_likelihood.is_some() {
+            reweight.replicates
+        } else {
+            1
+        },
         probe,
         pseudo_marginal,
         seconds: started.elapsed().as_secs_f64(),

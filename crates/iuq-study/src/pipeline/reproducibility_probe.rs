@@ -84,6 +84,13 @@ impl ReproducibilityProbe {
 /// `members` (model parameters) moved by [`RELATIVE_NUDGE`] of each parameter's `ranges` width,
 /// inwards where the move would leave the range.
 pub fn nudged(members: &[Vec<f64>], ranges: &[(f64, f64)]) -> Vec<Vec<f64>> {
+    nudged_by(members, ranges, 1.0)
+}
+
+/// `members` moved by `multiple` × [`RELATIVE_NUDGE`] of each parameter's range width (of its
+/// magnitude, at least 1, where the range is unbounded), inwards where the move would leave the
+/// range; `multiple` 0 leaves them as they are, bit for bit.
+pub fn nudged_by(members: &[Vec<f64>], ranges: &[(f64, f64)], multiple: f64) -> Vec<Vec<f64>> {
     members
         .iter()
         .map(|m| {
@@ -92,9 +99,9 @@ pub fn nudged(members: &[Vec<f64>], ranges: &[(f64, f64)]) -> Vec<Vec<f64>> {
                 .map(|(&x, &(lo, hi))| {
                     let width = hi - lo;
                     let delta = if width.is_finite() && width > 0.0 {
-                        RELATIVE_NUDGE * width
+                        RELATIVE_NUDGE * width * multiple
                     } else {
-                        RELATIVE_NUDGE * x.abs().max(1.0)
+                        RELATIVE_NUDGE * x.abs().max(1.0) * multiple
                     };
                     if x + delta <= hi {
                         x + delta
@@ -173,5 +180,9 @@ mod tests {
         assert_eq!(moved[0][0], 5.0 + 1e-8);
         assert_eq!(moved[0][1], 2.0 - 1e-9);
         assert!(moved[0][1] >= 1.0);
+        let still = nudged_by(&[vec![5.0, 2.0]], &ranges, 0.0);
+        assert_eq!(still[0], vec![5.0, 2.0]);
+        assert_eq!(nudged_by(&[vec![5.0, 2.0]], &ranges, 1.0), moved);
+        assert_eq!(nudged_by(&[vec![5.0, 1.5]], &ranges, 3.0)[0][1], 1.5 + 3e-9);
     }
 }
