@@ -120,6 +120,10 @@ pub struct ModelPosteriorReport {
     /// The likelihood was taken as a noisy estimate: one importance step, certified by k̂ alone.
     #[serde(default)]
     pub pseudo_marginal: bool,
+    /// Runs per member at each irregular data point (their likelihoods averaged; 1: none
+    /// repeated).
+    #[serde(default = "one")]
+    pub replicates: usize,
     /// One row per parameter.
     pub parameters: Vec<ComparedParameter>,
     /// The final stage's log-weights Δβ·(ℓ_model − ℓ_surrogate) of the members whose model run
@@ -476,4 +480,9 @@ pub struct RunStatistics {
     pub failures_by_reason: Vec<(String, usize)>,
     /// Wall time of each pipeline stage in seconds, e.g. ("design", 0.2).
     pub stage_seconds: Vec<(String, f64)>,
+}
+
+/// The default of [`ModelPosteriorReport::replicates`].
+fn one() -> usize {
+    1
 }

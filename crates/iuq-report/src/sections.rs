@@ -521,9 +521,21 @@ fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
             " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs did not repeat at {}: there the {model} is irregular (chaotic or stochastic), a run's likelihood is one draw of its average over that irregular part, and {}.",
             m.irregular_outputs.join(", "),
             if pseudo_marginal {
-                "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂ alone"
+                format!(
+                    "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂ alone{}",
+                    if m.replicates > 1 {
+                        format!(
+                            "; each irregular datum was measured by {} runs (the member's own and {} nudged by multiples of a billionth), their likelihoods averaged",
+                            m.replicates,
+                            m.replicates - 1
+                        )
+                    } else {
+                        String::new()
+                    }
+                )
             } else {
                 "the study nevertheless treats the likelihood as reproducible (`noisy = false`)"
+                    .to_string()
             }
         ),
     }

@@ -342,6 +342,12 @@ fn a_noisy_models_posterior_with_replicate_runs_is_its_average_over_the_noise() 
             assert!((std - es).abs() <= 4.0 * mcse_std, "{p} std");
         }
         ess.push(m["effective_sample_size"].as_f64().unwrap());
+        let html =
+            std::fs::read_to_string(dir.join(format!("report-{replicates}/report.html"))).unwrap();
+        assert_eq!(
+            html.contains("each irregular datum was measured by 4 runs"),
+            replicates == 4
+        );
     }
     // Four runs per datum quarter the noise of each likelihood: a larger effective sample.
     println!("ESS with 1 and 4 replicates: {ess:?}");

@@ -336,6 +336,7 @@ pub fn synthetic_report(
             probe_pairs: 4,
             irregular_outputs: vec!["y_3".into()],
             pseudo_marginal: true,
+            replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()
                 .enumerate()

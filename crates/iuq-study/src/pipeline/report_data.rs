@@ -270,6 +270,7 @@ fn model_posterior_report(
             })
             .unwrap_or_default(),
         pseudo_marginal: outcome.pseudo_marginal,
+        replicates: outcome.replicates,
         parameters,
         log_weights: p
             .raw_log_weights
