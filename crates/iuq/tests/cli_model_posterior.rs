@@ -212,12 +212,15 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     let study = expression_study_of(
         &dir,
         CHAOTIC_CURVE,
-        "samples = 100\nseed = 4\nnoisy = false",
+        "samples = 100\nseed = 4\nnoisy = false\nreplicates = 4",
     );
     let v = pipeline(&study, &dir.join("declared"), &[]);
     let m = &v["model_posterior"];
     assert_eq!(m["probe"]["irregular"], true);
     assert_eq!(m["pseudo_marginal"], false);
+    // Replicates go unused where the likelihood is not taken as noisy.
+    assert_eq!(m["replicates"], 1);
+    assert_eq!(m["replicate_runs"], 0);
 
     // `probe = 0` runs no probe; `noisy = true` then makes the likelihood noisy by itself.
     let dir = cooling("no-probe");

@@ -263,6 +263,12 @@ pub fn reweight_to_model(
     let pseudo_marginal = reweight
         .noisy
         .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
+    if reweight.replicates > 1 && !pseudo_marginal {
+        message(format!(
+            "replicates = {} goes unused: the model's likelihood is not noisy (its outputs repeat, or `noisy = false`)",
+            reweight.replicates
+        ));
+    }
     let settings = &ModelPosteriorSettings {
         pseudo_marginal,
         ..reweight.method.clone()
