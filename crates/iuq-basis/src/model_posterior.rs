@@ -41,10 +41,10 @@
 //!    equal parameters differ by more than their own reported spread): a run's likelihood is
 //!    then one unbiased draw of the likelihood averaged over the model's irregular part, the
 //!    weights exp(r) stay unbiased (pseudo-marginal importance sampling, Andrieu & Roberts
-//!    2009), and the estimate is the one full step, certified by k̂ alone. Steps 2–4 are left
-//!    out: a quadratic fit of a noisy r fits its mean, which by Jensen's inequality lies below
-//!    the log of the mean weight, and a Metropolis chain on a noisy ratio sticks where a lucky
-//!    run landed.
+//!    2009), and the estimate is the one full step, certified by k̂ (or nearly equal
+//!    weights). Steps 2–4 are left out: a quadratic fit of a noisy r fits its mean, which by
+//!    Jensen's inequality lies below the log of the mean weight, and a Metropolis chain on a
+//!    noisy ratio sticks where a lucky run landed.
 //!
 //! The final population is summarised with its normalised smoothed weights w̄: mean
 //! μ = Σ w̄θ, std σ = √(Σ w̄(θ − μ)²), weighted quantiles; the Monte Carlo standard errors of
@@ -127,7 +127,7 @@ pub struct ModelPosteriorSettings {
     /// output moves by more than its own reported spread under a negligible change of the
     /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
     /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
-    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ alone; no
+    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or nearly equal weights); no
     /// correction and no bridge, whose quadratic fits and Metropolis ratios assume a
     /// reproducible r (a noisy r makes the chains stick where a lucky run landed).
     #[serde(default)]

@@ -117,7 +117,7 @@ pub struct ModelPosteriorReport {
     /// The outputs that did not repeat (irregular: a chaotic or stochastic model).
     #[serde(default)]
     pub irregular_outputs: Vec<String>,
-    /// The likelihood was taken as a noisy estimate: one importance step, certified by k̂ alone.
+    /// The likelihood was taken as a noisy estimate: one importance step, certified by k̂.
     #[serde(default)]
     pub pseudo_marginal: bool,
     /// Runs per member at each irregular data point (their likelihoods averaged; 1: none

@@ -502,37 +502,37 @@ pub(crate) fn build_sections(
 /// What the reproducibility probe found, as a sentence of the model posterior's section.
 fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let model = &m.model_source;
+    let nudge = "Rerun with every parameter moved by a billionth of its range";
+    let one_step = "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂";
+    let replicated = if m.replicates > 1 {
+        format!(
+            "; each irregular datum was measured by {} runs (the member's own and {} nudged by multiples of a billionth), their likelihoods averaged",
+            m.replicates,
+            m.replicates - 1
+        )
+    } else {
+        String::new()
+    };
     match (
         m.probe_pairs,
         m.irregular_outputs.is_empty(),
         m.pseudo_marginal,
     ) {
         (0, _, false) => String::new(),
-        (0, _, true) => format!(
-            " The study declares the {model}'s likelihood noisy: the weights are those of one importance step (pseudo-marginal), certified by k̂ alone."
-        ),
-        (pairs, true, false) => format!(
-            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs repeated: the {model} is reproducible."
-        ),
+        (0, _, true) => {
+            format!(" The study declares the {model}'s likelihood noisy: {one_step}{replicated}.")
+        }
+        (pairs, true, false) => {
+            format!(" {nudge}, {pairs} members' outputs repeated: the {model} is reproducible.")
+        }
         (pairs, true, true) => format!(
-            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs repeated, but the study declares the {model}'s likelihood noisy: one importance step (pseudo-marginal), certified by k̂ alone."
+            " {nudge}, {pairs} members' outputs repeated, but the study declares the {model}'s likelihood noisy: {one_step}{replicated}."
         ),
         (pairs, false, pseudo_marginal) => format!(
-            " Rerun with every parameter moved by a billionth of its range, {pairs} members' outputs did not repeat at {}: there the {model} is irregular (chaotic or stochastic), a run's likelihood is one draw of its average over that irregular part, and {}.",
+            " {nudge}, {pairs} members' outputs did not repeat at {}: there the {model} is irregular (chaotic or stochastic), a run's likelihood is one draw of its average over that irregular part, and {}.",
             m.irregular_outputs.join(", "),
             if pseudo_marginal {
-                format!(
-                    "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂ alone{}",
-                    if m.replicates > 1 {
-                        format!(
-                            "; each irregular datum was measured by {} runs (the member's own and {} nudged by multiples of a billionth), their likelihoods averaged",
-                            m.replicates,
-                            m.replicates - 1
-                        )
-                    } else {
-                        String::new()
-                    }
-                )
+                format!("{one_step}{replicated}")
             } else {
                 "the study nevertheless treats the likelihood as reproducible (`noisy = false`)"
                     .to_string()

@@ -196,6 +196,8 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     assert!(stages[0]["screen_acceptance"].is_null());
     assert_eq!(m["model_evaluations"], 100);
     assert_eq!(m["model_runs"], 8 * (100 + 4));
+    // Certified by k̂ (the weights of a noisy likelihood are far from equal: CV above 0.1).
+    assert!(stages[0]["cv"].as_f64().unwrap() > 0.1);
     assert_eq!(
         m["certified"],
         m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap()
@@ -322,9 +324,15 @@ fn a_noisy_models_posterior_with_replicate_runs_is_its_average_over_the_noise() 
         let m = &v["model_posterior"];
         assert_eq!(m["pseudo_marginal"], true, "{m}");
         assert_eq!(m["replicates"], replicates);
-        // Every output is irregular, so each of the 8 times is repeated: 200 members × 3 more.
-        let replicate_runs = if replicates == 4 { 200 * 3 * 8 } else { 0 };
+        // Every output is irregular, so each of the 8 times is repeated: 200 members × 3 more,
+        // less the probe's 4 members' first nudge, which the probe has run.
+        let replicate_runs = if replicates == 4 {
+            200 * 3 * 8 - 4 * 8
+        } else {
+            0
+        };
         assert_eq!(m["replicate_runs"], replicate_runs);
+        assert_eq!(m["replicate_failures"], 0);
         assert_eq!(m["model_runs"], 8 * (200 + 4) + replicate_runs);
         assert_eq!(m["certified"], true, "{m}");
         for (i, p) in ["k", "T0"].into_iter().enumerate() {

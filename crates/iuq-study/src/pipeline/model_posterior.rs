@@ -27,7 +27,7 @@ use iuq_campaign::study_section::StudySection;
 use iuq_core::{Model, Outcome};
 
 use super::model_runs::ModelRuns;
-use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood};
+use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood, bits};
 use super::reproducibility_probe::{RELATIVE_NUDGE, ReproducibilityProbe, probe_reproducibility};
 use super::surrogate::Surrogate;
 use crate::error::{Context, Result, StudyError};
@@ -116,6 +116,27 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     }))
 }
 
+/// Each datum's smallest error scale √(σ_d² + (σ_m,low·ŷ)²): its measurement std (when it
+/// enters) and the modelling error's lower bound (its prior's lowest value, when estimated).
+fn error_scales(data: &crate::likelihood_section::DataLikelihood) -> Vec<f64> {
+    let sigma_low = data
+        .modelling_error
+        .as_ref()
+        .map_or(0.0, |p| p.plotting_range().0.max(0.0));
+    data.observations
+        .values
+        .iter()
+        .enumerate()
+        .map(|(j, y)| {
+            let sd = match (&data.observations.measurement_std, data.measurement_error) {
+                (Some(s), true) => s[j],
+                _ => 0.0,
+            };
+            (sd * sd + (sigma_low * y).powi(2)).sqrt()
+        })
+        .collect()
+}
+
 /// The model at the data with every batch recorded as `model-posterior-<k>`.
 struct LabelledModel {
     runs: ModelRuns,
@@ -164,8 +185,11 @@ pub struct ModelPosteriorOutcome {
     pub pseudo_marginal: bool,
     /// Runs per member at each irregular data point (1: none repeated).
     pub replicates: usize,
-    /// Replicate runs requested (beyond each member's own; stored runs included).
+    /// Replicate runs requested (beyond each member's own and the probe's; stored runs
+    /// included).
     pub replicate_runs: usize,
+    /// Of those, failed runs (their likelihood counts as 0 in the member's mean).
+    pub replicate_failures: usize,
     /// Wall-clock seconds.
     pub seconds: f64,
 }
@@ -199,6 +223,7 @@ impl ModelPosteriorOutcome {
             "pseudo_marginal": self.pseudo_marginal,
             "replicates": self.replicates,
             "replicate_runs": self.replicate_runs,
+            "replicate_failures": self.replicate_failures,
             "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
             "stages": p.stages.iter().map(|s| json!({
                 "stage": s.stage,
@@ -231,13 +256,30 @@ pub fn reweight_to_model(
     let started = std::time::Instant::now();
     let d = model_runs.parameters().len();
     let state = &gp_posterior.run.state;
+    let data = match parse_likelihood(study)? {
+        LikelihoodSection::Data(data) => Some(data),
+        LikelihoodSection::LogDensity(_) => None,
+    };
     let probe = if reweight.probe > 0 {
         let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &reweight.method)
             .into_iter()
             .take(reweight.probe)
             .map(|i| state.samples[i][..d].to_vec())
             .collect();
-        let probe = probe_reproducibility(model_runs, &members, &study.space.ranges())?;
+        let scales = data.as_ref().map(error_scales).unwrap_or_default();
+        Some(probe_reproducibility(
+            model_runs,
+            &members,
+            &study.space.ranges(),
+            &scales,
+        )?)
+    } else {
+        None
+    };
+    let pseudo_marginal = reweight
+        .noisy
+        .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
+    if let Some(probe) = &probe {
         let irregular: Vec<&str> = probe
             .outputs
             .iter()
@@ -247,22 +289,20 @@ pub fn reweight_to_model(
         message(format!(
             "the model's outputs under a nudge of the parameters by {RELATIVE_NUDGE:e} of their ranges ({} members): {}",
             probe.pairs,
-            if irregular.is_empty() {
-                "they repeat".to_string()
-            } else {
-                format!(
-                    "irregular at {} (the likelihood is a noisy estimate: one importance step, certified by k̂ alone)",
+            match (probe.pairs, irregular.is_empty(), pseudo_marginal) {
+                (0, _, _) => "inconclusive: every probed member had a failed run".to_string(),
+                (_, true, _) => "they repeat".to_string(),
+                (_, false, true) => format!(
+                    "irregular at {} (the likelihood is a noisy estimate: one importance step, certified by k̂)",
                     irregular.join(", ")
-                )
+                ),
+                (_, false, false) => format!(
+                    "irregular at {} (`noisy = false`: the stages all the same)",
+                    irregular.join(", ")
+                ),
             }
         ));
-        Some(probe)
-    } else {
-        None
-    };
-    let pseudo_marginal = reweight
-        .noisy
-        .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
+    }
     if reweight.replicates > 1 && !pseudo_marginal {
         message(format!(
             "replicates = {} goes unused: the model's likelihood is not noisy (its outputs repeat, or `noisy = false`)",
@@ -279,11 +319,8 @@ pub fn reweight_to_model(
         batches: Mutex::new(0),
     };
     let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
-    let replicated = match (
-        pseudo_marginal && reweight.replicates > 1,
-        parse_likelihood(study)?,
-    ) {
-        (true, LikelihoodSection::Data(data)) => {
+    let replicated = match (pseudo_marginal && reweight.replicates > 1, data) {
+        (true, Some(data)) => {
             let all: Vec<usize> = (0..model_runs.output_names().len()).collect();
             let irregular = match &probe {
                 Some(p) if p.irregular() => (0..p.outputs.len())
@@ -309,7 +346,12 @@ pub fn reweight_to_model(
             irregular: irregular.clone(),
             replicates: reweight.replicates,
             ranges: study.space.ranges(),
+            already_run: probe
+                .iter()
+                .flat_map(|p| p.nudged_points().iter().map(|x| bits(x)))
+                .collect(),
             replicate_runs: AtomicUsize::new(0),
+            replicate_failures: AtomicUsize::new(0),
         });
     let model_likelihood: &dyn LogLikelihood = match &replicated_likelihood {
         Some(r) => r,
@@ -357,6 +399,9 @@ pub fn reweight_to_model(
     let replicate_runs = replicated_likelihood
         .as_ref()
         .map_or(0, |r| r.replicate_runs.load(Ordering::Relaxed));
+    let replicate_failures = replicated_likelihood
+        .as_ref()
+        .map_or(0, |r| r.replicate_failures.load(Ordering::Relaxed));
     // The model at both MAPs (the surrogate's is usually stored by the posterior check, the
     // model's by the stages).
     let surrogate_map = gp_posterior.summary.map[..d].to_vec();
@@ -387,6 +432,7 @@ pub fn reweight_to_model(
             * groups
             + replicate_runs,
         replicate_runs,
+        replicate_failures,
         replicates: if replicated_likelihood.is_some() {
             reweight.replicates
         } else {

@@ -7,15 +7,18 @@
 //! k = 1 … m − 1, whose irregular parts are unrelated — is still an unbiased draw, with 1/m of the
 //! variance:
 //!
-//! ln L̂(θ) = Σ_{j regular} ln f_j(θ) + Σ_{j irregular} ln (1/m) Σ_k f_j(θ_k),
+//! ln L̂(θ) = Σ_{j regular} ln f_j(θ) + Σ_{g} ln (1/m) Σ_k Π_{j ∈ g irregular} f_j(θ_k),
 //!
-//! and, the data being independent given θ, exp of it is unbiased for Π_j E f_j (pseudo-marginal,
-//! Andrieu & Roberts 2009). Only the run groups holding an irregular datum are repeated (for the
-//! red-cell studies: one stress of eight). A failed replicate counts as f = 0. The replicate runs
+//! the mean over k taken per run group g (the data one run returns share its irregular part; a
+//! group of one datum per run — the red-cell studies' stresses — averages datum by datum), and
+//! separate runs' irregular parts being unrelated, exp of it is unbiased for the averaged
+//! likelihood (pseudo-marginal, Andrieu & Roberts 2009). Only the run groups holding an irregular
+//! datum are repeated (for the red-cell studies: one stress of eight). A failed replicate counts
+//! as f = 0 (as a failed run does throughout; counted in `replicate_failures`). The replicate runs
 //! are campaign runs under [`REPLICATES_DESIGN`], so a rerun reuses them; the k = 1 runs of the
 //! probed members are the probe's own.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeSet, HashSet};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use iuq_basis::{ErrorModel, LogLikelihood, Observations, PointLogLikelihood};
@@ -45,8 +48,18 @@ pub struct ReplicatedLikelihood<'a> {
     pub replicates: usize,
     /// The model parameters' prior ranges (for the nudges).
     pub ranges: Vec<(f64, f64)>,
-    /// Replicate runs requested so far (k ≥ 1; stored runs included).
+    /// Points already run by the reproducibility probe (their parameters' bits): the probed
+    /// members' k = 1 replicates, not counted again.
+    pub already_run: HashSet<Vec<u64>>,
+    /// Replicate runs requested so far (k ≥ 1, beyond the probe's; stored runs included).
     pub replicate_runs: AtomicUsize,
+    /// Of the replicate runs (k ≥ 1), those that failed (their likelihood counts as 0).
+    pub replicate_failures: AtomicUsize,
+}
+
+/// The bits of a point, to compare points exactly.
+pub fn bits(point: &[f64]) -> Vec<u64> {
+    point.iter().map(|v| v.to_bits()).collect()
 }
 
 impl ReplicatedLikelihood<'_> {
@@ -98,14 +111,26 @@ impl LogLikelihood for ReplicatedLikelihood<'_> {
                 }
             }
         }
-        self.replicate_runs.fetch_add(
-            members.len() * (self.replicates - 1) * groups.len(),
-            Ordering::Relaxed,
-        );
+        let new_runs = requests
+            .iter()
+            .enumerate()
+            .filter(|(r, (_, at))| {
+                let k = (r / groups.len()) % self.replicates;
+                k > 0 && !self.already_run.contains(&bits(at))
+            })
+            .count();
+        self.replicate_runs.fetch_add(new_runs, Ordering::Relaxed);
         let outcomes = self
             .runs
             .run(Some(REPLICATES_DESIGN), &requests)
             .map_err(|e| iuq_basis::BasisError::ModelBatch(format!("replicate runs: {e}")))?;
+        let failed = requests
+            .iter()
+            .zip(&outcomes)
+            .enumerate()
+            .filter(|(r, (_, o))| (r / groups.len()) % self.replicates > 0 && o.is_err())
+            .count();
+        self.replicate_failures.fetch_add(failed, Ordering::Relaxed);
         let per_member = self.replicates * groups.len();
         let y = &self.observations.values;
         let measurement = self.observations.measurement_std.as_deref();
@@ -114,19 +139,23 @@ impl LogLikelihood for ReplicatedLikelihood<'_> {
             let s_m = sigma_m(&points[i]);
             let mut correction = 0.0;
             for (gi, &g) in groups.iter().enumerate() {
-                for (offset, j) in self.runs.group_outputs(g).enumerate() {
-                    if !self.irregular.contains(&j) {
-                        continue;
-                    }
-                    let terms: Vec<f64> = (0..self.replicates)
-                        .map(|k| match &outcomes[k * groups.len() + gi] {
-                            Ok(e) => {
-                                let q = e.outputs.get(offset).copied().unwrap_or(f64::NAN);
-                                let s = e
-                                    .computational_std
-                                    .as_ref()
-                                    .and_then(|s| s.get(offset).copied())
-                                    .unwrap_or(0.0);
+                let width = self.runs.group_outputs(g).len();
+                // ln Π_{j irregular in g} f_j of replicate k: a run's data share its irregular
+                // part, so the mean over k is taken of the group's product, not datum by datum.
+                let terms: Vec<f64> = (0..self.replicates)
+                    .map(|k| match &outcomes[k * groups.len() + gi] {
+                        Ok(e) if e.outputs.len() == width => self
+                            .runs
+                            .group_outputs(g)
+                            .enumerate()
+                            .filter(|(_, j)| self.irregular.contains(j))
+                            .map(|(offset, j)| {
+                                let q = e.outputs[offset];
+                                // As the model at the data reads a run's stds: all or none.
+                                let s = match &e.computational_std {
+                                    Some(s) if s.len() == width => s[offset],
+                                    _ => 0.0,
+                                };
                                 if !q.is_finite() {
                                     return f64::NEG_INFINITY;
                                 }
@@ -140,13 +169,13 @@ impl LogLikelihood for ReplicatedLikelihood<'_> {
                                         s_m,
                                     )
                                     .unwrap_or(f64::NEG_INFINITY)
-                            }
-                            Err(_) => f64::NEG_INFINITY,
-                        })
-                        .collect();
-                    // Replace the member's own term (k = 0) by the mean over the replicates.
-                    correction += log_mean_exp(&terms) - terms[0];
-                }
+                            })
+                            .sum(),
+                        _ => f64::NEG_INFINITY,
+                    })
+                    .collect();
+                // Replace the member's own term (k = 0) by the mean over the replicates.
+                correction += log_mean_exp(&terms) - terms[0];
             }
             if let Ok(v) = &mut values[i] {
                 *v += correction;
