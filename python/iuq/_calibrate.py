@@ -145,6 +145,27 @@ def _toml_number(value: float) -> str:
     return repr(float(value))
 
 
+def _model_posterior_lines(model_posterior: Any, seed: int) -> List[str]:
+    """The `[model_posterior]` lines of ``calibrate``'s study: its seed, and a dict's keys."""
+    options = model_posterior if isinstance(model_posterior, dict) else {}
+    lines = [] if "seed" in options else [f"seed = {seed}"]
+    for key, value in options.items():
+        if not (isinstance(key, str) and key.replace("_", "").isalnum() and key.isascii()):
+            raise ValueError(f"model_posterior: `{key}` is not a key of [model_posterior]")
+        if isinstance(value, bool):
+            text = "true" if value else "false"
+        elif isinstance(value, (int, np.integer)):
+            text = str(int(value))
+        elif isinstance(value, (float, np.floating)):
+            text = _toml_number(value)
+        elif isinstance(value, str):
+            text = _toml_string(value)
+        else:
+            raise ValueError(f"model_posterior.{key}: {value!r} is not a number, bool or string")
+        lines.append(f"{key} = {text}")
+    return lines
+
+
 def _describe(model: Callable[..., Any], description: Optional[str]) -> str:
     """What names the model in the store: the caller's text, else the function's qualified
     name and a digest of its source code (so that an edited function does not reuse the runs
@@ -214,7 +235,7 @@ def calibrate(
     modelling_error: Optional[Tuple[float, float]] = (0.001, 0.1),
     computational_error: str = "relative",
     posterior_check: int = 0,
-    model_posterior: bool = False,
+    model_posterior: Union[bool, Dict[str, Any]] = False,
     samples: int = 10000,
     sensitivity: int = 256,
     seed: int = 0,
@@ -246,7 +267,11 @@ def calibrate(
     (``on_error="fail"``, their reason stored) that a classifier keeps the posterior away from;
     ``on_error="raise"`` stops and raises the exception. ``posterior_check`` runs the model at
     the posterior's MAP and that many samples; ``model_posterior`` also gives the model's own
-    posterior, certified from the surrogate's (a few hundred runs). ``samples`` is the final
+    posterior, certified from the surrogate's (a few hundred runs); a dict instead of ``True``
+    gives its ``[model_posterior]`` keys (``docs/study-file.md``), e.g. ``{"samples": 400,
+    "replicates": 4}`` for a stochastic or chaotic function (found by the method's probe and
+    weighed pseudo-marginally: its irregular outputs then measured by 4 calls each; a bad key or
+    value is a ``ValueError`` naming ``model_posterior.<key>``). ``samples`` is the final
     BASIS population, ``sensitivity`` the Sobol' base points (0: none), ``seed`` seeds everything.
 
     With ``store`` (a directory), every evaluation is stored as it completes in
@@ -339,7 +364,8 @@ def calibrate(
         if sensitivity > 0:
             study += ["[sensitivity]", f"n = {sensitivity}", f"seed = {seed}"]
         study += ["[sampler]", f"samples = {samples}", f"seed = {seed}"]
-        study += ["[model_posterior]", f"seed = {seed}", "[executor]", 'kind = "local"']
+        study += ["[model_posterior]", *_model_posterior_lines(model_posterior, seed)]
+        study += ["[executor]", 'kind = "local"']
         path = directory / STUDY_FILE
         _write_atomically(path, "\n".join(study) + "\n")
 
@@ -361,7 +387,7 @@ def calibrate(
                 1 if per_point else m,
                 on_error,
                 batch_size,
-                bool(model_posterior),
+                bool(model_posterior) or isinstance(model_posterior, dict),
                 printer,
             )
         finally:

@@ -9,6 +9,7 @@ ESS ≥ N/2); the fixed seeds make each check deterministic.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import signal
@@ -186,6 +187,45 @@ def test_the_posterior_check_and_the_model_posterior_run_the_function(tmp_path):
     assert result.model_runs == len(result.runs)
     assert 4 <= result.model_runs - result.surrogate_runs - posterior["model_runs"] <= 6
     assert result.surrogate_runs < 30
+
+
+def chaotic_decay(theta):
+    """The decay curve plus an irregular term of std NOISE that any change of θ redraws (a
+    hash of its bits seeds it), as a chaotic simulator's."""
+    out = decay(theta)
+    for i, row in enumerate(np.atleast_2d(theta)):
+        seed = int.from_bytes(hashlib.sha256(np.ascontiguousarray(row).tobytes()).digest()[:8], "little")
+        out[i] += np.random.default_rng(seed).normal(0, NOISE, out.shape[1])
+    return out
+
+
+def test_model_posterior_options_reach_the_method_for_a_chaotic_function(tmp_path):
+    y = observations()
+    result = iuq.calibrate(
+        chaotic_decay, PRIORS, y, np.full(X.size, NOISE), x=X, modelling_error=None, max_runs=40,
+        samples=2000, sensitivity=0, seed=3, store=tmp_path / "s", progress=False,
+        model_posterior={"samples": 60, "replicates": 3},
+    )
+    posterior = result.model_posterior
+    # The probe saw outputs that do not repeat, so the likelihood is noisy: one importance step,
+    # each member's curve (one call, one run group) measured 3 times, less the probe's 4 runs.
+    assert posterior["probe"]["irregular"] is True
+    assert posterior["pseudo_marginal"] is True and posterior["replicates"] == 3
+    assert posterior["samples"] == 60 and len(posterior["stages"]) == 1
+    assert posterior["replicate_runs"] == 60 * 2 - 4
+    # An empty dict is the defaults; a bad key or value is a ValueError naming it.
+    with pytest.raises(ValueError, match="model_posterior.replicatez"):
+        iuq.calibrate(
+            decay, PRIORS, y, np.full(X.size, NOISE), x=X, modelling_error=None, max_runs=20,
+            sensitivity=0, seed=3, store=tmp_path / "t", progress=False,
+            model_posterior={"replicatez": 2},
+        )
+    with pytest.raises(ValueError, match="model_posterior.samples"):
+        iuq.calibrate(
+            decay, PRIORS, y, np.full(X.size, NOISE), x=X, modelling_error=None, max_runs=20,
+            sensitivity=0, seed=3, store=tmp_path / "u", progress=False,
+            model_posterior={"samples": [1, 2]},
+        )
 
 
 def test_with_on_error_raise_the_exception_stops_the_call_as_itself(tmp_path):
