@@ -514,11 +514,7 @@ pub fn model_posterior(
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
-        let max_r = r
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(f64::NEG_INFINITY, f64::max);
+        let max_r = largest_finite(&r);
         let one_stage = max_r.is_finite() && {
             let rule = next_step(&r, 0.0, settings.cv_target, max_r);
             rule.reaches_one
@@ -572,11 +568,7 @@ pub fn model_posterior(
     }
     let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
-        let max_r = r
-            .iter()
-            .copied()
-            .filter(|v| v.is_finite())
-            .fold(f64::NEG_INFINITY, f64::max);
+        let max_r = largest_finite(&r);
         if !max_r.is_finite() {
             return Err(BasisError::NoFiniteLikelihood { stage: 1, failures });
         }
@@ -610,11 +602,7 @@ pub fn model_posterior(
     } else {
         loop {
             let r: Vec<f64> = log_ratios(&lm, &ls);
-            let max_r = r
-                .iter()
-                .copied()
-                .filter(|v| v.is_finite())
-                .fold(f64::NEG_INFINITY, f64::max);
+            let max_r = largest_finite(&r);
             if !max_r.is_finite() {
                 return Err(BasisError::NoFiniteLikelihood {
                     stage: stages.len() + 1,
@@ -869,6 +857,15 @@ pub fn model_posterior(
         model_evaluations: evaluations,
         failures,
     })
+}
+
+/// The largest finite value (−∞ when there is none: every model run failed).
+fn largest_finite(values: &[f64]) -> f64 {
+    values
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// r_i = ℓ_m,i − ℓ_s,i, −∞ where it is not finite (a failed model run).

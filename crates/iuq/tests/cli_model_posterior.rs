@@ -234,6 +234,19 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     assert_eq!(m["model_runs"], 8 * 100);
 }
 
+/// The cooling measurements (time, temperature, its std) of `dir/cooling.csv`.
+fn cooling_data(dir: &Path) -> Vec<(f64, f64, f64)> {
+    std::fs::read_to_string(dir.join("cooling.csv"))
+        .unwrap()
+        .lines()
+        .filter(|l| !l.starts_with('#') && !l.starts_with("t_min"))
+        .map(|l| {
+            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+            (v[0], v[1], v[2])
+        })
+        .collect()
+}
+
 /// erfc(x) with fractional error below 1.2e-7 (Numerical Recipes, `erfcc`): the exact reference
 /// below needs Φ, and a quadrature reference of 1e-7 is far finer than the test's tolerance.
 fn erfc(x: f64) -> f64 {
@@ -294,15 +307,7 @@ fn chaotic_cooling_exact(data: &[(f64, f64, f64)]) -> [(f64, f64); 2] {
 #[test]
 fn a_noisy_models_posterior_with_replicate_runs_is_its_average_over_the_noise() {
     let dir = cooling("replicates");
-    let data: Vec<(f64, f64, f64)> = std::fs::read_to_string(dir.join("cooling.csv"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("t_min"))
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-            (v[0], v[1], v[2])
-        })
-        .collect();
+    let data = cooling_data(&dir);
     let exact = chaotic_cooling_exact(&data);
     let study_with = |replicates: usize| {
         let path = expression_study_of(
@@ -421,15 +426,7 @@ fn replicates_of_a_whole_curve_average_the_likelihood_of_the_run_not_of_each_dat
     // One run returns the whole curve, offset by one irregular term shared by its 8 points: the
     // mean over replicates must be taken of each run's likelihood (the product over its data).
     let dir = cooling("replicated-curve");
-    let data: Vec<(f64, f64, f64)> = std::fs::read_to_string(dir.join("cooling.csv"))
-        .unwrap()
-        .lines()
-        .filter(|l| !l.starts_with('#') && !l.starts_with("t_min"))
-        .map(|l| {
-            let v: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
-            (v[0], v[1], v[2])
-        })
-        .collect();
+    let data = cooling_data(&dir);
     let amplitude = 1.5;
     let exact = shifted_cooling_exact(&data, amplitude, true);
     let per_datum = shifted_cooling_exact(&data, amplitude, false);
