@@ -15,7 +15,8 @@
 //! - [`summary`]: MAP, mean, std, quantiles and KDE marginals;
 //! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
 //! - [`model_posterior`]: from a surrogate's posterior to the model's, by importance stages
-//!   and delayed-acceptance moves, certified by k̂.
+//!   and delayed-acceptance moves, certified by k̂; [`pseudo_marginal`] for a noisy model, with
+//!   [`moment_matching`]'s correction and its test.
 //!
 //! ```
 //! use iuq_basis::{Basis, BasisSettings, FnLikelihood, Silent};
@@ -46,9 +47,11 @@ pub mod diagnostics;
 pub mod error;
 pub mod likelihood;
 pub mod model_posterior;
+pub mod moment_matching;
 pub mod pareto_smoothing;
 pub mod prediction_error;
 pub mod proposal;
+pub mod pseudo_marginal;
 pub mod quadratic_regression;
 pub mod resampling;
 pub mod sampler;
@@ -63,6 +66,7 @@ pub use model_posterior::{
     ModelPosterior, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
     SurrogatePopulation, model_posterior, selected_members,
 };
+pub use moment_matching::{GaussianLogRatio, ProposalMismatch, proposal_mismatch};
 pub use pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
 };

@@ -41,10 +41,11 @@
 //!    equal parameters differ by more than their own reported spread): a run's likelihood is
 //!    then one unbiased draw of the likelihood averaged over the model's irregular part, the
 //!    weights exp(r) stay unbiased (pseudo-marginal importance sampling, Andrieu & Roberts
-//!    2009), and the estimate is the one full step, certified by k̂ (or nearly equal
-//!    weights). Steps 2–4 are left out: a quadratic fit of a noisy r fits its mean, which by
-//!    Jensen's inequality lies below the log of the mean weight, and a Metropolis chain on a
-//!    noisy ratio sticks where a lucky run landed.
+//!    2009), and the estimate is one full step, certified by k̂ (or nearly equal weights),
+//!    after a moment-matched correction where the first batch shows the surrogate off
+//!    ([`crate::pseudo_marginal`]). Steps 2–4 are left out: a quadratic fit of a noisy r fits
+//!    its mean, which by Jensen's inequality lies below the log of the mean weight, and a
+//!    Metropolis chain on a noisy ratio sticks where a lucky run landed.
 //!
 //! The final population is summarised with its normalised smoothed weights w̄: mean
 //! μ = Σ w̄θ, std σ = √(Σ w̄(θ − μ)²), weighted quantiles; the Monte Carlo standard errors of
@@ -71,8 +72,10 @@ use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
+use crate::moment_matching::ProposalMismatch;
 use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
 use crate::proposal::Proposal;
+use crate::pseudo_marginal::{Members, noisy_estimate};
 use crate::quadratic_regression::QuadraticFit;
 use crate::resampling::resample;
 use crate::sampler::{Basis, Silent};
@@ -254,15 +257,20 @@ pub struct SurrogateCorrection {
     pub model_evaluations: usize,
     /// Whether the fit had quadratic terms (else linear).
     pub quadratic: bool,
+    /// Whether it was the moment-matched log-ratio of a noisy model's weights
+    /// ([`crate::pseudo_marginal`]) rather than a least-squares fit of r.
+    #[serde(default)]
+    pub moment_matched: bool,
 }
 
-/// ℓ_s + r̂: the surrogate corrected by a fit of the model–surrogate difference.
-struct CorrectedLikelihood<'a> {
-    base: &'a dyn LogLikelihood,
-    fit: QuadraticFit,
+/// ℓ_s + r̂: the surrogate corrected by a fit of the model–surrogate difference (a quadratic
+/// fit of r, or the moment-matched log-ratio of a noisy model's weights).
+pub(crate) struct CorrectedLikelihood<'a, F: Fn(&[f64]) -> f64 + Send + Sync> {
+    pub(crate) base: &'a dyn LogLikelihood,
+    pub(crate) correction: F,
 }
 
-impl LogLikelihood for CorrectedLikelihood<'_> {
+impl<F: Fn(&[f64]) -> f64 + Send + Sync> LogLikelihood for CorrectedLikelihood<'_, F> {
     fn parameter_count(&self) -> usize {
         self.base.parameter_count()
     }
@@ -273,7 +281,7 @@ impl LogLikelihood for CorrectedLikelihood<'_> {
             .log_likelihood_batch(points)?
             .into_iter()
             .zip(points)
-            .map(|(v, x)| v.map(|v| v + self.fit.predict(x)))
+            .map(|(v, x)| v.map(|v| v + (self.correction)(x)))
             .collect())
     }
 }
@@ -374,6 +382,11 @@ pub struct ModelPosterior {
     pub log_evidence_ratio: f64,
     /// The corrections of the surrogate made (see [`ModelPosteriorSettings::corrections`]).
     pub corrections: Vec<SurrogateCorrection>,
+    /// For a noisy model: the test of the first batch's weights for a mismatch of the
+    /// surrogate's posterior ([`crate::moment_matching::proposal_mismatch`]; `None`: not made,
+    /// with `corrections = 0`, a reproducible model, or too few effective weights).
+    #[serde(default)]
+    pub proposal_mismatch: Option<ProposalMismatch>,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.
@@ -402,7 +415,11 @@ struct Chain {
 }
 
 /// The likelihoods, with batch failures turned into errors naming what was evaluated.
-fn evaluate(likelihood: &dyn LogLikelihood, points: &[Vec<f64>], what: &str) -> Result<Vec<f64>> {
+pub(crate) fn evaluate(
+    likelihood: &dyn LogLikelihood,
+    points: &[Vec<f64>],
+    what: &str,
+) -> Result<Vec<f64>> {
     if points.is_empty() {
         return Ok(Vec::new());
     }
@@ -508,9 +525,9 @@ pub fn model_posterior(
     let mut beta = 0.0;
     let mut log_evidence_ratio = 0.0;
     let mut stages = Vec::new();
-    let threshold = pareto_k_threshold(s);
+    let mut threshold = pareto_k_threshold(s);
     let mut corrections = Vec::new();
-    let corrected_holder: CorrectedLikelihood;
+    let corrected_holder: CorrectedLikelihood<_>;
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
@@ -532,10 +549,11 @@ pub fn model_posterior(
                 cv_before: coefficient_of_variation(&r),
                 model_evaluations: s,
                 quadratic: fit.is_quadratic(),
+                moment_matched: false,
             });
             corrected_holder = CorrectedLikelihood {
                 base: surrogate,
-                fit,
+                correction: move |x: &[f64]| fit.predict(x),
             };
             surrogate = &corrected_holder;
             let basis_settings = BasisSettings {
@@ -566,39 +584,37 @@ pub fn model_posterior(
             stage_evaluations = (s, batch_failures);
         }
     }
+    let mut mismatch = None;
     let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
-        let r: Vec<f64> = log_ratios(&lm, &ls);
-        let max_r = largest_finite(&r);
-        if !max_r.is_finite() {
-            return Err(BasisError::NoFiniteLikelihood { stage: 1, failures });
-        }
-        let smoothing = pareto_smooth(&r);
-        let cv = coefficient_of_variation(&r);
-        let certified = smoothing.pareto_k <= threshold || cv <= NEARLY_EQUAL_CV;
-        let record = ModelPosteriorStage {
-            stage: 1,
-            beta: 1.0,
-            step: 1.0,
-            cv,
-            pareto_k: smoothing.pareto_k,
-            cv_step: 1.0,
-            effective_sample_size: effective_sample_size(&normalised_weights(
-                &smoothing.log_weights,
-            )),
-            model_evaluations: stage_evaluations.0,
-            failures: stage_evaluations.1,
-            screen_acceptance: None,
-            confirm_acceptance: None,
+        let first = Members {
+            theta: std::mem::take(&mut theta),
+            surrogate: std::mem::take(&mut ls),
+            model: std::mem::take(&mut lm),
+            prior: std::mem::take(&mut lp),
         };
-        on_stage(&record);
-        stages.push(record);
-        log_evidence_ratio += log_evidence_increment(&r, 1.0, max_r);
-        let stop = if certified {
-            ModelPosteriorStop::Certified
-        } else {
-            ModelPosteriorStop::NoisyWeightsTail
-        };
-        (r, smoothing.log_weights, smoothing.pareto_k, stop)
+        let estimate = noisy_estimate(
+            space, population, surrogate, model, settings, first, failures, &mut best,
+        )?;
+        on_stage(&estimate.stage);
+        stages.push(estimate.stage);
+        Members {
+            theta,
+            surrogate: ls,
+            model: lm,
+            prior: lp,
+        } = estimate.members;
+        evaluations += estimate.evaluations;
+        failures += estimate.failures;
+        corrections.extend(estimate.correction);
+        log_evidence_ratio += estimate.log_evidence_ratio;
+        threshold = estimate.threshold;
+        mismatch = estimate.mismatch;
+        (
+            estimate.raw,
+            estimate.smoothing.log_weights,
+            estimate.smoothing.pareto_k,
+            estimate.stop,
+        )
     } else {
         loop {
             let r: Vec<f64> = log_ratios(&lm, &ls);
@@ -854,13 +870,14 @@ pub fn model_posterior(
         map_log_prior,
         log_evidence_ratio,
         corrections,
+        proposal_mismatch: mismatch,
         model_evaluations: evaluations,
         failures,
     })
 }
 
 /// The largest finite value (−∞ when there is none: every model run failed).
-fn largest_finite(values: &[f64]) -> f64 {
+pub(crate) fn largest_finite(values: &[f64]) -> f64 {
     values
         .iter()
         .copied()
@@ -869,7 +886,7 @@ fn largest_finite(values: &[f64]) -> f64 {
 }
 
 /// r_i = ℓ_m,i − ℓ_s,i, −∞ where it is not finite (a failed model run).
-fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
+pub(crate) fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
     model
         .iter()
         .zip(surrogate)
@@ -882,18 +899,18 @@ fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
 
 /// CV (population std / mean) of the weights exp(lw − max lw), as BASIS's rule measures it;
 /// failed members count as 0.
-fn coefficient_of_variation(log_weights: &[f64]) -> f64 {
+pub(crate) fn coefficient_of_variation(log_weights: &[f64]) -> f64 {
     crate::annealing::coefficient_of_variation(&normalised_weights(log_weights))
 }
 
 /// The best model-evaluated point so far (largest ℓ_m + ln π; the first one on ties).
 #[derive(Default)]
-struct Best {
+pub(crate) struct Best {
     point: Option<(Vec<f64>, f64, f64)>,
 }
 
 impl Best {
-    fn offer(&mut self, points: &[Vec<f64>], lm: &[f64], lp: &[f64]) {
+    pub(crate) fn offer(&mut self, points: &[Vec<f64>], lm: &[f64], lp: &[f64]) {
         for ((p, &m), &q) in points.iter().zip(lm).zip(lp) {
             if !(m + q).is_finite() {
                 continue;

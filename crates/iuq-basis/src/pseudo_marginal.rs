@@ -1,0 +1,231 @@
+//! The model posterior of a noisy model: one pseudo-marginal importance step, preceded by a
+//! moment-matched correction of the surrogate where the first batch shows the surrogate's
+//! posterior off the model's by more than the weights' noise explains.
+//!
+//! Each run's likelihood L̂ is an unbiased draw of the likelihood L averaged over the model's
+//! irregular part, so the weights L̂/L_s are unbiased (Andrieu & Roberts 2009) and one full step
+//! from the surrogate's posterior q is a consistent estimate. Consistent is not enough for a few
+//! hundred members: where q is shifted or narrower than the target, self-normalised importance
+//! sampling is biased towards q by O(1/ESS) and k̂ of noisy weights does not always flag it. So:
+//!
+//! 1. The first batch of S members of q is run; [`crate::moment_matching::proposal_mismatch`]
+//!    tests whether the weighted moments differ from q's more than the same weights dealt to
+//!    the members at random would make them.
+//! 2. If not, and the step's k̂ holds, the estimate is that step.
+//! 3. If so, or if k̂ does not hold (and `corrections` allows one), the surrogate is corrected by the moment-matched
+//!    log-ratio g (ℓ_s + g, [`crate::moment_matching::GaussianLogRatio`], towards the weighted
+//!    moments with the stds widened by [`crate::moment_matching::DEFENSIVE_WIDENING`]), the corrected
+//!    surrogate's posterior q_c ∝ q·e^g sampled by BASIS (surrogate evaluations only), and a
+//!    second batch of S members of q_c run. Both batches are weighed as one sample of the
+//!    mixture ½q + ½q_c (the deterministic-mixture, or balance-heuristic, weights of multiple
+//!    importance sampling; Veach & Guibas 1995, Owen & Zhou 2000):
+//!    w = L̂·π / (½q + ½q_c) ∝ exp(r̂ − ln(½(1 + e^{g − ln c}))), r̂ = ℓ̂_m − ℓ_s,
+//!    c = Z_c/Z_s = E_q[e^g], estimated over the whole surrogate population. No run is wasted,
+//!    and a weight is never more than twice what the better of the two proposals alone would
+//!    give it, so a correction that overshoots cannot make the estimate worse than the first
+//!    batch's.
+//!
+//! The final weights are certified by k̂ over all members (or nearly equal weights), as the one
+//! step was; otherwise the stop is [`ModelPosteriorStop::NoisyWeightsTail`]. The evidence ratio
+//! Z_m/Z_s is the mean weight (the mixture's density is normalised).
+
+use rand::seq::index::sample as sample_indices;
+
+use iuq_core::ParameterSpace;
+use iuq_core::random::stream;
+use iuq_core::weighted_statistics::effective_sample_size;
+
+use crate::annealing::log_evidence_increment;
+use crate::error::{BasisError, Result};
+use crate::likelihood::LogLikelihood;
+use crate::model_posterior::{
+    Best, CorrectedLikelihood, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
+    NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
+    coefficient_of_variation, evaluate, largest_finite, log_ratios,
+};
+use crate::moment_matching::{
+    DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
+};
+use crate::pareto_smoothing::{
+    ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
+};
+use crate::sampler::{Basis, Silent};
+use crate::settings::BasisSettings;
+
+/// Members with their surrogate and model log-likelihoods and log-priors.
+pub(crate) struct Members {
+    pub(crate) theta: Vec<Vec<f64>>,
+    pub(crate) surrogate: Vec<f64>,
+    pub(crate) model: Vec<f64>,
+    pub(crate) prior: Vec<f64>,
+}
+
+/// The weighted members of the pseudo-marginal estimate and how they were reached.
+pub(crate) struct NoisyEstimate {
+    /// Every member run (both batches after a correction); `surrogate` is the uncorrected ℓ_s.
+    pub(crate) members: Members,
+    /// The raw log-weights (mixture weights after a correction).
+    pub(crate) raw: Vec<f64>,
+    pub(crate) smoothing: ParetoSmoothing,
+    pub(crate) threshold: f64,
+    pub(crate) stop: ModelPosteriorStop,
+    pub(crate) stage: ModelPosteriorStage,
+    pub(crate) log_evidence_ratio: f64,
+    pub(crate) correction: Option<SurrogateCorrection>,
+    pub(crate) mismatch: Option<ProposalMismatch>,
+    /// Model evaluations of the second batch (0 without a correction).
+    pub(crate) evaluations: usize,
+    /// Of those, failed runs.
+    pub(crate) failures: usize,
+}
+
+/// ln(e^a + e^b) without overflow.
+fn log_add_exp(a: f64, b: f64) -> f64 {
+    let m = a.max(b);
+    if m == f64::NEG_INFINITY {
+        return m;
+    }
+    m + ((a - m).exp() + (b - m).exp()).ln()
+}
+
+/// The pseudo-marginal estimate from the `first` batch (drawn from `population`; `failures` of
+/// its runs failed), see the module documentation.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn noisy_estimate(
+    space: &ParameterSpace,
+    population: SurrogatePopulation<'_>,
+    surrogate: &dyn LogLikelihood,
+    model: &dyn LogLikelihood,
+    settings: &ModelPosteriorSettings,
+    first: Members,
+    first_failures: usize,
+    best: &mut Best,
+) -> Result<NoisyEstimate> {
+    let s = first.theta.len();
+    let r = log_ratios(&first.model, &first.surrogate);
+    if !largest_finite(&r).is_finite() {
+        return Err(BasisError::NoFiniteLikelihood {
+            stage: 1,
+            failures: first_failures,
+        });
+    }
+    let first_smoothing = pareto_smooth(&r);
+    let mismatch = if settings.corrections > 0 {
+        proposal_mismatch(&first.theta, &first_smoothing.log_weights, settings.seed)
+    } else {
+        None
+    };
+    // Correct where the proposal is measurably off, or where the one step would not be
+    // certified (a tail the weights cannot carry: the case a correction of the spread helps).
+    let tail = first_smoothing.pareto_k > pareto_k_threshold(s)
+        && coefficient_of_variation(&r) > NEARLY_EQUAL_CV;
+    let correct = settings.corrections > 0
+        && (tail || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
+    let g = if correct {
+        GaussianLogRatio::fit(&first.theta, &first_smoothing.log_weights)
+            .map(|g| g.widened(DEFENSIVE_WIDENING))
+    } else {
+        None
+    };
+    let (members, raw, correction, evaluations, failures) = match g {
+        None => (first, r, None, 0, 0),
+        Some(g) => {
+            let correction = SurrogateCorrection {
+                pareto_k_before: first_smoothing.pareto_k,
+                cv_before: coefficient_of_variation(&r),
+                model_evaluations: s,
+                quadratic: true,
+                moment_matched: true,
+            };
+            let corrected = CorrectedLikelihood {
+                base: surrogate,
+                correction: |x: &[f64]| g.log_ratio(x),
+            };
+            let basis_settings = BasisSettings {
+                samples: population.samples.len().max(s),
+                burn_in: 10,
+                seed: settings.seed,
+                ..Default::default()
+            }
+            .check()?;
+            let state = Basis::new(space, &corrected, basis_settings)?
+                .run(&mut Silent)?
+                .state;
+            let mut rng = stream(settings.seed, STREAM_BASE, 1);
+            let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
+            chosen.sort_unstable();
+            let theta: Vec<Vec<f64>> = chosen.iter().map(|&i| state.samples[i].clone()).collect();
+            let second = Members {
+                surrogate: chosen
+                    .iter()
+                    .map(|&i| state.log_likelihood[i] - g.log_ratio(&state.samples[i]))
+                    .collect(),
+                prior: chosen.iter().map(|&i| state.log_prior[i]).collect(),
+                model: evaluate(
+                    model,
+                    &theta,
+                    "the model at the corrected surrogate's posterior samples",
+                )?,
+                theta,
+            };
+            let second_failures = second.model.iter().filter(|v| !v.is_finite()).count();
+            best.offer(&second.theta, &second.model, &second.prior);
+            // ln c = ln E_q[e^g] over the whole surrogate population.
+            let on_population: Vec<f64> =
+                population.samples.iter().map(|x| g.log_ratio(x)).collect();
+            let log_c = log_evidence_increment(&on_population, 1.0, largest_finite(&on_population));
+            let mut members = first;
+            members.theta.extend(second.theta);
+            members.surrogate.extend(second.surrogate);
+            members.model.extend(second.model);
+            members.prior.extend(second.prior);
+            let raw: Vec<f64> = log_ratios(&members.model, &members.surrogate)
+                .into_iter()
+                .zip(&members.theta)
+                .map(|(r, x)| r - (log_add_exp(0.0, g.log_ratio(x) - log_c) - 2f64.ln()))
+                .collect();
+            (members, raw, Some(correction), s, second_failures)
+        }
+    };
+    let max_raw = largest_finite(&raw);
+    if !max_raw.is_finite() {
+        return Err(BasisError::NoFiniteLikelihood {
+            stage: 1,
+            failures: first_failures + failures,
+        });
+    }
+    let threshold = pareto_k_threshold(raw.len());
+    let smoothing = pareto_smooth(&raw);
+    let cv = coefficient_of_variation(&raw);
+    let stop = if smoothing.pareto_k <= threshold || cv <= NEARLY_EQUAL_CV {
+        ModelPosteriorStop::Certified
+    } else {
+        ModelPosteriorStop::NoisyWeightsTail
+    };
+    let stage = ModelPosteriorStage {
+        stage: 1,
+        beta: 1.0,
+        step: 1.0,
+        cv,
+        pareto_k: smoothing.pareto_k,
+        cv_step: 1.0,
+        effective_sample_size: effective_sample_size(&normalised_weights(&smoothing.log_weights)),
+        model_evaluations: s + evaluations,
+        failures: first_failures + failures,
+        screen_acceptance: None,
+        confirm_acceptance: None,
+    };
+    Ok(NoisyEstimate {
+        log_evidence_ratio: log_evidence_increment(&raw, 1.0, max_raw),
+        members,
+        raw,
+        smoothing,
+        threshold,
+        stop,
+        stage,
+        correction,
+        mismatch,
+        evaluations,
+        failures,
+    })
+}
