@@ -208,11 +208,16 @@ def test_model_posterior_options_reach_the_method_for_a_chaotic_function(tmp_pat
     )
     posterior = result.model_posterior
     # The probe saw outputs that do not repeat, so the likelihood is noisy: one importance step,
-    # each member's curve (one call, one run group) measured 3 times, less the probe's 4 runs.
+    # each member's curve (one call, one run group) measured 3 times, less the probe's 4 runs;
+    # a second batch where the first showed the surrogate's posterior off (then both are one
+    # mixture sample).
     assert posterior["probe"]["irregular"] is True
     assert posterior["pseudo_marginal"] is True and posterior["replicates"] == 3
-    assert posterior["samples"] == 60 and len(posterior["stages"]) == 1
-    assert posterior["replicate_runs"] == 60 * 2 - 4
+    assert posterior["proposal_mismatch"]["permutations"] == 999
+    batches = 1 + len(posterior["corrections"])
+    assert all(c["moment_matched"] for c in posterior["corrections"])
+    assert posterior["samples"] == 60 * batches and len(posterior["stages"]) == 1
+    assert posterior["replicate_runs"] == 60 * batches * 2 - 4
     # An empty dict is the defaults; a bad key or value is a ValueError naming it.
     with pytest.raises(ValueError, match="model_posterior.replicatez"):
         iuq.calibrate(

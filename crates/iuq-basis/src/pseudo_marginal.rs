@@ -122,8 +122,12 @@ pub(crate) fn noisy_estimate(
     let correct = settings.corrections > 0
         && (tail || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
     let g = if correct {
-        GaussianLogRatio::fit(&first.theta, &first_smoothing.log_weights)
-            .map(|g| g.widened(DEFENSIVE_WIDENING))
+        GaussianLogRatio::fit(
+            &first.theta,
+            &first_smoothing.log_weights,
+            DEFENSIVE_WIDENING,
+            settings.seed,
+        )
     } else {
         None
     };

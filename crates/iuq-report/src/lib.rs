@@ -39,7 +39,7 @@ pub use figure::FigureInfo;
 pub use format::format_number;
 pub use model::{
     CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, Convergence, ConvergenceRound,
-    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, ModelPosteriorReport,
+    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, MismatchTest, ModelPosteriorReport,
     ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
     PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
     SensitivityResult, StudyReport,

@@ -120,6 +120,10 @@ pub struct ModelPosteriorReport {
     /// The likelihood was taken as a noisy estimate: one importance step, certified by k̂.
     #[serde(default)]
     pub pseudo_marginal: bool,
+    /// For a noisy likelihood, the test of the first batch's weights for a surrogate posterior
+    /// off the model's (`None`: not made).
+    #[serde(default)]
+    pub proposal_mismatch: Option<MismatchTest>,
     /// Runs per member at each irregular data point (their likelihoods averaged; 1: none
     /// repeated).
     #[serde(default = "one")]
@@ -133,6 +137,21 @@ pub struct ModelPosteriorReport {
     pub stages: Vec<ModelPosteriorStageRow>,
     /// The model at both MAPs, one entry per data point.
     pub map_runs: Vec<MapRunsAtPoint>,
+}
+
+/// The permutation test of a noisy model's first batch: how far its importance-weighted
+/// moments lie from the surrogate posterior's, against the weights' noise.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct MismatchTest {
+    /// Mahalanobis distance of the weighted mean from the surrogate posterior's.
+    pub mean_shift: f64,
+    /// Kullback–Leibler divergence of the weighted covariance from the surrogate posterior's.
+    pub spread_divergence: f64,
+    /// Bonferroni p-value of the two permutation tests.
+    pub p_value: f64,
+    /// Whether a moment-matched correction followed (a second batch, both weighed as one
+    /// mixture sample).
+    pub corrected: bool,
 }
 
 /// One parameter in the surrogate's and the model's posterior.

@@ -364,7 +364,9 @@ pub(crate) fn build_sections(
                 samples = m.samples,
                 runs = m.model_runs,
                 stop = m.stop,
-                corrected = if m.corrections > 0 {
+                corrected = if m.pseudo_marginal {
+                    mismatch_sentence(m)
+                } else if m.corrections > 0 {
                     format!(
                         " The first batch's weights did not hold in one stage, so the {surrogate} was corrected by a quadratic fit of the difference of the two log-likelihoods and a new batch drawn from the corrected {surrogate}'s posterior.",
                         surrogate = m.surrogate_source
@@ -500,10 +502,40 @@ pub(crate) fn build_sections(
 }
 
 /// What the reproducibility probe found, as a sentence of the model posterior's section.
+/// What the test of a noisy model's first batch found and what followed.
+fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+    let (model, surrogate) = (&m.model_source, &m.surrogate_source);
+    match &m.proposal_mismatch {
+        None if m.corrections > 0 => format!(
+            " The first batch's weights did not hold in one step, so the {surrogate} was corrected towards their weighted moments and a second batch drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture."
+        ),
+        None => String::new(),
+        Some(t) => {
+            let found = format!(
+                "the first batch's importance-weighted mean lies {:.2} posterior stds from the {surrogate}'s and its spread's divergence is {:.3} (a permutation test of the weights over the members: p = {:.3})",
+                t.mean_shift, t.spread_divergence, t.p_value
+            );
+            if t.corrected {
+                let why = if t.p_value < 0.01 {
+                    "beyond what the weights' noise explains"
+                } else {
+                    "within the weights' noise, but the one step's k̂ did not hold"
+                };
+                format!(
+                    " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened by a fifth) and a second batch drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
+                    samples = m.samples
+                )
+            } else {
+                format!(" Measured on the {model}'s runs, {found}: no correction.")
+            }
+        }
+    }
+}
+
 fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let model = &m.model_source;
     let nudge = "Rerun with every parameter moved by a billionth of its range";
-    let one_step = "the weights are those of one importance step (pseudo-marginal: unbiased, with no correction or bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂";
+    let one_step = "the weights are those of one importance step (pseudo-marginal: unbiased, with no fit of the log-likelihoods' difference and no bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂";
     let replicated = if m.replicates > 1 {
         format!(
             "; each irregular datum was measured by {} runs (the member's own and {} nudged by multiples of a billionth), their likelihoods averaged",

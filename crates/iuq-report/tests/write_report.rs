@@ -264,6 +264,12 @@ fn the_page_is_self_contained() {
         })
         .collect();
     assert!(positions.windows(2).all(|w| w[0] < w[1]));
+    // The noisy model's correction is stated with the test that called for it.
+    let text = html.replace("&#39;", "'");
+    assert!(text.contains(
+        "the first batch's importance-weighted mean lies 0.42 posterior stds from the GP surrogate's and its spread's divergence is 0.061 (a permutation test of the weights over the members: p = 0.002): beyond what the weights' noise explains."
+    ));
+    assert!(text.contains("both batches are weighed as one sample of the two posteriors' even mixture, so that 200 members carry the estimate"));
     assert_eq!(html.matches("<svg").count(), FIGURES.len());
     for name in FIGURES {
         assert!(html.contains(&format!("href=\"figures/{name}.png\"")));

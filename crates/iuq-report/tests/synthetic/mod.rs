@@ -4,7 +4,7 @@
 
 use iuq_report::{
     CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, Convergence, ConvergenceRound,
-    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, ModelPosteriorReport,
+    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, MismatchTest, ModelPosteriorReport,
     ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
     PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
     SensitivityResult, StudyReport,
@@ -332,10 +332,16 @@ pub fn synthetic_report(
             effective_sample_size: 151.5,
             model_runs: 1600,
             failures: 2,
-            corrections: 0,
+            corrections: 1,
             probe_pairs: 4,
             irregular_outputs: vec!["y_3".into()],
             pseudo_marginal: true,
+            proposal_mismatch: Some(MismatchTest {
+                mean_shift: 0.42,
+                spread_divergence: 0.061,
+                p_value: 0.002,
+                corrected: true,
+            }),
             replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()

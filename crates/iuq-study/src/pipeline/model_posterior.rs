@@ -220,6 +220,7 @@ impl ModelPosteriorOutcome {
             "map_runs": self.map_runs.iter().map(|(s, m)| json!({"at_surrogate_map": s, "at_model_map": m})).collect::<Vec<_>>(),
             "failures": p.failures,
             "corrections": p.corrections,
+            "proposal_mismatch": p.proposal_mismatch,
             "pseudo_marginal": self.pseudo_marginal,
             "replicates": self.replicates,
             "replicate_runs": self.replicate_runs,

@@ -12,7 +12,7 @@ use super::emulator::Emulator;
 use iuq_campaign::StatusCounts;
 use iuq_report::{
     CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic,
-    MapRunsAtPoint, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
+    MapRunsAtPoint, MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
     PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage,
     SensitivityIndex, SensitivityResult, StudyReport, write_report,
 };
@@ -270,6 +270,12 @@ fn model_posterior_report(
             })
             .unwrap_or_default(),
         pseudo_marginal: outcome.pseudo_marginal,
+        proposal_mismatch: p.proposal_mismatch.as_ref().map(|t| MismatchTest {
+            mean_shift: t.mean_shift,
+            spread_divergence: t.spread_divergence,
+            p_value: t.p_value,
+            corrected: p.corrections.iter().any(|c| c.moment_matched),
+        }),
         replicates: outcome.replicates,
         parameters,
         log_weights: p
