@@ -93,7 +93,7 @@ pub const MIN_SAMPLES: usize = 25;
 
 /// First stream stage of the model-posterior sampler (stage k uses `STREAM_BASE + k`; the
 /// selection of the surrogate members uses `STREAM_BASE`).
-pub const STREAM_BASE: u64 = 2 << 32;
+pub const STREAM_BASE: u64 = iuq_core::random::stages::MODEL_POSTERIOR_BASE;
 
 /// Settings of [`model_posterior`].
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -114,7 +114,10 @@ pub struct ModelPosteriorSettings {
     pub max_stages: usize,
     /// Corrections of the surrogate, 0 or 1 (one costs `samples` model evaluations): where the
     /// first batch's weights do not hold in one stage, the surrogate's log-likelihood is
-    /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew.
+    /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew;
+    /// for a noisy model ([`Self::pseudo_marginal`]), where a permutation test finds the
+    /// surrogate off or the step's k̂ does not hold, by the moment-matched log-ratio of
+    /// [`crate::moment_matching`], both batches then weighed as one mixture sample.
     pub corrections: usize,
     /// Delayed-acceptance moves per member after a bridging stage.
     pub moves: usize,
@@ -130,9 +133,11 @@ pub struct ModelPosteriorSettings {
     /// output moves by more than its own reported spread under a negligible change of the
     /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
     /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
-    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or nearly equal weights); no
-    /// correction and no bridge, whose quadratic fits and Metropolis ratios assume a
-    /// reproducible r (a noisy r makes the chains stick where a lucky run landed).
+    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or
+    /// nearly equal weights), after a moment-matched correction where the first batch shows
+    /// the surrogate off ([`crate::pseudo_marginal`]); no quadratic fit and no bridge, whose
+    /// fits and Metropolis ratios assume a reproducible r (a noisy r makes the chains stick
+    /// where a lucky run landed).
     #[serde(default)]
     pub pseudo_marginal: bool,
 }
@@ -244,9 +249,11 @@ pub struct ModelPosteriorStage {
     pub confirm_acceptance: Option<f64>,
 }
 
-/// A correction of the surrogate: the first batch's weights would not hold in one stage, so
-/// the surrogate's log-likelihood became ℓ_s + r̂ (r̂ a quadratic fit of the batch's r) and a new
-/// batch was drawn from the corrected surrogate's posterior.
+/// A correction of the surrogate: the first batch's weights would not hold in one stage (or,
+/// for a noisy model, showed the surrogate off), so the surrogate's log-likelihood became
+/// ℓ_s + r̂ (r̂ a quadratic fit of the batch's r, or for a noisy model the moment-matched
+/// log-ratio of [`crate::moment_matching`]) and a new batch was drawn from the corrected
+/// surrogate's posterior.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurrogateCorrection {
     /// k̂ of the batch's full-step weights before the correction.
@@ -255,7 +262,8 @@ pub struct SurrogateCorrection {
     pub cv_before: f64,
     /// Model evaluations of the batch the correction was fitted on.
     pub model_evaluations: usize,
-    /// Whether the fit had quadratic terms (else linear).
+    /// Whether the correction had quadratic terms (else linear; a moment-matched one always
+    /// has).
     pub quadratic: bool,
     /// Whether it was the moment-matched log-ratio of a noisy model's weights
     /// ([`crate::pseudo_marginal`]) rather than a least-squares fit of r.
@@ -339,7 +347,8 @@ pub struct ModelPosterior {
     pub samples: Vec<Vec<f64>>,
     /// Their normalised smoothed log-weights.
     pub log_weights: Vec<f64>,
-    /// The final stage's raw log-weights Δβ·r (before smoothing).
+    /// The final stage's raw log-weights Δβ·r (before smoothing); for a noisy model after a
+    /// correction, the mixture weights of both batches ([`crate::pseudo_marginal`]).
     pub raw_log_weights: Vec<f64>,
     /// ℓ_m of each member (−∞ for a failed run).
     pub model_log_likelihood: Vec<f64>,
@@ -377,8 +386,8 @@ pub struct ModelPosterior {
     pub map_log_prior: f64,
     /// ln(Z_model/Z_surrogate): Σ_k ln mean_i exp(Δβ_k·r_i) over the stages (the evidence
     /// increments of the tempering, as BASIS accumulates them), plus ln(Z_corrected/Z_s) after a
-    /// correction (from the corrected surrogate's BASIS run): the model's log-evidence is the
-    /// surrogate's plus this.
+    /// correction (from the corrected surrogate's BASIS run); for a noisy model, the log of the
+    /// mean (mixture) weight: the model's log-evidence is the surrogate's plus this.
     pub log_evidence_ratio: f64,
     /// The corrections of the surrogate made (see [`ModelPosteriorSettings::corrections`]).
     pub corrections: Vec<SurrogateCorrection>,
@@ -387,6 +396,11 @@ pub struct ModelPosterior {
     /// with `corrections = 0`, a reproducible model, or too few effective weights).
     #[serde(default)]
     pub proposal_mismatch: Option<ProposalMismatch>,
+    /// For a noisy model: why a correction that the test or k̂ asked for was not made (too few
+    /// effective weights to estimate a covariance, or the corrected surrogate's sampling
+    /// failed); `None` when none was wanted or it was made.
+    #[serde(default)]
+    pub correction_not_made: Option<String>,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.
@@ -585,6 +599,7 @@ pub fn model_posterior(
         }
     }
     let mut mismatch = None;
+    let mut correction_not_made = None;
     let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
         let first = Members {
             theta: std::mem::take(&mut theta),
@@ -609,6 +624,7 @@ pub fn model_posterior(
         log_evidence_ratio += estimate.log_evidence_ratio;
         threshold = estimate.threshold;
         mismatch = estimate.mismatch;
+        correction_not_made = estimate.not_corrected;
         (
             estimate.raw,
             estimate.smoothing.log_weights,
@@ -871,6 +887,7 @@ pub fn model_posterior(
         log_evidence_ratio,
         corrections,
         proposal_mismatch: mismatch,
+        correction_not_made,
         model_evaluations: evaluations,
         failures,
     })

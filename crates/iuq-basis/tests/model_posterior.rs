@@ -404,6 +404,33 @@ fn a_noisy_models_posterior_is_its_average_over_the_noise() {
     assert_matches(&result, &y, &std, "noisy model, shifted surrogate");
     // The surrogate's own mean is off by more than the test's tolerance.
     assert!((s_mean[0] - y[0]).abs() > 4.0 * result.mcse_mean[0]);
+    // The evidence: the averaged likelihood Π_k (σ/√(σ² + τ²))·N-shape integrates over the
+    // uniform prior to (σ√(2π)/20)² (the surrogate's evidence is added by `run`'s population,
+    // Π_k s_k√(2π)/20). The log of a mean of N weights with CV c has a standard error of about
+    // c/√N; held to 4 of it.
+    let log_z_exact = 2.0 * (sigma * (2.0 * std::f64::consts::PI).sqrt() / 20.0).ln();
+    let log_z_surrogate: f64 = s_std
+        .iter()
+        .map(|s| (s * (2.0 * std::f64::consts::PI).sqrt() / 20.0).ln())
+        .sum();
+    let standard_error = result.stages[0].cv / (result.samples.len() as f64).sqrt();
+    println!(
+        "log-evidence {} (exact {log_z_exact}, standard error {standard_error})",
+        log_z_surrogate + result.log_evidence_ratio
+    );
+    assert!(
+        (log_z_surrogate + result.log_evidence_ratio - log_z_exact).abs() < 4.0 * standard_error
+    );
+    // The same with one thread and with three.
+    let in_pool = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap()
+            .install(|| run(2, &s_mean, &s_std, &model, &settings))
+    };
+    assert_eq!(in_pool(1), result);
+    assert_eq!(in_pool(3), result);
 
     // A surrogate half as wide: the one step's tail is flagged by k̂ and the correction widens
     // the proposal…

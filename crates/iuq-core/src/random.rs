@@ -25,6 +25,13 @@ pub mod stages {
     pub const PRIOR_SAMPLING: u64 = 5;
     /// First stage number available to iterative samplers (BASIS stage k uses `SAMPLER_BASE + k`).
     pub const SAMPLER_BASE: u64 = 1 << 32;
+    /// First stage of the model-posterior method (stage k uses `MODEL_POSTERIOR_BASE + k`; the
+    /// choice of its batches uses `MODEL_POSTERIOR_BASE` itself).
+    pub const MODEL_POSTERIOR_BASE: u64 = 2 << 32;
+    /// The permutations of the test of a surrogate posterior against a noisy model's weights.
+    pub const MISMATCH_PERMUTATION: u64 = 3 << 32;
+    /// The draws that cap a moment-matched correction of a surrogate.
+    pub const CORRECTION_CEILING: u64 = (3 << 32) + 1;
 }
 
 /// SplitMix64 finaliser (Steele, Lea & Flood 2014): a bijective 64-bit mixer.

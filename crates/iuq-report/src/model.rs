@@ -124,6 +124,9 @@ pub struct ModelPosteriorReport {
     /// off the model's (`None`: not made).
     #[serde(default)]
     pub proposal_mismatch: Option<MismatchTest>,
+    /// For a noisy likelihood, why a correction the test or k̂ asked for was not made.
+    #[serde(default)]
+    pub correction_not_made: Option<String>,
     /// Runs per member at each irregular data point (their likelihoods averaged; 1: none
     /// repeated).
     #[serde(default = "one")]
@@ -149,6 +152,10 @@ pub struct MismatchTest {
     pub spread_divergence: f64,
     /// Bonferroni p-value of the two permutation tests.
     pub p_value: f64,
+    /// The level below which the surrogate is called off.
+    pub level: f64,
+    /// The factor by which a correction widens the weighted stds.
+    pub widening: f64,
     /// Whether a moment-matched correction followed (a second batch, both weighed as one
     /// mixture sample).
     pub corrected: bool,

@@ -361,7 +361,7 @@ pub(crate) fn build_sections(
                 "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{corrected}{probe} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
                 model = m.model_source,
                 surrogate = m.surrogate_source,
-                samples = m.samples,
+                samples = first_batch(m),
                 runs = m.model_runs,
                 stop = m.stop,
                 corrected = if m.pseudo_marginal {
@@ -501,37 +501,51 @@ pub(crate) fn build_sections(
     Ok(sections)
 }
 
-/// What the reproducibility probe found, as a sentence of the model posterior's section.
-/// What the test of a noisy model's first batch found and what followed.
-fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
-    let (model, surrogate) = (&m.model_source, &m.surrogate_source);
-    match &m.proposal_mismatch {
-        None if m.corrections > 0 => format!(
-            " The first batch's weights did not hold in one step, so the {surrogate} was corrected towards their weighted moments and a second batch drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture."
-        ),
-        None => String::new(),
-        Some(t) => {
-            let found = format!(
-                "the first batch's importance-weighted mean lies {:.2} posterior stds from the {surrogate}'s and its spread's divergence is {:.3} (a permutation test of the weights over the members: p = {:.3})",
-                t.mean_shift, t.spread_divergence, t.p_value
-            );
-            if t.corrected {
-                let why = if t.p_value < 0.01 {
-                    "beyond what the weights' noise explains"
-                } else {
-                    "within the weights' noise, but the one step's k̂ did not hold"
-                };
-                format!(
-                    " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened by a fifth) and a second batch drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
-                    samples = m.samples
-                )
-            } else {
-                format!(" Measured on the {model}'s runs, {found}: no correction.")
-            }
-        }
+/// Members of the first batch: all of them, or half after a noisy model's correction (its second
+/// batch has as many).
+fn first_batch(m: &crate::model::ModelPosteriorReport) -> usize {
+    if m.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
+        m.samples / 2
+    } else {
+        m.samples
     }
 }
 
+/// What the test of a noisy model's first batch found and what followed.
+fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+    let (model, surrogate) = (&m.model_source, &m.surrogate_source);
+    let not_made = m
+        .correction_not_made
+        .as_ref()
+        .map(|reason| {
+            format!(" The {model}'s runs asked for a correction of the {surrogate}, but {reason}: the one step stands.")
+        })
+        .unwrap_or_default();
+    let Some(t) = &m.proposal_mismatch else {
+        return not_made;
+    };
+    let found = format!(
+        "the first batch's importance-weighted mean lies {:.2} posterior stds from the {surrogate}'s and its spread's divergence is {:.3} (a permutation test of the weights over the members: p = {:.3})",
+        t.mean_shift, t.spread_divergence, t.p_value
+    );
+    if t.corrected {
+        let why = if t.p_value < t.level {
+            "beyond what the weights' noise explains"
+        } else {
+            "within the weights' noise, but the one step's k̂ did not hold"
+        };
+        format!(
+            " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times) and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
+            t.widening,
+            batch = m.samples / 2,
+            samples = m.samples
+        )
+    } else {
+        format!(" Measured on the {model}'s runs, {found}: no correction.{not_made}")
+    }
+}
+
+/// What the reproducibility probe found, as a sentence of the model posterior's section.
 fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let model = &m.model_source;
     let nudge = "Rerun with every parameter moved by a billionth of its range";

@@ -269,7 +269,8 @@ fn the_page_is_self_contained() {
     assert!(text.contains(
         "the first batch's importance-weighted mean lies 0.42 posterior stds from the GP surrogate's and its spread's divergence is 0.061 (a permutation test of the weights over the members: p = 0.002): beyond what the weights' noise explains."
     ));
-    assert!(text.contains("both batches are weighed as one sample of the two posteriors' even mixture, so that 200 members carry the estimate"));
+    assert!(text.contains("a second batch of 100 drawn from the corrected GP surrogate's posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that 200 members carry the estimate"));
+    assert!(text.contains("100 members of the GP surrogate posterior run through the cell model"));
     assert_eq!(html.matches("<svg").count(), FIGURES.len());
     for name in FIGURES {
         assert!(html.contains(&format!("href=\"figures/{name}.png\"")));

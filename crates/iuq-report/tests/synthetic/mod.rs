@@ -340,8 +340,11 @@ pub fn synthetic_report(
                 mean_shift: 0.42,
                 spread_divergence: 0.061,
                 p_value: 0.002,
+                level: 0.01,
+                widening: 1.2,
                 corrected: true,
             }),
+            correction_not_made: None,
             replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()

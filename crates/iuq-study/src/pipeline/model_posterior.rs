@@ -221,6 +221,7 @@ impl ModelPosteriorOutcome {
             "failures": p.failures,
             "corrections": p.corrections,
             "proposal_mismatch": p.proposal_mismatch,
+            "correction_not_made": p.correction_not_made,
             "pseudo_marginal": self.pseudo_marginal,
             "replicates": self.replicates,
             "replicate_runs": self.replicate_runs,

@@ -274,8 +274,11 @@ fn model_posterior_report(
             mean_shift: t.mean_shift,
             spread_divergence: t.spread_divergence,
             p_value: t.p_value,
+            level: iuq_basis::moment_matching::MISMATCH_LEVEL,
+            widening: iuq_basis::moment_matching::DEFENSIVE_WIDENING,
             corrected: p.corrections.iter().any(|c| c.moment_matched),
         }),
+        correction_not_made: p.correction_not_made.clone(),
         replicates: outcome.replicates,
         parameters,
         log_weights: p
