@@ -18,12 +18,16 @@ Like a real solver with an explicit time step, it refuses to run where the cooli
 step unstable: for k > 0.5 (or $COOLING_K_UNSTABLE) it prints a reason on stderr and exits with
 status 3, so part of the prior gives no answer. For tests and benchmarks: $COOLING_SLEEP (seconds)
 makes each run take that long, and $COOLING_RUN_LOG names a file to which every finished run
-appends its parameters as a JSON line.
+appends its parameters as a JSON line. $COOLING_CHAOS (°C) adds to each run's result one offset
+A·(2h − 1), h a hash of the exact bits of its parameters: like a chaotic simulator's, the same
+parameters give the same result, parameters a billionth apart unrelated ones.
 """
 
+import hashlib
 import json
 import math
 import os
+import struct
 import sys
 import time
 
@@ -53,6 +57,16 @@ def batch() -> int:
     return 0
 
 
+def chaotic_offset(params: dict) -> float:
+    """$COOLING_CHAOS·(2h − 1), h in [0, 1) a hash of the parameters' exact bits (0 unset)."""
+    amplitude = float(os.environ.get("COOLING_CHAOS", "0"))
+    if amplitude == 0:
+        return 0.0
+    bits = b"".join(struct.pack("<d", float(params[key])) for key in sorted(params))
+    h = int.from_bytes(hashlib.sha256(bits).digest()[:8], "little") / 2.0**64
+    return amplitude * (2.0 * h - 1.0)
+
+
 def main() -> int:
     if len(sys.argv) > 1 and sys.argv[1] == "--batch":
         return batch()
@@ -70,11 +84,12 @@ def main() -> int:
             file=sys.stderr,
         )
         return 3
+    offset = chaotic_offset(params)
     if len(sys.argv) > 1 and sys.argv[1] == "--curve":
         times = [float(a) for a in sys.argv[2:]]
-        result = {"T": [temperature(k, t0, t) for t in times]}
+        result = {"T": [temperature(k, t0, t) + offset for t in times]}
     else:
-        result = {"T": temperature(k, t0, float(params["t"]))}
+        result = {"T": temperature(k, t0, float(params["t"])) + offset}
     with open("result.json", "w", encoding="utf-8") as f:
         json.dump(result, f)
     log = os.environ.get("COOLING_RUN_LOG")

@@ -548,9 +548,20 @@ replicates = 8
     assert!((per_datum[1].1 - t_std).abs() > 6.0 * m_of("T0", "mcse_std"));
 }
 
-#[test]
-fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
-    let dir = cooling("resume");
+/// The cooling curve's program (0.2 s a run, `env` added to its environment, `[model_posterior]`
+/// lines `model_posterior`, a one-shot design of `design_size` runs) run by `iuq pipeline
+/// --model-posterior`, killed (SIGKILL) once `kill_after` model-posterior runs have finished,
+/// then rerun: no run the store had finished is made again, the store is intact, and the result
+/// is returned beside an uninterrupted run's, with the labels of the designs the store held at
+/// the kill.
+fn kill_and_rerun(
+    suite: &str,
+    env: &str,
+    model_posterior: &str,
+    design_size: usize,
+    kill_after: usize,
+) -> (serde_json::Value, serde_json::Value, Vec<String>) {
+    let dir = cooling(suite);
     let log = dir.join("finished-runs.jsonl");
     // The program of the curve, one run per parameter vector; each run takes 0.2 s.
     let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
@@ -558,14 +569,15 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
         .replace(
             "[surrogate]",
             &format!(
-                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\" }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\nsamples = 30\nmax_stages = 1\n\n[surrogate]",
+                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\"{env} }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\n{model_posterior}\n\n[surrogate]",
                 log.display()
             ),
         )
         .replace(
             "adaptive = { batch = 3, max_runs = 60, tolerance = 0.1 }",
             "test = { kind = \"sobol\", n = 0 }",
-        );
+        )
+        .replace("n = 8, seed = 1", &format!("n = {design_size}, seed = 1"));
     let path = dir.join("resume.toml");
     std::fs::write(&path, &study).unwrap();
     let out = dir.join("report");
@@ -579,7 +591,7 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
     ]);
     assert!(output.status.success(), "{}", stderr_of(&output));
     let design_runs = std::fs::read_to_string(&log).unwrap().lines().count();
-    assert!((3..=8).contains(&design_runs), "{design_runs}");
+    assert!((3..=design_size).contains(&design_runs), "{design_runs}");
     let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
         .args([
             "pipeline",
@@ -593,7 +605,7 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while std::fs::read_to_string(&log).unwrap().lines().count() < design_runs + 6 {
+    while std::fs::read_to_string(&log).unwrap().lines().count() < design_runs + kill_after {
         assert!(started.elapsed() < Duration::from_secs(120), "no model run");
         assert!(child.try_wait().unwrap().is_none(), "finished too early");
         std::thread::sleep(Duration::from_millis(20));
@@ -623,10 +635,24 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
             .collect()
     };
     assert!(
-        finished_before.len() > design_runs && finished_before.len() < design_runs + 30,
+        finished_before.len() > design_runs
+            && finished_before.len() < design_runs + kill_after + 24,
         "killed after {} stored runs",
         finished_before.len()
     );
+    // The designs (batches) the store held at the kill.
+    let designs_before: Vec<String> = {
+        let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
+        store
+            .connection()
+            .prepare("SELECT label FROM designs ORDER BY id")
+            .unwrap()
+            .query_map([], |r| r.get(0))
+            .unwrap()
+            .collect::<Result<_, _>>()
+            .unwrap()
+    };
+    println!("designs at the kill: {designs_before:?}");
     let v = pipeline(&path, &out, &[]);
     let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
     assert_eq!(store.integrity_check().unwrap(), "ok");
@@ -643,7 +669,7 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
         assert_eq!(text.matches(&needle).count(), 1, "run {id} was repeated");
     }
     // The same result as an uninterrupted run.
-    let clean_dir = cooling("resume-clean");
+    let clean_dir = cooling(&format!("{suite}-clean"));
     let clean_study = study.replace(
         &log.display().to_string(),
         &clean_dir.join("log.jsonl").display().to_string(),
@@ -657,6 +683,42 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
             "{key}"
         );
     }
+    (v, clean, designs_before)
+}
+
+#[test]
+fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
+    // Killed in the first batch of 30 (after the probe's 8 runs: 4 members and their nudges).
+    let (_, _, designs) = kill_and_rerun("resume", "", "samples = 30\nmax_stages = 1", 8, 8 + 6);
+    assert_eq!(
+        designs.last().map(String::as_str),
+        Some("model-posterior-1")
+    );
+}
+
+#[test]
+fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
+    // A chaotic program (one offset of ±0.3 °C per run, redrawn by any change of the
+    // parameters; a GP of the 6 runs of a 10-run design that succeed): the probe finds it, the
+    // first batch of 40 (and the probe's 4 runs) has weights whose k̂ does not hold, so the
+    // surrogate is corrected, and the kill falls in the corrected surrogate's batch, whose
+    // members depend on the first batch's stored results, the seeded test and BASIS run: the
+    // rerun asks for the same points.
+    let (v, clean, designs) = kill_and_rerun(
+        "resume-noisy",
+        ", COOLING_CHAOS = \"0.3\"",
+        "samples = 40",
+        10,
+        40 + 4 + 8,
+    );
+    let m = &v["model_posterior"];
+    assert_eq!(m["pseudo_marginal"], true, "{m}");
+    assert_eq!(m["corrections"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["samples"], 80);
+    assert_eq!(
+        m["proposal_mismatch"],
+        clean["model_posterior"]["proposal_mismatch"]
+    );
 }
 
 #[test]
