@@ -699,17 +699,21 @@ fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
 #[test]
 fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
     // A chaotic program (one offset of ±0.3 °C per run, redrawn by any change of the
-    // parameters; a GP of the 6 runs of a 10-run design that succeed): the probe finds it, the
-    // first batch of 40 (and the probe's 4 runs) has weights whose k̂ does not hold, so the
-    // surrogate is corrected, and the kill falls in the corrected surrogate's batch, whose
-    // members depend on the first batch's stored results, the seeded test and BASIS run: the
-    // rerun asks for the same points.
+    // parameters; a GP of the 6 runs of a 10-run design that succeed): the probe finds it (its 8
+    // runs: 4 members, requested first, and their nudges), the first batch of 40 has weights
+    // whose k̂ does not hold, so the surrogate is corrected, and the kill falls 8 runs into the
+    // corrected surrogate's batch, whose members depend on the first batch's stored results,
+    // the seeded test and BASIS run: the rerun asks for the same points.
     let (v, clean, designs) = kill_and_rerun(
         "resume-noisy",
         ", COOLING_CHAOS = \"0.3\"",
         "samples = 40",
         10,
-        40 + 4 + 8,
+        8 + 36 + 8,
+    );
+    assert_eq!(
+        designs.last().map(String::as_str),
+        Some("model-posterior-2")
     );
     let m = &v["model_posterior"];
     assert_eq!(m["pseudo_marginal"], true, "{m}");
