@@ -548,7 +548,7 @@ replicates = 8
     assert!((per_datum[1].1 - t_std).abs() > 6.0 * m_of("T0", "mcse_std"));
 }
 
-/// The cooling curve's program (0.2 s a run, `env` added to its environment, `[model_posterior]`
+/// The cooling curve's program (`sleep` s a run, `env` added to its environment, `[model_posterior]`
 /// lines `model_posterior`, a one-shot design of `design_size` runs) run by `iuq pipeline
 /// --model-posterior`, killed (SIGKILL) once `kill_after` model-posterior runs have finished,
 /// then rerun: no run the store had finished is made again, the store is intact, and the result
@@ -556,6 +556,7 @@ replicates = 8
 /// the kill.
 fn kill_and_rerun(
     suite: &str,
+    sleep: f64,
     env: &str,
     model_posterior: &str,
     design_size: usize,
@@ -563,13 +564,13 @@ fn kill_and_rerun(
 ) -> (serde_json::Value, serde_json::Value, Vec<String>) {
     let dir = cooling(suite);
     let log = dir.join("finished-runs.jsonl");
-    // The program of the curve, one run per parameter vector; each run takes 0.2 s.
+    // The program of the curve, one run per parameter vector; each run takes `sleep` s.
     let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
         .unwrap()
         .replace(
             "[surrogate]",
             &format!(
-                "env = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\"{env} }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\n{model_posterior}\n\n[surrogate]",
+                "env = {{ COOLING_SLEEP = \"{sleep}\", COOLING_RUN_LOG = \"{}\"{env} }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\n{model_posterior}\n\n[surrogate]",
                 log.display()
             ),
         )
@@ -612,7 +613,7 @@ fn kill_and_rerun(
     }
     child.kill().unwrap(); // SIGKILL
     child.wait().unwrap();
-    // The runs in flight outlive their coordinator (0.2 s each); the campaign declares them lost
+    // The runs in flight outlive their coordinator (`sleep` s each); the campaign declares them lost
     // and makes them again. What must not be repeated is a run the store had finished.
     std::thread::sleep(Duration::from_millis(600));
     let db = dir.join("resume.campaign/campaign.sqlite");
@@ -689,7 +690,8 @@ fn kill_and_rerun(
 #[test]
 fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
     // Killed in the first batch of 30 (after the probe's 8 runs: 4 members and their nudges).
-    let (_, _, designs) = kill_and_rerun("resume", "", "samples = 30\nmax_stages = 1", 8, 8 + 6);
+    let (_, _, designs) =
+        kill_and_rerun("resume", 0.2, "", "samples = 30\nmax_stages = 1", 8, 8 + 6);
     assert_eq!(
         designs.last().map(String::as_str),
         Some("model-posterior-1")
@@ -706,6 +708,7 @@ fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
     // the seeded test and BASIS run: the rerun asks for the same points.
     let (v, clean, designs) = kill_and_rerun(
         "resume-noisy",
+        0.05,
         ", COOLING_CHAOS = \"0.3\"",
         "samples = 40",
         10,
