@@ -12,10 +12,11 @@
 //!    tests whether the weighted moments differ from q's more than the same weights dealt to
 //!    the members at random would make them.
 //! 2. If not, and the step's k̂ holds, the estimate is that step.
-//! 3. If so, or if k̂ does not hold (and `corrections` allows one), the surrogate is corrected by the moment-matched
-//!    log-ratio g (ℓ_s + g, [`crate::moment_matching::GaussianLogRatio`], towards the weighted
-//!    moments with the stds widened by [`crate::moment_matching::DEFENSIVE_WIDENING`]), the corrected
-//!    surrogate's posterior q_c ∝ q·e^g sampled by BASIS (surrogate evaluations only), and a
+//! 3. If so, or if k̂ does not hold (and `corrections` allows one), the surrogate is corrected
+//!    by the moment-matched log-ratio g (ℓ_s + g, [`crate::moment_matching::GaussianLogRatio`],
+//!    towards the weighted moments with the stds widened by
+//!    [`crate::moment_matching::DEFENSIVE_WIDENING`]), the corrected surrogate's posterior
+//!    q_c ∝ q·e^g sampled by BASIS (surrogate evaluations only), and a
 //!    second batch of S members of q_c run. Both batches are weighed as one sample of the
 //!    mixture ½q + ½q_c (the deterministic-mixture, or balance-heuristic, weights of multiple
 //!    importance sampling; Veach & Guibas 1995, Owen & Zhou 2000):
@@ -32,6 +33,9 @@
 //! importance sampling (Cornuet et al. 2012), which adds a bias of order 1/S (Marin, Pudlo &
 //! Sedki 2019). Measured on the test problems (docs/methods.md §5b), what remains is within
 //! about one MCSE.
+//!
+//! Where a correction is wanted but cannot be made (fewer than 2(d + 1) effective weights, or
+//! the corrected surrogate's sampling fails), the one step stands and the reason is kept.
 //!
 //! The final weights are certified by k̂ over all members (or nearly equal weights), as the one
 //! step was; otherwise the stop is [`ModelPosteriorStop::NoisyWeightsTail`]. The evidence ratio
