@@ -14,7 +14,7 @@
 //! - [`checkpoint`]: the state as self-describing JSON, for bit-identical resumption;
 //! - [`summary`]: MAP, mean, std, quantiles and KDE marginals;
 //! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
-//! - [`model_posterior`]: from a surrogate's posterior to the model's, by importance stages
+//! - [`model_posterior`](mod@model_posterior): from a surrogate's posterior to the model's, by importance stages
 //!   and delayed-acceptance moves, certified by k̂; [`pseudo_marginal`] for a noisy model, with
 //!   [`moment_matching`]'s correction and its test.
 //!

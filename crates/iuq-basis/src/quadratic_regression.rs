@@ -1,6 +1,6 @@
 //! A quadratic least-squares fit of a function of the parameters, f̂(θ) = c + bᵀu + Σ_{k≤l}
 //! a_kl·u_k·u_l on standardised coordinates u = (θ − m)/s: the cheap stand-in for the
-//! model–surrogate log-likelihood difference r(θ) with which [`crate::model_posterior`]'s
+//! model–surrogate log-likelihood difference r(θ) with which [`crate::model_posterior`](mod@crate::model_posterior)'s
 //! delayed-acceptance moves screen proposals (a Gaussian-shaped correction: a surrogate
 //! posterior shifted or too narrow differs from the model's by exactly such an r).
 //!
