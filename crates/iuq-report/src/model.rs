@@ -134,7 +134,8 @@ pub struct ModelPosteriorReport {
     /// One row per parameter.
     pub parameters: Vec<ComparedParameter>,
     /// The final stage's log-weights Δβ·(ℓ_model − ℓ_surrogate) of the members whose model run
-    /// succeeded (their histogram).
+    /// succeeded (their histogram); after a noisy model's correction, the mixture weights of
+    /// both batches.
     pub log_weights: Vec<f64>,
     /// The stages.
     pub stages: Vec<ModelPosteriorStageRow>,

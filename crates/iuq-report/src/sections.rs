@@ -358,7 +358,7 @@ pub(crate) fn build_sections(
             "model-posterior",
             "The model's own posterior",
             format!(
-                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{corrected}{probe} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
+                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
                 model = m.model_source,
                 surrogate = m.surrogate_source,
                 samples = first_batch(m),
@@ -402,7 +402,11 @@ pub(crate) fn build_sections(
             FigureSpec {
                 name: "model_posterior_weights",
                 title: "Importance log-weights",
-                caption: "Histogram of the final stage's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded: a long right tail means a few members carry the estimate (k̂ measures it).".to_string(),
+                caption: if first_batch(m) < m.samples {
+                    "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's and the corrected surrogate's posteriors, (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the correction: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
+                } else {
+                    "Histogram of the final stage's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
+                },
                 size: (920, 460),
                 tables: &["model_posterior_stages"],
             },

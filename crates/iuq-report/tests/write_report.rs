@@ -271,6 +271,7 @@ fn the_page_is_self_contained() {
     ));
     assert!(text.contains("a second batch of 100 drawn from the corrected GP surrogate's posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that 200 members carry the estimate"));
     assert!(text.contains("100 members of the GP surrogate posterior run through the cell model"));
+    assert!(text.contains("Histogram of the log-weights of both batches"));
     assert_eq!(html.matches("<svg").count(), FIGURES.len());
     for name in FIGURES {
         assert!(html.contains(&format!("href=\"figures/{name}.png\"")));

@@ -67,7 +67,13 @@ impl Chart for LogWeightsChart<'_> {
             .build_cartesian_2d(x_lo..x_hi, 0.0..top)?;
         chart
             .configure_mesh()
-            .x_desc("Δβ·(ℓ model − ℓ surrogate)")
+            .x_desc(
+                if r.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
+                    "log-weight in the two batches' mixture"
+                } else {
+                    "Δβ·(ℓ model − ℓ surrogate)"
+                },
+            )
             .y_desc("members")
             .x_label_formatter(&|v| linear_tick_label(*v, x_lo, x_hi))
             .y_label_formatter(&|v| linear_tick_label(*v, 0.0, top))
