@@ -49,7 +49,7 @@ pub fn normalised_weights(log_weights: &[f64]) -> Vec<f64> {
 }
 
 /// ln Σ exp(v_i) over the finite values (−∞ when there are none).
-fn log_sum_exp(values: &[f64]) -> f64 {
+pub(crate) fn log_sum_exp(values: &[f64]) -> f64 {
     let max = values
         .iter()
         .copied()

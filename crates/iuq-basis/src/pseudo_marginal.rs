@@ -161,9 +161,7 @@ fn log_normalising_ratio(on_q: &[f64], on_corrected: &[f64]) -> f64 {
     let (n_q, n_c) = (on_q.len() as f64, on_corrected.len() as f64);
     let (ln_s_c, ln_s_q) = ((n_c / (n_q + n_c)).ln(), (n_q / (n_q + n_c)).ln());
     let log_mean = |values: &mut dyn Iterator<Item = f64>, n: f64| -> f64 {
-        let v: Vec<f64> = values.collect();
-        let m = largest_finite(&v);
-        m + (v.iter().map(|x| (x - m).exp()).sum::<f64>() / n).ln()
+        crate::pareto_smoothing::log_sum_exp(&values.collect::<Vec<f64>>()) - n.ln()
     };
     let mut rho = log_mean(&mut on_q.iter().copied(), n_q);
     for _ in 0..1000 {
