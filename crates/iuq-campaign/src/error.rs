@@ -26,8 +26,10 @@ pub enum CampaignError {
     /// Bad input that is not part of a study file (a command-line flag, a campaign directory).
     #[error("{0}")]
     BadInput(String),
-    /// The campaign store could not be read or written.
-    #[error("campaign store {path}: {source}")]
+    /// The campaign store could not be read or written. A file that is not an SQLite database,
+    /// or a damaged one, is bad input ([`store_file_unusable`]); any other SQLite error (a full
+    /// disk, a lock held too long) is a failure of the campaign.
+    #[error("campaign store {path}: {}", store_reason(source))]
     Store {
         /// The database file.
         path: PathBuf,
@@ -69,7 +71,11 @@ pub enum CampaignError {
 impl CampaignError {
     /// True when the error is caused by the user's input (a study file, a flag): exit code 2.
     pub fn is_bad_input(&self) -> bool {
-        matches!(self, Self::Study { .. } | Self::BadInput(_))
+        match self {
+            Self::Study { .. } | Self::BadInput(_) => true,
+            Self::Store { source, .. } => store_file_unusable(source),
+            _ => false,
+        }
     }
 
     /// A study-file error naming `file`, `key` and `reason`.
@@ -99,6 +105,30 @@ impl CampaignError {
             executor,
             reason: reason.into(),
         }
+    }
+}
+
+/// True when SQLite says the file itself cannot be a campaign store: not a database at all
+/// (`SQLITE_NOTADB`) or a damaged one (`SQLITE_CORRUPT`). Such a file is something the user
+/// pointed the study at, not a failure of the work, so the CLI exits 2 for it.
+pub fn store_file_unusable(error: &rusqlite::Error) -> bool {
+    matches!(
+        error.sqlite_error_code(),
+        Some(rusqlite::ErrorCode::NotADatabase | rusqlite::ErrorCode::DatabaseCorrupt)
+    )
+}
+
+/// The reason in a store error's message: what an unusable file is and what to do about it, else
+/// SQLite's own text.
+fn store_reason(error: &rusqlite::Error) -> String {
+    match error.sqlite_error_code() {
+        Some(rusqlite::ErrorCode::NotADatabase) => "not a campaign store: the file is not an \
+            SQLite database (move it aside, or point `executor.directory` elsewhere)"
+            .to_string(),
+        Some(rusqlite::ErrorCode::DatabaseCorrupt) => "the campaign store is damaged (SQLite \
+            reports it corrupt; restore it from a copy, or move it aside to start afresh)"
+            .to_string(),
+        _ => error.to_string(),
     }
 }
 

@@ -89,10 +89,34 @@ fn io(path: &Path, e: std::io::Error) -> String {
     format!("{}: {e}", path.display())
 }
 
+/// True when `dir` has the shape of the directory of a task whose first run is `first_run_id`:
+/// `…/runs/<id>` or `…/batches/<id>` ([`run_directory`], [`batch_directory`]). A worker empties
+/// only such a directory, so a manifest edited by hand (or damaged) to name another directory
+/// cannot make it delete that directory's contents.
+pub fn is_task_directory_of(dir: &Path, first_run_id: i64) -> bool {
+    let name_matches = dir
+        .file_name()
+        .is_some_and(|n| n.to_str() == Some(format!("{first_run_id:06}").as_str()));
+    let parent_matches = dir
+        .parent()
+        .and_then(Path::file_name)
+        .is_some_and(|p| p == "runs" || p == "batches");
+    name_matches && parent_matches
+}
+
 /// Create the task directory afresh and write its inputs. The error is a reason (the task's
-/// runs fail with it as an infrastructure failure).
+/// runs fail with it as an infrastructure failure); a directory that is not shaped like the
+/// task's own ([`is_task_directory_of`]) is refused before anything in it is removed.
 pub fn prepare(spec: &CommandSpec, derived: &[Expression], task: &Task) -> Result<(), String> {
     let dir = &task.directory;
+    let first_run_id = task.runs.first().ok_or("a task without runs")?.run_id;
+    if !is_task_directory_of(dir, first_run_id) {
+        return Err(format!(
+            "{}: not the directory of run {first_run_id} (`runs/{first_run_id:06}` or \
+             `batches/{first_run_id:06}` of the campaign); refusing to empty it",
+            dir.display()
+        ));
+    }
     match std::fs::remove_dir_all(dir) {
         Ok(()) => {}
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
@@ -167,4 +191,68 @@ pub fn prepare(spec: &CommandSpec, derived: &[Expression], task: &Task) -> Resul
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::study::CampaignStudy;
+
+    const STUDY: &str = r#"name = "guard"
+[parameters]
+x = { uniform = [0, 1] }
+[model]
+kind = "command"
+command = ["true"]
+outputs = ["f"]
+output = { file = "result.json", format = "json" }
+"#;
+
+    #[test]
+    fn only_a_directory_shaped_like_the_tasks_own_is_emptied() {
+        let campaign = std::env::temp_dir().join(format!("iuq-guard-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&campaign);
+        assert!(is_task_directory_of(&run_directory(&campaign, 7), 7));
+        assert!(is_task_directory_of(
+            &batch_directory(&campaign, 1_234_567),
+            1_234_567
+        ));
+        assert!(!is_task_directory_of(&run_directory(&campaign, 7), 8));
+        assert!(!is_task_directory_of(
+            &campaign.join("other").join("000007"),
+            7
+        ));
+        assert!(!is_task_directory_of(Path::new("/"), 7));
+
+        let study = CampaignStudy::parse(STUDY, &campaign.join("study.toml")).unwrap();
+        let precious = campaign.join("precious");
+        std::fs::create_dir_all(&precious).unwrap();
+        std::fs::write(precious.join("thesis.tex"), "years of work").unwrap();
+        let run = TaskRun {
+            run_id: 7,
+            attempt: 1,
+            parameters: vec![0.5],
+        };
+        let task = Task {
+            directory: precious.clone(),
+            runs: vec![run.clone()],
+        };
+        let reason = prepare(&study.model, &[], &task).unwrap_err();
+        assert!(
+            reason.contains("refusing to empty") && reason.contains("runs/000007"),
+            "{reason}"
+        );
+        assert!(precious.join("thesis.tex").exists());
+
+        let own = run_directory(&campaign, 7);
+        std::fs::create_dir_all(&own).unwrap();
+        std::fs::write(own.join("stale.txt"), "from an earlier attempt").unwrap();
+        let task = Task {
+            directory: own.clone(),
+            runs: vec![run],
+        };
+        prepare(&study.model, &[], &task).unwrap();
+        assert!(!own.join("stale.txt").exists() && own.join("params.json").exists());
+        let _ = std::fs::remove_dir_all(&campaign);
+    }
 }

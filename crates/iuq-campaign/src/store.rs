@@ -1326,6 +1326,28 @@ output = { file = "r.json", format = "json" }
     }
 
     #[test]
+    fn a_file_that_is_not_a_store_is_bad_input_and_left_as_it_was() {
+        let (dir, study) = fresh("not-a-store");
+        let path = dir.join("c.sqlite");
+        let garbage =
+            "not a database, just text that happens to sit where the store should be\n".repeat(20);
+        std::fs::write(&path, &garbage).unwrap();
+        for e in [
+            CampaignStore::open(&path, &study).map(drop).unwrap_err(),
+            CampaignStore::open_existing(&path).map(drop).unwrap_err(),
+        ] {
+            let message = e.to_string();
+            assert!(e.is_bad_input(), "{message}");
+            assert!(
+                message.contains("c.sqlite") && message.contains("not an SQLite database"),
+                "{message}"
+            );
+        }
+        assert_eq!(std::fs::read_to_string(&path).unwrap(), garbage);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
     fn a_store_refuses_a_study_with_another_model() {
         let (dir, study) = fresh("model");
         drop(CampaignStore::open(&dir.join("c.sqlite"), &study).unwrap());

@@ -268,6 +268,25 @@ fn bad_study_files_exit_2_naming_file_key_and_reason() {
     let o = iuq(&["status", dir.join("missing.toml").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));
     std::fs::write(&path, &text).unwrap();
+    // A store that is not an SQLite database is a bad input too: every verb names it and exits
+    // 2, and the file is left as it was.
+    let store = dir.join("study.campaign/campaign.sqlite");
+    std::fs::create_dir_all(store.parent().unwrap()).unwrap();
+    let garbage = "a spreadsheet saved under the store's name\n".repeat(40);
+    std::fs::write(&store, &garbage).unwrap();
+    for verb in ["status", "export", "run"] {
+        let o = iuq(&[verb, path.to_str().unwrap(), "--json"]);
+        assert_eq!(o.status.code(), Some(2), "{verb}");
+        let v = json_of(&o);
+        assert_eq!(v["error"]["kind"], "bad_input", "{verb}");
+        let m = v["error"]["message"].as_str().unwrap();
+        assert!(
+            m.contains("campaign.sqlite") && m.contains("not an SQLite database"),
+            "{verb}: {m}"
+        );
+    }
+    assert_eq!(std::fs::read_to_string(&store).unwrap(), garbage);
+    std::fs::remove_file(&store).unwrap();
     for interval in ["inf", "1e300", "0", "soon"] {
         let o = iuq(&["run", path.to_str().unwrap(), "--log-interval", interval]);
         assert_eq!(o.status.code(), Some(2), "--log-interval {interval}");
