@@ -15,6 +15,11 @@
 //!    evaluations only), and a new batch of `samples` members of it is run through the model;
 //!    from here on the corrected surrogate is the surrogate (r becomes r − r̂). At most
 //!    `corrections` times (0 or 1): this costs one batch where a bridge costs one per stage.
+//!    A corrected posterior that keeps less than half its population inside the batch's box
+//!    ([`MIN_CORRECTED_WITHIN_BATCH`]) is refused before any model run: the fit extrapolates
+//!    there. The moment-matched log-ratio of the batch's weights
+//!    ([`crate::moment_matching::GaussianLogRatio`], bounded by construction) is then tried in
+//!    its place; if it is refused too, the stages go on from the first batch.
 //! 3. Stage k from β: the step Δβ by the coefficient-of-variation rule of BASIS (CV of
 //!    exp(Δβ·r) equal to `cv_target`, `bridge_cv_target` after a bridge, or the whole 1 − β
 //!    when it stays within it; Wu et al. 2017), then, while the Pareto-smoothed weights' k̂
@@ -72,7 +77,7 @@ use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
-use crate::moment_matching::ProposalMismatch;
+use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch};
 use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
 use crate::proposal::Proposal;
 use crate::pseudo_marginal::{Members, noisy_estimate};
@@ -87,6 +92,12 @@ use crate::settings::Resampling;
 /// weights' spread: for a small step the weights exp(Δβ·r) ≈ 1 + Δβ·r keep the tail shape of r
 /// itself, and a few members with a large r would hold k̂ up however small the step.
 pub const NEARLY_EQUAL_CV: f64 = 0.1;
+
+/// A correction whose posterior keeps less than this share of its population inside the box of
+/// the batch it was fitted on is not made: most of its mass would lie where no run informed the
+/// fit, and a second batch there is spent on the fit's extrapolation (the stages go on from the
+/// first batch instead, exactly, at the price of bridges).
+pub const MIN_CORRECTED_WITHIN_BATCH: f64 = 0.5;
 
 /// The smallest population: k̂ needs a tail of 5 weights, ⌈min(0.2·S, 3√S)⌉ ≥ 5 from S = 21.
 pub const MIN_SAMPLES: usize = 25;
@@ -265,11 +276,19 @@ pub struct SurrogateCorrection {
     /// Whether the correction had quadratic terms (else linear; a moment-matched one always
     /// has).
     pub quadratic: bool,
-    /// Whether it was the moment-matched log-ratio of a noisy model's weights
-    /// ([`crate::pseudo_marginal`]) rather than a least-squares fit of r.
+    /// Whether it was the moment-matched log-ratio of the batch's weights
+    /// ([`crate::moment_matching`]; a noisy model's only correction, a reproducible model's
+    /// second candidate) rather than a least-squares fit of r.
     #[serde(default)]
     pub moment_matched: bool,
+    /// The candidates tried before this one and why each was refused (a corrected posterior
+    /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
+    #[serde(default)]
+    pub refused: Vec<String>,
 }
+
+/// A correction of the surrogate's log-likelihood, chosen at run time among the candidates.
+type BoxedCorrection = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
 
 /// ℓ_s + r̂: the surrogate corrected by a fit of the model–surrogate difference (a quadratic
 /// fit of r, or the moment-matched log-ratio of a noisy model's weights).
@@ -396,9 +415,10 @@ pub struct ModelPosterior {
     /// with `corrections = 0`, a reproducible model, or too few effective weights).
     #[serde(default)]
     pub proposal_mismatch: Option<ProposalMismatch>,
-    /// For a noisy model: why a correction that the test or k̂ asked for was not made (too few
-    /// effective weights to estimate a covariance, or the corrected surrogate's sampling
-    /// failed); `None` when none was wanted or it was made.
+    /// Why a correction that was wanted was not made: for a noisy model, too few effective
+    /// weights to estimate a covariance, or the corrected surrogate's sampling failed; for any
+    /// model, a corrected posterior mostly outside the batch its correction was fitted on
+    /// ([`MIN_CORRECTED_WITHIN_BATCH`]). `None` when none was wanted or it was made.
     #[serde(default)]
     pub correction_not_made: Option<String>,
     /// Model evaluations requested in all (points already stored in a campaign count too).
@@ -541,7 +561,8 @@ pub fn model_posterior(
     let mut stages = Vec::new();
     let mut threshold = pareto_k_threshold(s);
     let mut corrections = Vec::new();
-    let corrected_holder: CorrectedLikelihood<_>;
+    let mut correction_not_made = None;
+    let corrected_holder: CorrectedLikelihood<'_, BoxedCorrection>;
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
@@ -552,24 +573,34 @@ pub fn model_posterior(
                 && (pareto_smooth(&r).pareto_k <= threshold
                     || coefficient_of_variation(&r) <= NEARLY_EQUAL_CV)
         };
-        let fit = if one_stage {
-            None
-        } else {
-            QuadraticFit::fit(&theta, &r)
-        };
-        if let Some(fit) = fit {
-            corrections.push(SurrogateCorrection {
-                pareto_k_before: pareto_smooth(&r).pareto_k,
+        if !one_stage {
+            let smoothing = pareto_smooth(&r);
+            let record = |quadratic: bool, moment_matched: bool| SurrogateCorrection {
+                pareto_k_before: smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
                 model_evaluations: s,
-                quadratic: fit.is_quadratic(),
-                moment_matched: false,
-            });
-            corrected_holder = CorrectedLikelihood {
-                base: surrogate,
-                correction: move |x: &[f64]| fit.predict(x),
+                quadratic,
+                moment_matched,
+                refused: Vec::new(),
             };
-            surrogate = &corrected_holder;
+            let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
+            if let Some(fit) = QuadraticFit::fit(&theta, &r) {
+                candidates.push((
+                    record(fit.is_quadratic(), false),
+                    Box::new(move |x: &[f64]| fit.predict(x)),
+                ));
+            }
+            if let Some(g) = GaussianLogRatio::fit(
+                &theta,
+                &smoothing.log_weights,
+                DEFENSIVE_WIDENING,
+                settings.seed,
+            ) {
+                candidates.push((
+                    record(true, true),
+                    Box::new(move |x: &[f64]| g.log_ratio(x)),
+                ));
+            }
             let basis_settings = BasisSettings {
                 samples: n.max(s),
                 burn_in: 10,
@@ -577,29 +608,75 @@ pub fn model_posterior(
                 ..Default::default()
             }
             .check()?;
-            let run = Basis::new(space, surrogate, basis_settings)?.run(&mut Silent)?;
-            let state = run.state;
-            log_evidence_ratio += state.log_evidence - population.log_evidence;
-            let mut rng = stream(settings.seed, STREAM_BASE, 1);
-            let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
-            chosen.sort_unstable();
-            theta = chosen.iter().map(|&i| state.samples[i].clone()).collect();
-            ls = chosen.iter().map(|&i| state.log_likelihood[i]).collect();
-            lp = chosen.iter().map(|&i| state.log_prior[i]).collect();
-            lm = evaluate(
-                model,
-                &theta,
-                "the model at the corrected surrogate's posterior samples",
-            )?;
-            evaluations += s;
-            let batch_failures = lm.iter().filter(|v| !v.is_finite()).count();
-            failures += batch_failures;
-            best.offer(&theta, &lm, &lp);
-            stage_evaluations = (s, batch_failures);
+            let mut refused = Vec::new();
+            let mut accepted = None;
+            for (record, correction) in candidates {
+                let kind = if record.moment_matched {
+                    "the moment-matched correction"
+                } else {
+                    "the least-squares fit of r"
+                };
+                let candidate = CorrectedLikelihood {
+                    base: surrogate,
+                    correction,
+                };
+                let state = match Basis::new(space, &candidate, basis_settings)
+                    .and_then(|b| b.run(&mut Silent))
+                {
+                    Ok(run) => run.state,
+                    Err(e) => {
+                        refused.push(format!("{kind}: its posterior could not be sampled ({e})"));
+                        continue;
+                    }
+                };
+                let within = share_within_box(&state.samples, &theta);
+                if within < MIN_CORRECTED_WITHIN_BATCH {
+                    refused.push(format!(
+                        "{kind}: its posterior keeps {:.0} % of its population inside the box of \
+                         the batch it was fitted on (at least {:.0} % needed)",
+                        100.0 * within,
+                        100.0 * MIN_CORRECTED_WITHIN_BATCH
+                    ));
+                    continue;
+                }
+                accepted = Some((record, candidate, state));
+                break;
+            }
+            match accepted {
+                Some((mut record, candidate, state)) => {
+                    record.refused = refused;
+                    corrections.push(record);
+                    corrected_holder = candidate;
+                    surrogate = &corrected_holder;
+                    log_evidence_ratio += state.log_evidence - population.log_evidence;
+                    let mut rng = stream(settings.seed, STREAM_BASE, 1);
+                    let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
+                    chosen.sort_unstable();
+                    theta = chosen.iter().map(|&i| state.samples[i].clone()).collect();
+                    ls = chosen.iter().map(|&i| state.log_likelihood[i]).collect();
+                    lp = chosen.iter().map(|&i| state.log_prior[i]).collect();
+                    lm = evaluate(
+                        model,
+                        &theta,
+                        "the model at the corrected surrogate's posterior samples",
+                    )?;
+                    evaluations += s;
+                    let batch_failures = lm.iter().filter(|v| !v.is_finite()).count();
+                    failures += batch_failures;
+                    best.offer(&theta, &lm, &lp);
+                    stage_evaluations = (s, batch_failures);
+                }
+                None if !refused.is_empty() => {
+                    correction_not_made = Some(format!(
+                        "{}; the stages go on from the first batch",
+                        refused.join("; ")
+                    ));
+                }
+                None => {}
+            }
         }
     }
     let mut mismatch = None;
-    let mut correction_not_made = None;
     let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
         let first = Members {
             theta: std::mem::take(&mut theta),
@@ -894,6 +971,31 @@ pub fn model_posterior(
 }
 
 /// The largest finite value (−∞ when there is none: every model run failed).
+/// The share of `samples` inside the box (coordinate-wise minimum to maximum) of `batch`.
+fn share_within_box(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> f64 {
+    let Some(d) = batch.first().map(Vec::len) else {
+        return 0.0;
+    };
+    let bounds: Vec<(f64, f64)> = (0..d)
+        .map(|k| {
+            batch
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
+                    (lo.min(t[k]), hi.max(t[k]))
+                })
+        })
+        .collect();
+    let inside = samples
+        .iter()
+        .filter(|t| {
+            t.iter()
+                .zip(&bounds)
+                .all(|(x, (lo, hi))| x >= lo && x <= hi)
+        })
+        .count();
+    inside as f64 / samples.len().max(1) as f64
+}
+
 pub(crate) fn largest_finite(values: &[f64]) -> f64 {
     values
         .iter()

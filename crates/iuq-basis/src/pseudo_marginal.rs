@@ -260,6 +260,7 @@ pub(crate) fn noisy_estimate(
                 model_evaluations: s,
                 quadratic: true,
                 moment_matched: true,
+                refused: Vec::new(),
             };
             let second = Members {
                 model: evaluate(

@@ -328,6 +328,58 @@ fn a_gaussian_surrogate_of_a_curved_six_parameter_posterior_is_corrected() {
     assert_matches(&result, &mean, &std, "curved, d = 6");
 }
 
+#[test]
+fn a_correction_that_would_move_the_posterior_beyond_its_batch_is_refused_before_a_run() {
+    // The model's posterior is 8 times as wide as the surrogate's in x1 (N(0, 8²) cut at the
+    // prior's ±10): the quadratic fit of r = ℓ_m − ℓ_s is exact, and the posterior it corrects
+    // to keeps only about a third of its mass inside the box of the 400 members it was fitted
+    // on (±3.2 surrogate stds). That is the extrapolation that cost the TBHP red-cell study a batch
+    // of 1,200 cell-model runs at the prior's corner: refused, without a model run, and the
+    // bounded moment-matched correction is tried in its place.
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let model = FnLikelihood::new(2, {
+        let f = gaussian(vec![0.0, 0.0], vec![1.0, 8.0]);
+        let calls = &calls;
+        move |x: &[f64]| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            f(x)
+        }
+    });
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        ..Default::default()
+    };
+    let result = run(2, &[0.0, 0.0], &[1.0, 1.0], &model, &settings);
+    println!(
+        "{:#?}\n{:?}\n{:#?}\n{}",
+        result.corrections, result.correction_not_made, result.stages, result.stop
+    );
+    let refusals: Vec<&String> = result
+        .corrections
+        .iter()
+        .flat_map(|c| c.refused.iter())
+        .chain(result.correction_not_made.iter())
+        .collect();
+    assert!(
+        refusals
+            .iter()
+            .any(|r| r.contains("least-squares fit") && r.contains("inside the box")),
+        "{refusals:?}"
+    );
+    assert!(result.corrections.iter().all(|c| c.moment_matched));
+    // Every model evaluation is counted, and no batch was drawn from a refused correction.
+    assert_eq!(
+        result.model_evaluations,
+        calls.load(std::sync::atomic::Ordering::Relaxed)
+    );
+    // The stages still reach the model's posterior: x1 ~ N(0, 8²) cut at ±10, whose std is
+    // 8·√(1 − 2aφ(a)/(2Φ(a) − 1)) at a = 10/8 (φ(1.25) = 0.182649, Φ(1.25) = 0.894350).
+    let a = 1.25f64;
+    let sd1 = 8.0 * (1.0 - 2.0 * a * 0.182649 / (2.0 * 0.894350 - 1.0)).sqrt();
+    assert!(result.certified(), "{}", result.stop);
+    assert_matches(&result, &[0.0, 0.0], &[1.0, sd1], "wide model, refused fit");
+}
+
 /// SplitMix64: a deterministic hash of a point's bits, the "irregular part" of a chaotic model.
 fn splitmix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);

@@ -124,9 +124,16 @@ pub struct ModelPosteriorReport {
     /// off the model's (`None`: not made).
     #[serde(default)]
     pub proposal_mismatch: Option<MismatchTest>,
-    /// For a noisy likelihood, why a correction the test or k̂ asked for was not made.
+    /// Why a correction that was wanted was not made (a noisy likelihood: the test or k̂ asked
+    /// for one; a reproducible one: every candidate's posterior lay mostly outside the batch).
     #[serde(default)]
     pub correction_not_made: Option<String>,
+    /// Whether the correction made was the moment-matched one (else a least-squares fit).
+    #[serde(default)]
+    pub correction_moment_matched: bool,
+    /// Corrections tried and refused before the one made, each with its reason.
+    #[serde(default)]
+    pub corrections_refused: Vec<String>,
     /// Runs per member at each irregular data point (their likelihoods averaged; 1: none
     /// repeated).
     #[serde(default = "one")]

@@ -366,13 +366,8 @@ pub(crate) fn build_sections(
                 stop = m.stop,
                 corrected = if m.pseudo_marginal {
                     mismatch_sentence(m)
-                } else if m.corrections > 0 {
-                    format!(
-                        " The first batch's weights did not hold in one stage, so the {surrogate} was corrected by a quadratic fit of the difference of the two log-likelihoods and a new batch drawn from the corrected {surrogate}'s posterior.",
-                        surrogate = m.surrogate_source
-                    )
                 } else {
-                    String::new()
+                    correction_sentence(m)
                 },
                 probe = probe_sentence(m),
             ),
@@ -512,6 +507,35 @@ fn first_batch(m: &crate::model::ModelPosteriorReport) -> usize {
         m.samples / 2
     } else {
         m.samples
+    }
+}
+
+/// How a reproducible model's first batch corrected the surrogate, or why it did not.
+fn correction_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+    let surrogate = &m.surrogate_source;
+    let refused = if m.corrections_refused.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " (first tried and refused: {})",
+            m.corrections_refused.join("; ")
+        )
+    };
+    if m.corrections > 0 {
+        let how = if m.correction_moment_matched {
+            "towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times)"
+        } else {
+            "by a quadratic fit of the difference of the two log-likelihoods"
+        };
+        format!(
+            " The first batch's weights did not hold in one stage, so the {surrogate} was corrected {how}{refused} and a new batch drawn from the corrected {surrogate}'s posterior."
+        )
+    } else if let Some(reason) = &m.correction_not_made {
+        format!(
+            " The first batch's weights did not hold in one stage, and no correction of the {surrogate} was made: {reason}."
+        )
+    } else {
+        String::new()
     }
 }
 

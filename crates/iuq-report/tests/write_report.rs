@@ -279,6 +279,40 @@ fn the_page_is_self_contained() {
 }
 
 #[test]
+fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
+    let mut report = small_report();
+    {
+        let m = report.model_posterior.as_mut().unwrap();
+        m.pseudo_marginal = false;
+        m.proposal_mismatch = None;
+        m.corrections = 1;
+        m.correction_moment_matched = true;
+        m.corrections_refused =
+            vec!["the least-squares fit of r: its posterior keeps 0 % of its population inside the box of the batch it was fitted on (at least 50 % needed)".into()];
+    }
+    let dir = fresh_dir("smooth-correction");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .replace("&#39;", "'");
+    assert!(text.contains("so the GP surrogate was corrected towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times) (first tried and refused: the least-squares fit of r: its posterior keeps 0 % of its population inside the box"), "{text}");
+
+    let m = report.model_posterior.as_mut().unwrap();
+    m.corrections = 0;
+    m.corrections_refused.clear();
+    m.correction_not_made = Some(
+        "both corrections' posteriors lie outside the batch; the stages go on from the first batch"
+            .into(),
+    );
+    let dir = fresh_dir("smooth-no-correction");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .replace("&#39;", "'");
+    assert!(text.contains("The first batch's weights did not hold in one stage, and no correction of the GP surrogate was made: both corrections' posteriors lie outside the batch; the stages go on from the first batch."));
+}
+
+#[test]
 fn empty_posteriors_and_sensitivity_omit_their_sections() {
     let dir = fresh_dir("omitted");
     let mut report = small_report();

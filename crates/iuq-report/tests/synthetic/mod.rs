@@ -345,6 +345,8 @@ pub fn synthetic_report(
                 corrected: true,
             }),
             correction_not_made: None,
+            correction_moment_matched: false,
+            corrections_refused: Vec::new(),
             replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]
                 .iter()

@@ -279,6 +279,12 @@ fn model_posterior_report(
             corrected: p.corrections.iter().any(|c| c.moment_matched),
         }),
         correction_not_made: p.correction_not_made.clone(),
+        correction_moment_matched: p.corrections.iter().any(|c| c.moment_matched),
+        corrections_refused: p
+            .corrections
+            .iter()
+            .flat_map(|c| c.refused.iter().cloned())
+            .collect(),
         replicates: outcome.replicates,
         parameters,
         log_weights: p
