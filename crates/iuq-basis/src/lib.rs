@@ -63,8 +63,8 @@ pub use diagnostics::StageDiagnostics;
 pub use error::{BasisError, Result};
 pub use likelihood::{FnLikelihood, LogDensityLikelihood, LogLikelihood, PointLogLikelihood};
 pub use model_posterior::{
-    ModelPosterior, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
-    SurrogatePopulation, model_posterior, selected_members,
+    ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
+    ModelPosteriorStop, SurrogatePopulation, model_posterior, selected_members,
 };
 pub use moment_matching::{GaussianLogRatio, ProposalMismatch, proposal_mismatch};
 pub use pareto_smoothing::{

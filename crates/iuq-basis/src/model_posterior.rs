@@ -488,16 +488,29 @@ pub fn selected_members(population_size: usize, settings: &ModelPosteriorSetting
     chosen
 }
 
+/// What [`model_posterior`] reports as it goes, for progress lines: a user watching a batch of
+/// hundreds of model runs learns what the batch is for before it starts.
+#[derive(Debug, Clone, Copy)]
+pub enum ModelPosteriorEvent<'a> {
+    /// The surrogate was corrected; the batch at the corrected surrogate's posterior (this
+    /// many model evaluations, [`SurrogateCorrection::model_evaluations`]) starts now.
+    Correction(&'a SurrogateCorrection),
+    /// A correction was wanted but not made (the clause says why); the method goes on without.
+    CorrectionNotMade(&'a str),
+    /// A stage ended.
+    Stage(&'a ModelPosteriorStage),
+}
+
 /// The model's posterior from the surrogate's `population` (see the module documentation):
 /// `surrogate` and `model` are the two log-likelihoods of the same parameters on `space`;
-/// `on_stage` sees every stage as it ends (for progress reports).
+/// `on_event` sees each correction before its batch and every stage as it ends.
 pub fn model_posterior(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
     surrogate: &dyn LogLikelihood,
     model: &dyn LogLikelihood,
     settings: &ModelPosteriorSettings,
-    on_stage: &mut dyn FnMut(&ModelPosteriorStage),
+    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
 ) -> Result<ModelPosterior> {
     settings.check()?;
     let d = space.dimension();
@@ -645,6 +658,7 @@ pub fn model_posterior(
             match accepted {
                 Some((mut record, candidate, state)) => {
                     record.refused = refused;
+                    on_event(ModelPosteriorEvent::Correction(&record));
                     corrections.push(record);
                     corrected_holder = candidate;
                     surrogate = &corrected_holder;
@@ -667,10 +681,12 @@ pub fn model_posterior(
                     stage_evaluations = (s, batch_failures);
                 }
                 None if !refused.is_empty() => {
-                    correction_not_made = Some(format!(
+                    let reason = format!(
                         "{}; the stages go on from the first batch",
                         refused.join("; ")
-                    ));
+                    );
+                    on_event(ModelPosteriorEvent::CorrectionNotMade(&reason));
+                    correction_not_made = Some(reason);
                 }
                 None => {}
             }
@@ -685,9 +701,9 @@ pub fn model_posterior(
             prior: std::mem::take(&mut lp),
         };
         let estimate = noisy_estimate(
-            space, population, surrogate, model, settings, first, failures, &mut best,
+            space, population, surrogate, model, settings, first, failures, &mut best, on_event,
         )?;
-        on_stage(&estimate.stage);
+        on_event(ModelPosteriorEvent::Stage(&estimate.stage));
         stages.push(estimate.stage);
         Members {
             theta,
@@ -753,7 +769,7 @@ pub fn model_posterior(
                 screen_acceptance: bridge_rates.0,
                 confirm_acceptance: bridge_rates.1,
             };
-            on_stage(&record);
+            on_event(ModelPosteriorEvent::Stage(&record));
             stages.push(record);
             let certified_step = holds(&smoothing, step);
             if reaches_one && certified_step {

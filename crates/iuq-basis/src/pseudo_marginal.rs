@@ -51,8 +51,8 @@ use crate::annealing::log_evidence_increment;
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::model_posterior::{
-    Best, CorrectedLikelihood, ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop,
-    NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
+    Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
+    ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
     coefficient_of_variation, evaluate, largest_finite, log_ratios,
 };
 use crate::moment_matching::{
@@ -200,6 +200,7 @@ pub(crate) fn noisy_estimate(
     first: Members,
     first_failures: usize,
     best: &mut Best,
+    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
 ) -> Result<NoisyEstimate> {
     let s = first.theta.len();
     let r = log_ratios(&first.model, &first.surrogate);
@@ -252,6 +253,9 @@ pub(crate) fn noisy_estimate(
         },
         None => None,
     };
+    if let Some(reason) = &not_corrected {
+        on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
+    }
     let (members, raw, correction, evaluations, failures) = match (fitted, proposal) {
         (Some(g), Some(proposal)) => {
             let correction = SurrogateCorrection {
@@ -262,6 +266,7 @@ pub(crate) fn noisy_estimate(
                 moment_matched: true,
                 refused: Vec::new(),
             };
+            on_event(ModelPosteriorEvent::Correction(&correction));
             let second = Members {
                 model: evaluate(
                     model,

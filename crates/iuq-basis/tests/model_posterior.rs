@@ -12,8 +12,8 @@
 //! std, so that the test can fail.
 
 use iuq_basis::{
-    FnLikelihood, LogLikelihood, ModelPosterior, ModelPosteriorSettings, ModelPosteriorStop,
-    SurrogatePopulation, model_posterior, pareto_k_threshold,
+    FnLikelihood, LogLikelihood, ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings,
+    ModelPosteriorStop, SurrogatePopulation, model_posterior, pareto_k_threshold,
 };
 use iuq_core::random::stream;
 use iuq_core::{Parameter, ParameterSpace, Prior};
@@ -98,11 +98,33 @@ fn run(
         log_evidence,
     };
     let mut stages = Vec::new();
-    let result = model_posterior(&space, population, &surrogate, model, settings, &mut |s| {
-        stages.push(s.clone())
-    })
+    let mut corrections = Vec::new();
+    let mut not_made = None;
+    let result = model_posterior(
+        &space,
+        population,
+        &surrogate,
+        model,
+        settings,
+        &mut |event| match event {
+            ModelPosteriorEvent::Stage(s) => stages.push(s.clone()),
+            ModelPosteriorEvent::Correction(c) => {
+                assert!(stages.is_empty(), "a correction comes before every stage");
+                corrections.push(c.clone())
+            }
+            ModelPosteriorEvent::CorrectionNotMade(reason) => not_made = Some(reason.to_string()),
+        },
+    )
     .unwrap();
     assert_eq!(stages, result.stages, "every stage is reported as it ends");
+    assert_eq!(
+        corrections, result.corrections,
+        "every correction is reported before its batch"
+    );
+    assert_eq!(
+        not_made, result.correction_not_made,
+        "a correction not made is reported"
+    );
     result
 }
 

@@ -56,6 +56,11 @@ seed = 1
 }
 
 fn pipeline(study: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
+    pipeline_logged(study, out, extra).0
+}
+
+/// The pipeline's `--json` and its progress lines (stderr).
+fn pipeline_logged(study: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
     let mut args = vec![
         "pipeline",
         study.to_str().unwrap(),
@@ -66,8 +71,9 @@ fn pipeline(study: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     ];
     args.extend(extra);
     let output = iuq(&args);
-    assert!(output.status.success(), "{}", stderr_of(&output));
-    json_of(&output)
+    let log = stderr_of(&output);
+    assert!(output.status.success(), "{log}");
+    (json_of(&output), log)
 }
 
 #[test]
@@ -175,7 +181,7 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     let dir = cooling("chaotic");
     let study = expression_study_of(&dir, CHAOTIC_CURVE, "samples = 100\nseed = 4");
     let out = dir.join("report");
-    let v = pipeline(&study, &out, &[]);
+    let (v, log) = pipeline_logged(&study, &out, &[]);
     let m = &v["model_posterior"];
     assert_eq!(m["probe"]["irregular"], true, "{m}");
     let outputs = m["probe"]["outputs"].as_array().unwrap();
@@ -205,6 +211,12 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
             .unwrap()
             .contains("too few effective members"),
         "{m}"
+    );
+    assert!(
+        log.contains(
+            "model posterior: no correction of the surrogate: the first batch's weights have too few effective members"
+        ),
+        "the progress lines say so: {log}"
     );
     let stages = m["stages"].as_array().unwrap();
     assert_eq!(stages.len(), 1);
@@ -495,7 +507,7 @@ replicates = 8
     );
     let study = dir.join("study.toml");
     std::fs::write(&study, text).unwrap();
-    let v = pipeline(&study, &dir.join("report"), &[]);
+    let (v, log) = pipeline_logged(&study, &dir.join("report"), &[]);
     let m = &v["model_posterior"];
     assert_eq!(m["pseudo_marginal"], true, "{m}");
     assert_eq!(m["probe"]["irregular"], true);
@@ -520,6 +532,18 @@ replicates = 8
     assert_eq!(corrections.len(), 1, "{m}");
     assert_eq!(corrections[0]["moment_matched"], true);
     assert!(m["proposal_mismatch"]["p_value"].as_f64().unwrap() < 0.01);
+    // The correction's batch is announced before its runs, and before the stage's line.
+    let announced = log
+        .find("model posterior: the first batch's weights (k̂ = ")
+        .expect("the correction is announced");
+    assert!(
+        log[announced..].lines().next().unwrap().contains(
+            "the surrogate is corrected by the moment-matched log-ratio of the first batch's weights; \
+             a batch of 400 samples at the corrected surrogate's posterior starts, 400 runs and their replicates"
+        ),
+        "{log}"
+    );
+    assert!(announced < log.find("model posterior, stage 1:").unwrap());
     let m_of = |p: &str, key: &str| m[key][p].as_f64().unwrap();
     for (i, p) in ["k", "T0"].into_iter().enumerate() {
         let ((em, es), (pm, ps)) = (exact[i], per_datum[i]);

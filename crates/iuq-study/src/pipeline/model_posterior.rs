@@ -19,9 +19,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use serde_json::{Value, json};
 
+use iuq_basis::model_posterior::SurrogateCorrection;
 use iuq_basis::{
-    ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorSettings, SurrogatePopulation,
-    model_posterior, selected_members,
+    ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings,
+    ModelPosteriorStage, SurrogatePopulation, model_posterior, selected_members,
 };
 use iuq_campaign::study_section::StudySection;
 use iuq_core::{Model, Outcome};
@@ -372,24 +373,16 @@ pub fn reweight_to_model(
         surrogate_posterior.likelihood.as_ref(),
         model_likelihood,
         settings,
-        &mut |stage| {
-            message(format!(
-                "model posterior, stage {}: β = {:.4} (step {:.4}), k̂ = {:.3}, ESS {:.0}, {} model evaluations ({} runs){}",
-                stage.stage,
-                stage.beta,
-                stage.step,
-                stage.pareto_k,
-                stage.effective_sample_size,
-                stage.model_evaluations,
-                stage.model_evaluations * groups,
-                match (stage.screen_acceptance, stage.confirm_acceptance) {
-                    (Some(a), Some(b)) => format!(
-                        "; bridge acceptance: surrogate {:.2}, model {:.2}",
-                        a, b
-                    ),
-                    _ => String::new(),
-                }
-            ))
+        &mut |event| match event {
+            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
+            ModelPosteriorEvent::Correction(correction) => message(correction_line(
+                correction,
+                groups,
+                replicated_likelihood.is_some(),
+            )),
+            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
+                "model posterior: no correction of the surrogate: {reason}"
+            )),
         },
     )
     .map_err(|e| match e {
@@ -447,6 +440,54 @@ pub fn reweight_to_model(
     };
     write_results(&outcome, &out.join("model-posterior"))?;
     Ok(outcome)
+}
+
+/// The progress line of a finished stage.
+fn stage_line(stage: &ModelPosteriorStage, groups: usize) -> String {
+    format!(
+        "model posterior, stage {}: β = {:.4} (step {:.4}), k̂ = {:.3}, ESS {:.0}, {} model evaluations ({} runs){}",
+        stage.stage,
+        stage.beta,
+        stage.step,
+        stage.pareto_k,
+        stage.effective_sample_size,
+        stage.model_evaluations,
+        stage.model_evaluations * groups,
+        match (stage.screen_acceptance, stage.confirm_acceptance) {
+            (Some(a), Some(b)) => format!("; bridge acceptance: surrogate {a:.2}, model {b:.2}"),
+            _ => String::new(),
+        }
+    )
+}
+
+/// The progress line announcing a correction's batch, before its runs start.
+fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: bool) -> String {
+    let kind = if correction.moment_matched {
+        "the moment-matched log-ratio of the first batch's weights"
+    } else if correction.quadratic {
+        "a quadratic fit of the first batch's log-ratios"
+    } else {
+        "a linear fit of the first batch's log-ratios"
+    };
+    let refused = if correction.refused.is_empty() {
+        String::new()
+    } else {
+        format!(" (refused first: {})", correction.refused.join("; "))
+    };
+    format!(
+        "model posterior: the first batch's weights (k̂ = {:.3}, CV {:.2}) call for a correction: \
+         the surrogate is corrected by {kind}{refused}; a batch of {} samples at the corrected \
+         surrogate's posterior starts, {} runs{} (results already stored are reused)",
+        correction.pareto_k_before,
+        correction.cv_before,
+        correction.model_evaluations,
+        correction.model_evaluations * groups,
+        if replicated {
+            " and their replicates"
+        } else {
+            ""
+        },
+    )
 }
 
 fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
