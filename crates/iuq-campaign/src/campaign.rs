@@ -33,13 +33,14 @@ pub const STORE_FILE: &str = "campaign.sqlite";
 /// Where the campaign's progress stands, for progress bars and log lines.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Progress {
-    /// Runs per status in the store.
+    /// Runs per status: of the store ([`Campaign::run`]) or of the runs asked for
+    /// ([`Campaign::run_only`]; runs of an abandoned design left pending do not count).
     pub counts: StatusCounts,
     /// Runs finished since this coordinator started.
     pub finished_this_session: u64,
     /// Seconds since this coordinator started running.
     pub elapsed_seconds: f64,
-    /// Estimated seconds until every run is final, from the rate of finished runs.
+    /// Estimated seconds until every run counted is final, from the rate of finished runs.
     pub eta_seconds: Option<f64>,
 }
 
@@ -455,6 +456,12 @@ impl Campaign {
         observer: &mut dyn FnMut(&Progress),
     ) -> Result<StatusCounts> {
         let start = *self.session_start.get_or_insert_with(Instant::now);
+        let counted: Option<Vec<i64>> = among.map(|ids| {
+            let mut ids: Vec<i64> = ids.iter().copied().collect();
+            ids.sort_unstable();
+            ids
+        });
+        let counted = counted.as_deref();
         let runs_per_task = match self.study.model.kind {
             CommandKind::Command => 1,
             CommandKind::BatchCommand { batch_size, .. } => batch_size,
@@ -531,10 +538,10 @@ impl Campaign {
             let due = last_report.is_none_or(|t| t.elapsed() >= report_every);
             if due {
                 last_report = Some(Instant::now());
-                observer(&self.progress(start)?);
+                observer(&self.progress_of(start, counted)?);
             }
             if interrupted && self.executor.in_flight() == 0 {
-                observer(&self.progress(start)?);
+                observer(&self.progress_of(start, counted)?);
                 return Err(CampaignError::Interrupted);
             }
             if self.executor.in_flight() == 0 && !submitted_any {
@@ -570,14 +577,19 @@ impl Campaign {
                         500
                     })))?;
         }
-        let progress = self.progress(start)?;
+        let progress = self.progress_of(start, counted)?;
         observer(&progress);
         Ok(progress.counts)
     }
 
-    /// The current progress.
+    /// The current progress of the whole store.
     pub fn progress(&self, start: Instant) -> Result<Progress> {
-        let counts = self.store.counts(None)?;
+        self.progress_of(start, None)
+    }
+
+    /// The current progress of the runs `run_ids` (all of the store's: `None`).
+    fn progress_of(&self, start: Instant, run_ids: Option<&[i64]>) -> Result<Progress> {
+        let counts = self.store.counts(run_ids)?;
         let elapsed = start.elapsed().as_secs_f64();
         let remaining = counts.pending + counts.queued + counts.running;
         let eta = (self.finished_this_session > 0 && elapsed > 0.0)

@@ -236,8 +236,32 @@ fn a_batch_runs_only_its_own_runs_and_leaves_an_abandoned_design_pending() {
     let model = CampaignModel::new(campaign);
     let later = model.evaluate_batch(&[vec![0.0, 8.0]]).unwrap();
     assert_eq!(later[0].as_ref().unwrap().outputs[0], 8.0);
-    let counts = model.into_campaign().unwrap().store().counts(None).unwrap();
+    let mut campaign = model.into_campaign().unwrap();
+    let counts = campaign.store().counts(None).unwrap();
     assert_eq!((counts.succeeded, counts.pending), (2, 1));
+    // The progress of a batch counts its own runs (one stored, one new), not the abandoned
+    // run left pending: its ETA is the batch's.
+    let ids = campaign
+        .add_points("progress", &[vec![0.0, 1.0], vec![0.0, 2.0]])
+        .unwrap();
+    let mut seen = Vec::new();
+    campaign
+        .run_only(&ids, std::time::Duration::ZERO, &mut |p| {
+            seen.push(p.clone())
+        })
+        .unwrap();
+    assert!(!seen.is_empty());
+    for p in &seen {
+        assert_eq!(p.counts.total(), 2, "{p:?}");
+        assert_eq!(
+            p.counts.pending + p.counts.succeeded + p.counts.queued + p.counts.running,
+            2
+        );
+    }
+    let last = seen.last().unwrap();
+    assert_eq!((last.counts.succeeded, last.eta_seconds), (2, Some(0.0)));
+    let whole = campaign.progress(std::time::Instant::now()).unwrap();
+    assert_eq!((whole.counts.total(), whole.counts.pending), (4, 1));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
