@@ -66,6 +66,9 @@ class CampaignStatus:
     attempts: Dict[str, int]
     failures: List[Dict[str, Any]]
     journal_mode: Any = None
+    #: Every design recorded in the store (each batch the pipeline asked for), oldest first:
+    #: ``id``, ``label``, ``size``, ``created_at`` and ``counts`` of its runs per status.
+    designs: List[Dict[str, Any]] = field(default_factory=list)
 
 
 def _print_progress(line: str) -> None:
@@ -240,6 +243,7 @@ class Study:
             attempts=dict(raw["attempts"]),
             failures=list(raw["failures"]),
             journal_mode=raw.get("journal_mode"),
+            designs=list(raw.get("designs", [])),
         )
 
     def export(

@@ -62,6 +62,11 @@ def test_status_and_export_read_the_campaign(pipeline_run, tmp_path):
     status = study.status()
     assert status.total == status.counts["succeeded"] + status.counts["failed"]
     assert status.total >= result.runs - result.failed
+    # Every run belongs to a design (the initial one, each adaptive round's, the check's).
+    labels = [d["label"] for d in status.designs]
+    assert "adaptive-round-1" in labels and len(labels) == len(set(d["id"] for d in status.designs))
+    assert sum(d["counts"]["succeeded"] + d["counts"]["failed"] for d in status.designs) >= status.total
+    assert all(d["counts"]["pending"] == 0 for d in status.designs)
     rows = study.export()
     assert len(rows) == status.total
     assert {"k", "T0"} <= set(rows[0])

@@ -23,6 +23,7 @@
 //! | [`retry_policy`] | which failures are retried |
 //! | [`outcome`] | outcome kinds and worker reports |
 //! | [`design`] | the points of `iuq run` |
+//! | [`designs`] | the designs of a store, how far each got, setting one aside (`iuq cancel`) |
 //! | [`export`] | tidy CSV/JSON of parameters and outputs |
 //! | [`atomic_file`] | atomic file writes |
 //! | [`error`] | the crate's error type [`CampaignError`] |
@@ -34,6 +35,7 @@ pub mod campaign;
 pub mod campaign_model;
 pub mod decoder;
 pub mod design;
+pub mod designs;
 pub mod error;
 pub mod executor;
 pub mod export;

@@ -16,6 +16,7 @@ use std::path::{Path, PathBuf};
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::Serialize;
 
+use crate::designs::revive_cancelled;
 use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, unix_now};
 use crate::retry_policy::RetryPolicy;
@@ -495,6 +496,7 @@ impl CampaignStore {
             source: e,
         };
         if let Some(ids) = self.recorded_design(label, points).map_err(err)? {
+            revive_cancelled(&self.connection, &ids).map_err(err)?;
             return Ok(ids);
         }
         let tx = self.connection.transaction().map_err(err)?;
@@ -530,6 +532,7 @@ impl CampaignStore {
                 ids.push(id);
             }
         }
+        revive_cancelled(&tx, &ids).map_err(err)?;
         tx.commit().map_err(err)?;
         Ok(ids)
     }

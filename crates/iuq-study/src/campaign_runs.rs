@@ -4,6 +4,7 @@
 
 use std::path::Path;
 
+use iuq_campaign::designs::{DesignSummary, design_summaries};
 use iuq_campaign::store::{FailedRun, JournalMode};
 use iuq_campaign::{
     Campaign, CampaignError, CampaignOptions, CampaignStore, CampaignStudy, Progress,
@@ -118,6 +119,8 @@ pub struct CampaignStatus {
     pub failures: Vec<FailedRun>,
     /// The names of the runs' parameters, in order.
     pub parameter_names: Vec<String>,
+    /// The designs recorded in the store (every batch a coordinator asked for), oldest first.
+    pub designs: Vec<DesignSummary>,
 }
 
 impl CampaignStatus {
@@ -131,6 +134,7 @@ impl CampaignStatus {
             counts: store.counts(None).map_err(campaign_error)?,
             attempts: store.attempt_kinds().map_err(campaign_error)?,
             failures: store.failures().map_err(campaign_error)?,
+            designs: design_summaries(&store).map_err(campaign_error)?,
             parameter_names: study.space.names(),
             store: path,
         })
@@ -164,6 +168,7 @@ impl CampaignStatus {
             "total": self.counts.total(),
             "attempts": attempts,
             "failures": failures,
+            "designs": self.designs,
         })
     }
 }

@@ -46,6 +46,8 @@ enum Command {
     Status(commands::status::StatusArgs),
     /// Run the failed (--failed) or lost (--lost) runs of a campaign again.
     Retry(commands::retry::RetryArgs),
+    /// Set the pending runs of a design aside (one a pipeline abandoned), so that nothing runs them.
+    Cancel(commands::cancel::CancelArgs),
     /// Decode the outputs of a campaign's finished runs again from their run directories.
     Redecode(commands::redecode::RedecodeArgs),
     /// Export a campaign's runs (parameters, outputs, status) as tidy CSV or JSON.
@@ -75,6 +77,7 @@ fn main() {
         Command::Run(args) => commands::run::run(args, cli.json),
         Command::Status(args) => commands::status::run(args, cli.json),
         Command::Retry(args) => commands::retry::run(args, cli.json),
+        Command::Cancel(args) => commands::cancel::run(args, cli.json),
         Command::Redecode(args) => commands::redecode::run(args, cli.json),
         Command::Export(args) => commands::export::run(args, cli.json),
         Command::Worker(args) => commands::worker::run(args, cli.json),

@@ -159,6 +159,88 @@ fn run_status_export_and_retry_of_a_misbehaving_simulator() {
 }
 
 #[test]
+fn cancel_sets_an_abandoned_designs_pending_runs_aside_until_a_design_asks_again() {
+    let dir = scratch("cli-campaign", "cancel");
+    let path = study(&dir, &[(0, 1.0), (0, 2.0)], "max_parallel = 2");
+    let p = path.to_str().unwrap();
+    assert!(iuq(&["run", p]).status.success());
+    // A design a pipeline recorded and then abandoned: two new points and one already run.
+    let abandoned = {
+        let mut store = store_of(&dir);
+        store
+            .add_design(
+                "abandoned",
+                &[vec![0.0, 7.0], vec![0.0, 8.0], vec![0.0, 1.0]],
+            )
+            .unwrap();
+        iuq_campaign::designs::design_summaries(&store)
+            .unwrap()
+            .last()
+            .unwrap()
+            .id
+    };
+    let v = json_of(&iuq(&["status", p, "--json"]));
+    let designs = v["designs"].as_array().unwrap();
+    assert_eq!(designs.len(), 2, "{v}");
+    assert_eq!(designs[1]["id"], abandoned);
+    assert_eq!(designs[1]["label"], "abandoned");
+    assert_eq!(designs[1]["size"], 3);
+    assert_eq!(designs[1]["counts"]["pending"], 2);
+    assert_eq!(designs[1]["counts"]["succeeded"], 1);
+    let text = String::from_utf8_lossy(&iuq(&["status", p]).stdout).to_string();
+    assert!(
+        text.contains(&format!("designs: 2, 1 with runs left:\n  {abandoned} `abandoned`: 3 points, 1 succeeded, 0 failed, 0 cancelled, 2 pending")),
+        "{text}"
+    );
+
+    // A design the store does not have is bad input, and nothing is cancelled, not even the
+    // designs named before it.
+    let missing = (abandoned + 40).to_string();
+    let a = abandoned.to_string();
+    let o = iuq(&["cancel", p, "--design", &a, "--design", &missing]);
+    assert_eq!(o.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        err.contains(&format!("--design {missing}"))
+            && err.contains("campaign.sqlite has no design"),
+        "{err}"
+    );
+    assert_eq!(store_of(&dir).counts(None).unwrap().cancelled, 0);
+
+    let v = json_of(&iuq(&["cancel", p, "--design", &a, "--json"]));
+    assert_eq!(v["cancelled"][0]["cancelled"], 2, "{v}");
+    assert_eq!(v["cancelled"][0]["design"]["counts"]["cancelled"], 2);
+    // `iuq run` runs no cancelled run, and says so in its counts.
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["pending"], 0, "{v}");
+    assert_eq!(v["counts"]["cancelled"], 2);
+    assert_eq!(v["counts"]["succeeded"], 2);
+    let reason: String = store_of(&dir)
+        .connection()
+        .query_row(
+            "SELECT reason FROM runs WHERE status = 'cancelled' LIMIT 1",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(
+        reason,
+        format!("design {abandoned} (`abandoned`) set aside with `iuq cancel`")
+    );
+
+    // A later design that asks for a cancelled point gets it run.
+    let ids = store_of(&dir)
+        .add_design("later", &[vec![0.0, 8.0]])
+        .unwrap();
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["succeeded"], 3, "{v}");
+    assert_eq!(v["counts"]["cancelled"], 1);
+    let outcome = store_of(&dir).outcomes(&ids).unwrap();
+    assert_eq!(outcome[0].clone().unwrap().unwrap().0, vec![8.0]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn redecode_reads_the_run_directories_again_and_keeps_what_it_cannot_read() {
     let dir = scratch("cli-campaign", "redecode");
     let path = study(&dir, &[(0, 1.5), (0, 2.5), (0, 3.5)], "max_parallel = 1");

@@ -2,6 +2,7 @@
 
 pub mod basis;
 pub mod bench;
+pub mod cancel;
 pub mod design;
 pub mod export;
 pub mod gp;

@@ -52,6 +52,33 @@ pub fn run(args: &StatusArgs, json: bool) -> Result<()> {
                     .join(", "),
             );
         }
+        let open: Vec<_> = status
+            .designs
+            .iter()
+            .filter(|d| d.counts.pending + d.counts.queued + d.counts.running > 0)
+            .collect();
+        if !status.designs.is_empty() {
+            text.push_str(&format!(
+                "\ndesigns: {}, {} with runs left{}",
+                status.designs.len(),
+                open.len(),
+                if open.is_empty() { "" } else { ":" }
+            ));
+            for d in &open {
+                let c = &d.counts;
+                text.push_str(&format!(
+                    "\n  {} `{}`: {} points, {} succeeded, {} failed, {} cancelled, {} pending, {} queued or running",
+                    d.id,
+                    d.label,
+                    d.size,
+                    c.succeeded,
+                    c.failed,
+                    c.cancelled,
+                    c.pending,
+                    c.queued + c.running
+                ));
+            }
+        }
         if !failures.is_empty() {
             text.push_str("\nfailures:");
             for f in failures.iter().take(args.max_failures) {

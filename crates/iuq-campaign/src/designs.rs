@@ -1,0 +1,170 @@
+//! The designs of a campaign store — each batch of points a coordinator asked for, under its
+//! label — with how far each got, and setting a design aside.
+//!
+//! A pipeline that changes course (a posterior check stopped half-way, a batch found useless)
+//! leaves the pending runs of the design it abandoned in the store. A pipeline never runs them
+//! (it runs only the runs it asks for), but `iuq run` runs every pending run, and `iuq status`
+//! counts them. [`cancel_design`] sets such a design's pending runs to `cancelled` (a final
+//! status: nothing runs them); a design that asks for one of them again makes it pending again
+//! ([`revive_cancelled`], called whenever a design is recorded), so that cancelling never
+//! costs a later request its result.
+
+use rusqlite::{Connection, OptionalExtension, params};
+use serde::Serialize;
+
+use crate::error::{CampaignError, Result};
+use crate::outcome::unix_now;
+use crate::store::{CampaignStore, RunStatus, StatusCounts};
+
+/// A design of the store and the status of its runs.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct DesignSummary {
+    /// The design's id (the order in which designs were recorded).
+    pub id: i64,
+    /// Its label (`initial-design`, `adaptive-round-3`, `model-posterior-1`, …; several designs
+    /// may share one).
+    pub label: String,
+    /// Points asked for.
+    pub size: u64,
+    /// When it was recorded (seconds since the Unix epoch).
+    pub created_at: f64,
+    /// Its runs per status (a run asked for by several designs counts in each).
+    pub counts: StatusCounts,
+}
+
+/// What [`cancel_design`] did.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct CancelledDesign {
+    /// The design.
+    pub design: DesignSummary,
+    /// Its runs set from pending to cancelled.
+    pub cancelled: u64,
+}
+
+/// Every design of the store, oldest first.
+pub fn design_summaries(store: &CampaignStore) -> Result<Vec<DesignSummary>> {
+    let err = |e| CampaignError::Store {
+        path: store.path().to_path_buf(),
+        source: e,
+    };
+    let connection = store.connection();
+    let mut designs = connection
+        .prepare("SELECT id, label, size, created_at FROM designs ORDER BY id")
+        .map_err(err)?;
+    let rows: Vec<(i64, String, i64, f64)> = designs
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .and_then(|rows| rows.collect())
+        .map_err(err)?;
+    let mut statuses = connection
+        .prepare(
+            "SELECT dp.design_id, r.status, COUNT(*) FROM design_points dp \
+             JOIN runs r ON r.id = dp.run_id GROUP BY dp.design_id, r.status",
+        )
+        .map_err(err)?;
+    let per_status: Vec<(i64, String, i64)> = statuses
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
+        .and_then(|rows| rows.collect())
+        .map_err(err)?;
+    Ok(rows
+        .into_iter()
+        .map(|(id, label, size, created_at)| {
+            let mut counts = StatusCounts::default();
+            for (_, status, n) in per_status.iter().filter(|(d, _, _)| *d == id) {
+                let n = *n as u64;
+                match RunStatus::from_name(status) {
+                    Some(RunStatus::Pending) => counts.pending += n,
+                    Some(RunStatus::Queued) => counts.queued += n,
+                    Some(RunStatus::Running) => counts.running += n,
+                    Some(RunStatus::Succeeded) => counts.succeeded += n,
+                    Some(RunStatus::Failed) => counts.failed += n,
+                    Some(RunStatus::Cancelled) => counts.cancelled += n,
+                    None => {}
+                }
+            }
+            DesignSummary {
+                id,
+                label,
+                size: size as u64,
+                created_at,
+                counts,
+            }
+        })
+        .collect())
+}
+
+/// Set the pending runs of design `design_id` to cancelled, with the reason saying so. Queued
+/// and running runs are left alone (only a coordinator may touch them, and one holding the
+/// campaign is the caller). An unknown id is bad input.
+pub fn cancel_design(store: &CampaignStore, design_id: i64) -> Result<CancelledDesign> {
+    let err = |e| CampaignError::Store {
+        path: store.path().to_path_buf(),
+        source: e,
+    };
+    let label: Option<String> = store
+        .connection()
+        .query_row(
+            "SELECT label FROM designs WHERE id = ?1",
+            [design_id],
+            |r| r.get(0),
+        )
+        .optional()
+        .map_err(err)?;
+    let Some(label) = label else {
+        let known = design_summaries(store)?;
+        return Err(CampaignError::BadInput(format!(
+            "--design {design_id}: {} has no design {design_id} ({})",
+            store.path().display(),
+            match (known.first(), known.last()) {
+                (Some(first), Some(last)) => format!(
+                    "its designs are {} to {}; `iuq status` lists them",
+                    first.id, last.id
+                ),
+                _ => "it has none".to_string(),
+            }
+        )));
+    };
+    let cancelled = store
+        .connection()
+        .execute(
+            "UPDATE runs SET status = 'cancelled', outcome_kind = 'cancelled', reason = ?1, \
+             updated_at = ?2 WHERE status = 'pending' AND id IN \
+             (SELECT run_id FROM design_points WHERE design_id = ?3)",
+            params![
+                format!("design {design_id} (`{label}`) set aside with `iuq cancel`"),
+                unix_now(),
+                design_id
+            ],
+        )
+        .map_err(err)? as u64;
+    let design = design_summaries(store)?
+        .into_iter()
+        .find(|d| d.id == design_id)
+        .ok_or_else(|| {
+            CampaignError::BadInput(format!(
+                "design {design_id} vanished while it was cancelled"
+            ))
+        })?;
+    Ok(CancelledDesign { design, cancelled })
+}
+
+/// Make the cancelled runs among `run_ids` pending again: a design asked for them. Writes
+/// nothing when the store has no cancelled run (a replay of a finished study stays a read).
+pub(crate) fn revive_cancelled(connection: &Connection, run_ids: &[i64]) -> rusqlite::Result<()> {
+    let any: i64 = connection.query_row(
+        "SELECT COUNT(*) FROM runs WHERE status = 'cancelled'",
+        [],
+        |r| r.get(0),
+    )?;
+    if any == 0 {
+        return Ok(());
+    }
+    let mut revive = connection.prepare_cached(
+        "UPDATE runs SET status = 'pending', outcome_kind = NULL, reason = NULL, updated_at = ?1 \
+         WHERE id = ?2 AND status = 'cancelled'",
+    )?;
+    let now = unix_now();
+    for id in run_ids {
+        revive.execute(params![now, id])?;
+    }
+    Ok(())
+}
