@@ -347,6 +347,26 @@ fn a_single_source_renders() {
     assert!(dir.join("figures/violins.png").is_file());
 }
 
+#[test]
+fn a_posterior_without_sampler_stages_has_no_line_and_no_legend_entry() {
+    // The model's posterior reweighted from the surrogate's has no BASIS stages.
+    let mut report = small_report();
+    report.posteriors[1].stages.clear();
+    let dir = fresh_dir("stageless");
+    write_report(&report, &dir).unwrap();
+    let svg = std::fs::read_to_string(dir.join("figures/sampler_stages.svg")).unwrap();
+    assert!(svg.contains(">\nGP surrogate\n</text>"), "{svg}");
+    assert!(
+        !svg.contains(">\ncell model\n</text>"),
+        "a legend entry without a line"
+    );
+    let corner = std::fs::read_to_string(dir.join("figures/corner.svg")).unwrap();
+    assert!(
+        corner.contains(">\ncell model\n</text>"),
+        "the corner plot still shows both"
+    );
+}
+
 /// A report at the control values `xs` (a general model's abscissae, e.g. times) renders: every
 /// figure well formed, the data-fit and violin figures written as SVG and PNG, their x tick
 /// labels on the linear axis the values call for.

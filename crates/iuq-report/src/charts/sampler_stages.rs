@@ -119,6 +119,9 @@ impl Chart for SamplerStagesChart<'_> {
             .posteriors
             .iter()
             .enumerate()
+            // A posterior without sampler stages (the model's, reweighted from the surrogate's)
+            // draws no line, so it gets no legend entry.
+            .filter(|(_, p)| !p.stages.is_empty())
             .map(|(s, p)| {
                 (
                     LegendMark::Line(source_colour(&p.source, s), 2),
