@@ -532,6 +532,13 @@ replicates = 8
     assert_eq!(corrections.len(), 1, "{m}");
     assert_eq!(corrections[0]["moment_matched"], true);
     assert!(m["proposal_mismatch"]["p_value"].as_f64().unwrap() < 0.01);
+    // The replicate runs are announced with the batch they follow.
+    assert!(
+        log.contains("replicates = 8: after each batch, every member whose own runs succeeded is run 7 more times")
+            && log.contains("in the 1 run group(s) holding")
+            && log.contains("up to 2800 runs per batch of 400 members"),
+        "{log}"
+    );
     // The correction's batch is announced before its runs, and before the stage's line.
     let announced = log
         .find("model posterior: the first batch's weights (k̂ = ")

@@ -356,6 +356,22 @@ pub fn reweight_to_model(
             replicate_runs: AtomicUsize::new(0),
             replicate_failures: AtomicUsize::new(0),
         });
+    if let Some(r) = &replicated_likelihood {
+        let groups = r.irregular_groups().len();
+        let members = reweight.method.samples.min(state.samples.len());
+        let names: Vec<&str> = r
+            .irregular
+            .iter()
+            .map(|&j| model_runs.output_names()[j].as_str())
+            .collect();
+        message(format!(
+            "replicates = {m}: after each batch, every member whose own runs succeeded is run {} more times (its parameters moved by k·1e-9 of their ranges) in the {groups} run group(s) holding {}: up to {} runs per batch of {members} members (results already stored are reused)",
+            r.replicates - 1,
+            names.join(", "),
+            members * (r.replicates - 1) * groups,
+            m = r.replicates,
+        ));
+    }
     let model_likelihood: &dyn LogLikelihood = match &replicated_likelihood {
         Some(r) => r,
         None => model_posterior_likelihood.likelihood.as_ref(),

@@ -63,8 +63,8 @@ pub fn bits(point: &[f64]) -> Vec<u64> {
 }
 
 impl ReplicatedLikelihood<'_> {
-    /// The run groups holding an irregular datum.
-    fn groups(&self) -> Vec<usize> {
+    /// The run groups holding an irregular datum: the groups each member's replicates repeat.
+    pub fn irregular_groups(&self) -> Vec<usize> {
         let irregular: BTreeSet<usize> = self.irregular.iter().copied().collect();
         (0..self.runs.groups())
             .filter(|&g| self.runs.group_outputs(g).any(|j| irregular.contains(&j)))
@@ -97,7 +97,7 @@ impl LogLikelihood for ReplicatedLikelihood<'_> {
         }
         let d = self.runs.parameters().len();
         let sigma_m = |p: &[f64]| p.get(d).copied().unwrap_or(0.0);
-        let groups = self.groups();
+        let groups = self.irregular_groups();
         // Every replicate k = 0 … m − 1 of every member whose own runs succeeded, at every
         // irregular group, in one campaign batch (k = 0 is the member's own run, stored).
         let members: Vec<usize> = (0..points.len()).filter(|&i| values[i].is_ok()).collect();
