@@ -23,6 +23,7 @@ use crate::executor::{
 };
 use crate::outcome::OutcomeKind;
 use crate::run_directory::{Task, TaskRun, task_directory};
+use crate::start_watch::StartWatch;
 use crate::store::{CampaignStore, Disposition, StatusCounts};
 use crate::study::{CampaignStudy, CommandKind, ExecutorKind};
 use crate::worker::{CompiledSpec, read_report, write_spec};
@@ -55,6 +56,9 @@ pub struct ResumeSummary {
     pub lost: u64,
     /// Runs put back to pending because they had no attempt.
     pub requeued: u64,
+    /// Runs whose command could not start in an earlier session, pending again
+    /// ([`crate::start_watch`]).
+    pub restarted: u64,
 }
 
 /// Options of a campaign beyond its study file.
@@ -112,6 +116,7 @@ pub struct Campaign {
     directory: PathBuf,
     session_start: Option<Instant>,
     finished_this_session: u64,
+    start_watch: StartWatch,
     interrupt: Option<Interrupt>,
 }
 
@@ -283,6 +288,7 @@ impl Campaign {
             directory,
             session_start: None,
             finished_this_session: 0,
+            start_watch: StartWatch::default(),
             interrupt: options.interrupt.clone(),
         };
         let summary = campaign.resume()?;
@@ -313,6 +319,7 @@ impl Campaign {
     fn resume(&mut self) -> Result<ResumeSummary> {
         let mut summary = ResumeSummary {
             requeued: self.store.requeue_orphans()? as u64,
+            restarted: self.store.restart_unstarted()? as u64,
             ..ResumeSummary::default()
         };
         let open = self.store.open_attempts()?;
@@ -472,12 +479,14 @@ impl Campaign {
         let mut events: Vec<ExecutorEvent> = Vec::new();
         let mut external: Vec<(i64, String)> = Vec::new();
         let mut last_report: Option<Instant> = None;
+        let mut cannot_start: Option<String> = None;
         loop {
             let interrupted = self.interrupt.as_ref().is_some_and(Interrupt::is_raised);
-            if interrupted {
+            let stopping = interrupted || cannot_start.is_some();
+            if stopping {
                 self.executor.stop_starting();
             }
-            let free = if interrupted {
+            let free = if stopping {
                 0
             } else {
                 self.executor
@@ -493,11 +502,14 @@ impl Campaign {
             let directory = self.directory.clone();
             let spec = &self.study.model;
             let mut finished_now = 0u64;
+            let watch = &mut self.start_watch;
             let tasks = self.store.write(|w| {
                 for e in &events {
-                    if let Disposition::Succeeded | Disposition::Failed =
-                        apply_event(w, e, &outputs, &policy)?
-                    {
+                    let disposition = apply_event(w, e, &outputs, &policy)?;
+                    if let ExecutorEvent::Finished { result, .. } = e {
+                        watch.observe(result, disposition);
+                    }
+                    if let Disposition::Succeeded | Disposition::Failed = disposition {
                         finished_now += 1;
                     }
                 }
@@ -543,6 +555,17 @@ impl Campaign {
             if interrupted && self.executor.in_flight() == 0 {
                 observer(&self.progress_of(start, counted)?);
                 return Err(CampaignError::Interrupted);
+            }
+            if cannot_start.is_none() {
+                cannot_start = self.start_watch.verdict();
+            }
+            if let Some(reason) = cannot_start.take_if(|_| self.executor.in_flight() == 0) {
+                self.store.restart_unstarted()?;
+                observer(&self.progress_of(start, counted)?);
+                return Err(CampaignError::BadInput(format!(
+                    "{}: {reason}",
+                    self.study.path.display()
+                )));
             }
             if self.executor.in_flight() == 0 && !submitted_any {
                 if self.store.pending_runs_among(among, 1)?.is_empty() {

@@ -21,6 +21,7 @@
 //! | [`campaign_model`] | a campaign as a batch `Model` |
 //! | [`redecode`] | outputs of finished runs decoded again from their run directories |
 //! | [`retry_policy`] | which failures are retried |
+//! | [`start_watch`] | a campaign whose model command cannot start stops early |
 //! | [`outcome`] | outcome kinds and worker reports |
 //! | [`design`] | the points of `iuq run` |
 //! | [`designs`] | the designs of a store, how far each got, setting one aside (`iuq cancel`) |
@@ -44,6 +45,7 @@ pub mod outcome;
 pub mod redecode;
 pub mod retry_policy;
 pub mod run_directory;
+pub mod start_watch;
 pub mod store;
 pub mod study;
 pub mod study_section;

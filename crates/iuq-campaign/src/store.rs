@@ -800,6 +800,24 @@ impl CampaignStore {
             .map_err(|e| self.err(e))
     }
 
+    /// Put the failed runs whose model never started back to pending with no attempts: every
+    /// attempt could not start its command (`spawn_failed`) or was lost (e.g. held back by a
+    /// stop before it started), at least one could not start. The failure is no result of the
+    /// model (see [`crate::start_watch`]). Returns how many.
+    pub fn restart_unstarted(&mut self) -> Result<usize> {
+        self.connection
+            .execute(
+                "UPDATE runs SET status = 'pending', attempts = 0, updated_at = ?1 \
+                 WHERE status = 'failed' \
+                 AND EXISTS (SELECT 1 FROM attempts a WHERE a.run_id = runs.id \
+                             AND a.outcome_kind = 'spawn_failed') \
+                 AND NOT EXISTS (SELECT 1 FROM attempts a WHERE a.run_id = runs.id \
+                                 AND a.outcome_kind NOT IN ('spawn_failed', 'lost'))",
+                [unix_now()],
+            )
+            .map_err(|e| self.err(e))
+    }
+
     /// The stored outcome of each run of `run_ids`.
     pub fn outcomes(&self, run_ids: &[i64]) -> Result<Vec<StoredOutcome>> {
         let mut status_stmt = self

@@ -241,6 +241,68 @@ fn cancel_sets_an_abandoned_designs_pending_runs_aside_until_a_design_asks_again
 }
 
 #[test]
+fn a_model_command_that_cannot_start_stops_the_campaign_and_leaves_its_runs_pending() {
+    let dir = scratch("cli-campaign", "cannot-start");
+    let points: Vec<(u32, f64)> = (0..12).map(|i| (0, i as f64)).collect();
+    let path = study(&dir, &points, "max_parallel = 2");
+    let p = path.to_str().unwrap();
+    std::fs::rename(dir.join("sim.sh"), dir.join("sim.sh.aside")).unwrap();
+    let o = iuq(&["run", p]);
+    assert_eq!(o.status.code(), Some(2), "bad input: the study's command");
+    let err = String::from_utf8_lossy(&o.stderr);
+    // At least 3 runs (those whose attempts ended in the same poll may add to them).
+    let failed_to_start: usize = err
+        .split("the model command cannot start: ")
+        .nth(1)
+        .and_then(|rest| rest.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{err}"));
+    assert!((3..12).contains(&failed_to_start), "{err}");
+    assert!(
+        err.contains("study.toml: the model command cannot start: ")
+            && err.contains("sim.sh`: No such file or directory")
+            && err.contains("Fix the study's `[model] command`"),
+        "{err}"
+    );
+    // Stopped after a few runs (each tried by the retry policy), not after all 12; none is
+    // filed as a failure of the model.
+    let store = store_of(&dir);
+    let counts = store.counts(None).unwrap();
+    assert_eq!(
+        (counts.pending, counts.failed, counts.succeeded),
+        (12, 0, 0)
+    );
+    let attempts: i64 = store
+        .connection()
+        .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
+        .unwrap();
+    assert!(attempts < 3 * 12, "{attempts} attempts");
+    drop(store);
+
+    // With the program back, the next run makes every run.
+    std::fs::rename(dir.join("sim.sh.aside"), dir.join("sim.sh")).unwrap();
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["succeeded"], 12, "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn runs_that_could_not_start_in_an_earlier_session_run_again_when_the_campaign_resumes() {
+    let dir = scratch("cli-campaign", "restart");
+    let path = study(&dir, &[(0, 1.0), (0, 2.0)], "max_parallel = 1");
+    let p = path.to_str().unwrap();
+    std::fs::rename(dir.join("sim.sh"), dir.join("sim.sh.aside")).unwrap();
+    // Two runs that cannot start are fewer than the campaign stops at: they fail.
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["failed"], 2, "{v}");
+    std::fs::rename(dir.join("sim.sh.aside"), dir.join("sim.sh")).unwrap();
+    let v = json_of(&iuq(&["run", p, "--json"]));
+    assert_eq!(v["counts"]["succeeded"], 2, "{v}");
+    assert_eq!(v["resumed"]["restarted"], 2, "{v}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn redecode_reads_the_run_directories_again_and_keeps_what_it_cannot_read() {
     let dir = scratch("cli-campaign", "redecode");
     let path = study(&dir, &[(0, 1.5), (0, 2.5), (0, 3.5)], "max_parallel = 1");

@@ -116,6 +116,11 @@ pub fn summary_text(v: &Value) -> String {
             r["ingested"], r["reattached"], r["lost"]
         ));
     }
+    if let Some(n) = r["restarted"].as_u64().filter(|&n| n > 0) {
+        text.push_str(&format!(
+            "\n{n} runs whose command could not start last time were run again"
+        ));
+    }
     if c["failed"].as_u64().unwrap_or(0) > 0 {
         text.push_str("\nsee `iuq status` for the failures and their reasons");
     }
