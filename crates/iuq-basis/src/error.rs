@@ -31,6 +31,10 @@ pub enum BasisError {
     /// [`BasisError::Evaluation`] with the stage.
     #[error("model could not evaluate the batch: {0}")]
     ModelBatch(String),
+    /// A likelihood's model cannot run as its study describes it
+    /// ([`iuq_core::CoreError::ModelInput`]): bad input, passed on as it is.
+    #[error("{0}")]
+    ModelInput(String),
     /// A whole batch failed at a stage of the run (the model's infrastructure, not a single
     /// point), or returned the wrong number of outcomes.
     #[error("model evaluation failed at stage {stage}: {reason}")]

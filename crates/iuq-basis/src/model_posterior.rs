@@ -459,7 +459,10 @@ pub(crate) fn evaluate(
     }
     let values = likelihood
         .log_likelihood_batch(points)
-        .map_err(|e| BasisError::ModelBatch(format!("{what}: {e}")))?;
+        .map_err(|e| match e {
+            BasisError::ModelInput(_) => e,
+            e => BasisError::ModelBatch(format!("{what}: {e}")),
+        })?;
     if values.len() != points.len() {
         return Err(BasisError::ModelBatch(format!(
             "{what}: {} values for {} points",

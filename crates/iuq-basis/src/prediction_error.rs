@@ -347,7 +347,10 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
         let outcomes = self
             .model
             .evaluate_batch(&model_points)
-            .map_err(|e| BasisError::ModelBatch(e.to_string()))?;
+            .map_err(|e| match e {
+                iuq_core::CoreError::ModelInput(reason) => BasisError::ModelInput(reason),
+                e => BasisError::ModelBatch(e.to_string()),
+            })?;
         if outcomes.len() != points.len() {
             return Err(BasisError::ModelBatch(format!(
                 "the model returned {} outcomes for {} points",

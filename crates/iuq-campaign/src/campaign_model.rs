@@ -136,7 +136,13 @@ impl CampaignModel {
         label: Option<&str>,
         points: &[Vec<f64>],
     ) -> iuq_core::Result<Vec<Outcome>> {
-        let unavailable = |e: crate::CampaignError| CoreError::ModelUnavailable(e.to_string());
+        let unavailable = |e: crate::CampaignError| {
+            if e.is_bad_input() {
+                CoreError::ModelInput(e.to_string())
+            } else {
+                CoreError::ModelUnavailable(e.to_string())
+            }
+        };
         let mut guard = self
             .state
             .lock()

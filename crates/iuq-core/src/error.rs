@@ -39,6 +39,10 @@ pub enum CoreError {
     /// A model could not evaluate a whole batch (infrastructure failure, not a per-point failure).
     #[error("model evaluation failed: {0}")]
     ModelUnavailable(String),
+    /// A model cannot run as its study describes it (e.g. its command does not start): bad
+    /// input to fix in the study, not a failure of the model or of its infrastructure.
+    #[error("{0}")]
+    ModelInput(String),
 }
 
 /// Result type of `iuq-core`.

@@ -62,12 +62,23 @@ impl StudyError {
     }
 
     /// Any error as a study error: a [`StudyError`] stays what it is, a [`CampaignError`] is bad
-    /// input when it says so, anything else is a failure; the message is the error's text
-    /// followed by its sources'.
+    /// input when it says so, as is a model that cannot run as its study describes it
+    /// (`CoreError::ModelInput`, `BasisError::ModelInput`); anything else is a failure; the
+    /// message is the error's text followed by its sources'.
     pub fn from_error<E: StdError + 'static>(error: E) -> Self {
         let any: &dyn std::any::Any = &error;
         if let Some(study) = any.downcast_ref::<StudyError>() {
             return study.clone();
+        }
+        if let Some(iuq_core::CoreError::ModelInput(reason)) =
+            any.downcast_ref::<iuq_core::CoreError>()
+        {
+            return Self::BadInput(reason.clone());
+        }
+        if let Some(iuq_basis::BasisError::ModelInput(reason)) =
+            any.downcast_ref::<iuq_basis::BasisError>()
+        {
+            return Self::BadInput(reason.clone());
         }
         if let Some(campaign) = any.downcast_ref::<CampaignError>() {
             if matches!(campaign, CampaignError::Interrupted) {

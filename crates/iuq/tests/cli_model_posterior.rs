@@ -760,6 +760,58 @@ fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
 }
 
 #[test]
+fn a_model_program_that_cannot_start_is_bad_input_and_costs_no_run() {
+    // The surrogate's runs are made; then the program is gone (a wrong path, an executable of
+    // another session) when the model posterior asks for its batch: the pipeline stops with
+    // exit 2 naming the study file and the reason, files no run as a failure of the model, and
+    // makes the batch once the program is back.
+    let dir = cooling("cannot-start");
+    let study = std::fs::read_to_string(dir.join("cooling-curve.toml"))
+        .unwrap()
+        .replace(
+            "[surrogate]",
+            "[model_posterior]\nsamples = 30\n\n[surrogate]",
+        )
+        .replace(
+            "adaptive = { batch = 3, max_runs = 60, tolerance = 0.1 }",
+            "test = { kind = \"sobol\", n = 0 }",
+        );
+    let path = dir.join("study.toml");
+    std::fs::write(&path, study).unwrap();
+    let out = dir.join("report");
+    let p = path.to_str().unwrap();
+    let o = iuq(&["pipeline", p, "--out", out.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr_of(&o));
+    // The design's own failures (k beyond the program's stability limit).
+    let failed_before = json_of(&iuq(&["status", p, "--json"]))["counts"]["failed"].clone();
+    let program = dir.join("cooling_model.py");
+    std::fs::rename(&program, dir.join("aside.py")).unwrap();
+    let o = iuq(&[
+        "pipeline",
+        p,
+        "--out",
+        out.to_str().unwrap(),
+        "--model-posterior",
+    ]);
+    let err = stderr_of(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("study.toml: the model command cannot start: ")
+            && err.contains("cooling_model.py`: No such file or directory"),
+        "{err}"
+    );
+    let failed = iuq(&["status", p, "--json"]);
+    assert_eq!(
+        json_of(&failed)["counts"]["failed"],
+        failed_before,
+        "no run filed as the model's failure"
+    );
+    std::fs::rename(dir.join("aside.py"), &program).unwrap();
+    let v = pipeline(&path, &out, &[]);
+    assert_eq!(v["model_posterior"]["samples"], 30, "{v}");
+}
+
+#[test]
 fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
     let dir = cooling("bad-keys");
     for (lines, key) in [

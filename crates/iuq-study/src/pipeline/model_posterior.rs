@@ -402,6 +402,7 @@ pub fn reweight_to_model(
         },
     )
     .map_err(|e| match e {
+        iuq_basis::BasisError::ModelInput(reason) => StudyError::BadInput(reason),
         iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
             "the model posterior: the model could not evaluate a batch: {reason}"
         )),
@@ -420,7 +421,7 @@ pub fn reweight_to_model(
     let at_maps = model_runs
         .model_at_data()
         .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-maps"), &maps)
-        .map_err(|e| StudyError::Failure(format!("the model at both MAPs: {e}")))?;
+        .map_err(|e| StudyError::from(e).context("the model at both MAPs"))?;
     let outputs: Vec<Option<Vec<f64>>> = at_maps
         .into_iter()
         .map(|o| o.ok().map(|e| e.outputs))

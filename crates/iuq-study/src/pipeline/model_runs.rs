@@ -581,10 +581,13 @@ impl ModelAtData {
             .iter()
             .flat_map(|p| (0..groups).map(move |g| (g, p.clone())))
             .collect();
-        let outcomes = self
-            .runs
-            .run(label, &requests)
-            .map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
+        let outcomes = self.runs.run(label, &requests).map_err(|e| {
+            if e.is_bad_input() {
+                iuq_core::CoreError::ModelInput(e.message().to_string())
+            } else {
+                iuq_core::CoreError::ModelUnavailable(e.to_string())
+            }
+        })?;
         Ok(outcomes
             .chunks(groups.max(1))
             .map(|group| {

@@ -123,7 +123,13 @@ impl LogLikelihood for ReplicatedLikelihood<'_> {
         let outcomes = self
             .runs
             .run(Some(REPLICATES_DESIGN), &requests)
-            .map_err(|e| iuq_basis::BasisError::ModelBatch(format!("replicate runs: {e}")))?;
+            .map_err(|e| {
+                if e.is_bad_input() {
+                    iuq_basis::BasisError::ModelInput(e.message().to_string())
+                } else {
+                    iuq_basis::BasisError::ModelBatch(format!("replicate runs: {e}"))
+                }
+            })?;
         let failed = requests
             .iter()
             .zip(&outcomes)

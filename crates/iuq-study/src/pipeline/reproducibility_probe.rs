@@ -160,7 +160,7 @@ pub fn probe_reproducibility(
     let outcomes = model_runs
         .model_at_data()
         .evaluate_labelled(PROBE_DESIGN, &points)
-        .map_err(|e| StudyError::Failure(format!("the reproducibility probe: {e}")))?;
+        .map_err(|e| StudyError::from(e).context("the reproducibility probe"))?;
     let (own, nudged_outcomes) = outcomes.split_at(members.len());
     let (pairs, outputs) = compare_pairs(
         model_runs.output_names(),
