@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::error::{CampaignError, Result};
 use crate::outcome::unix_now;
-use crate::store::{CampaignStore, RunStatus, StatusCounts};
+use crate::store::{CampaignStore, StatusCounts};
 
 /// A design of the store and the status of its runs.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -70,16 +70,7 @@ pub fn design_summaries(store: &CampaignStore) -> Result<Vec<DesignSummary>> {
         .map(|(id, label, size, created_at)| {
             let mut counts = StatusCounts::default();
             for (_, status, n) in per_status.iter().filter(|(d, _, _)| *d == id) {
-                let n = *n as u64;
-                match RunStatus::from_name(status) {
-                    Some(RunStatus::Pending) => counts.pending += n,
-                    Some(RunStatus::Queued) => counts.queued += n,
-                    Some(RunStatus::Running) => counts.running += n,
-                    Some(RunStatus::Succeeded) => counts.succeeded += n,
-                    Some(RunStatus::Failed) => counts.failed += n,
-                    Some(RunStatus::Cancelled) => counts.cancelled += n,
-                    None => {}
-                }
+                counts.add(status, *n as u64);
             }
             DesignSummary {
                 id,

@@ -221,6 +221,19 @@ impl StatusCounts {
     pub fn finished(&self) -> u64 {
         self.succeeded + self.failed + self.cancelled
     }
+
+    /// Count `n` more runs of the stored status `status` (an unknown name counts nowhere).
+    pub(crate) fn add(&mut self, status: &str, n: u64) {
+        match RunStatus::from_name(status) {
+            Some(RunStatus::Pending) => self.pending += n,
+            Some(RunStatus::Queued) => self.queued += n,
+            Some(RunStatus::Running) => self.running += n,
+            Some(RunStatus::Succeeded) => self.succeeded += n,
+            Some(RunStatus::Failed) => self.failed += n,
+            Some(RunStatus::Cancelled) => self.cancelled += n,
+            None => {}
+        }
+    }
 }
 
 /// A run that failed, with its reason.
@@ -671,15 +684,7 @@ impl CampaignStore {
     /// Counts of runs per status (all runs, or those of `run_ids`).
     pub fn counts(&self, run_ids: Option<&[i64]>) -> Result<StatusCounts> {
         let mut counts = StatusCounts::default();
-        let mut add = |status: &str, n: u64| match RunStatus::from_name(status) {
-            Some(RunStatus::Pending) => counts.pending += n,
-            Some(RunStatus::Queued) => counts.queued += n,
-            Some(RunStatus::Running) => counts.running += n,
-            Some(RunStatus::Succeeded) => counts.succeeded += n,
-            Some(RunStatus::Failed) => counts.failed += n,
-            Some(RunStatus::Cancelled) => counts.cancelled += n,
-            None => {}
-        };
+        let mut add = |status: &str, n: u64| counts.add(status, n);
         match run_ids {
             None => {
                 let mut stmt = self
