@@ -16,7 +16,8 @@
 //! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
 //! - [`model_posterior`](mod@model_posterior): from a surrogate's posterior to the model's, by importance stages
 //!   and delayed-acceptance moves, certified by k̂; [`pseudo_marginal`] for a noisy model, with
-//!   [`moment_matching`]'s correction and its test.
+//!   [`moment_matching`]'s correction and its test; [`member_selection`]: the members a batch
+//!   runs, nested in the batch's size.
 //!
 //! ```
 //! use iuq_basis::{Basis, BasisSettings, FnLikelihood, Silent};
@@ -46,6 +47,7 @@ pub mod curve_model;
 pub mod diagnostics;
 pub mod error;
 pub mod likelihood;
+pub mod member_selection;
 pub mod model_posterior;
 pub mod moment_matching;
 pub mod pareto_smoothing;

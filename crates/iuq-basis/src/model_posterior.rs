@@ -65,7 +65,6 @@
 //! an interrupted run without repeating a finished model run.
 
 use rand::Rng;
-use rand::seq::index::sample as sample_indices;
 use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -77,6 +76,7 @@ use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
+use crate::member_selection::nested_selection;
 use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch};
 use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
 use crate::proposal::Proposal;
@@ -481,14 +481,17 @@ pub(crate) fn evaluate(
 
 /// The indices (ascending) of the members of a surrogate population of `population_size` that
 /// [`model_posterior`] runs through the model first: `min(samples, population_size)` of them,
-/// drawn without replacement by `seed`. A caller that probes the model at the same members
-/// (e.g. whether its output is reproducible) gets the points the method will request anyway.
+/// drawn without replacement by `seed`, nested in `samples` ([`crate::member_selection`]: a
+/// larger `samples` keeps these members and adds others, so their model runs are reused). A
+/// caller that probes the model at the same members (e.g. whether its output is reproducible)
+/// gets the points the method will request anyway.
 pub fn selected_members(population_size: usize, settings: &ModelPosteriorSettings) -> Vec<usize> {
     let s = settings.samples.min(population_size);
-    let mut selection_rng = stream(settings.seed, STREAM_BASE, 0);
-    let mut chosen = sample_indices(&mut selection_rng, population_size, s).into_vec();
-    chosen.sort_unstable();
-    chosen
+    nested_selection(
+        &mut stream(settings.seed, STREAM_BASE, 0),
+        population_size,
+        s,
+    )
 }
 
 /// What [`model_posterior`] reports as it goes, for progress lines: a user watching a batch of
@@ -666,9 +669,11 @@ pub fn model_posterior(
                     corrected_holder = candidate;
                     surrogate = &corrected_holder;
                     log_evidence_ratio += state.log_evidence - population.log_evidence;
-                    let mut rng = stream(settings.seed, STREAM_BASE, 1);
-                    let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
-                    chosen.sort_unstable();
+                    let chosen = nested_selection(
+                        &mut stream(settings.seed, STREAM_BASE, 1),
+                        state.samples.len(),
+                        s,
+                    );
                     theta = chosen.iter().map(|&i| state.samples[i].clone()).collect();
                     ls = chosen.iter().map(|&i| state.log_likelihood[i]).collect();
                     lp = chosen.iter().map(|&i| state.log_prior[i]).collect();

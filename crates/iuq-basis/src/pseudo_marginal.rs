@@ -41,8 +41,6 @@
 //! step was; otherwise the stop is [`ModelPosteriorStop::NoisyWeightsTail`]. The evidence ratio
 //! Z_m/Z_s is the mean weight (the mixture's density is normalised).
 
-use rand::seq::index::sample as sample_indices;
-
 use iuq_core::ParameterSpace;
 use iuq_core::random::stream;
 use iuq_core::weighted_statistics::effective_sample_size;
@@ -50,6 +48,7 @@ use iuq_core::weighted_statistics::effective_sample_size;
 use crate::annealing::log_evidence_increment;
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
+use crate::member_selection::nested_selection;
 use crate::model_posterior::{
     Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
     ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
@@ -138,9 +137,11 @@ fn corrected_proposal(
         .state;
     let on_population: Vec<f64> = population.samples.iter().map(|x| g.log_ratio(x)).collect();
     let on_corrected: Vec<f64> = state.samples.iter().map(|x| g.log_ratio(x)).collect();
-    let mut rng = stream(settings.seed, STREAM_BASE, 1);
-    let mut chosen = sample_indices(&mut rng, state.samples.len(), s).into_vec();
-    chosen.sort_unstable();
+    let chosen = nested_selection(
+        &mut stream(settings.seed, STREAM_BASE, 1),
+        state.samples.len(),
+        s,
+    );
     Ok(CorrectedProposal {
         theta: chosen.iter().map(|&i| state.samples[i].clone()).collect(),
         surrogate: chosen
