@@ -67,7 +67,9 @@ class CampaignStatus:
     failures: List[Dict[str, Any]]
     journal_mode: Any = None
     #: Every design recorded in the store (each batch the pipeline asked for), oldest first:
-    #: ``id``, ``label``, ``size``, ``created_at`` and ``counts`` of its runs per status.
+    #: ``id``, ``label``, ``size``, ``created_at``, ``counts`` of its runs per status, and what
+    #: its runs cost since it was recorded: ``run_seconds`` (their attempts' summed duration),
+    #: ``first_started_at`` and ``last_finished_at`` (Unix seconds; ``None`` before one finished).
     designs: List[Dict[str, Any]] = field(default_factory=list)
 
 

@@ -30,6 +30,17 @@ pub struct DesignSummary {
     pub created_at: f64,
     /// Its runs per status (a run asked for by several designs counts in each).
     pub counts: StatusCounts,
+    /// What its runs cost since it was recorded: the summed duration (start to finish, in
+    /// seconds) of the attempts at its runs submitted at or after `created_at` (a run it reused
+    /// from an earlier design cost it nothing; an attempt lost before it finished is not
+    /// counted). The model time the design took, e.g. a model posterior's batch.
+    pub run_seconds: f64,
+    /// The first start and last finish of those attempts (seconds since the Unix epoch; `None`
+    /// before one has finished): the wall-clock span in which the design's runs were made,
+    /// stops of the campaign included.
+    pub first_started_at: Option<f64>,
+    /// See [`DesignSummary::first_started_at`].
+    pub last_finished_at: Option<f64>,
 }
 
 /// What [`cancel_design`] did.
@@ -65,6 +76,18 @@ pub fn design_summaries(store: &CampaignStore) -> Result<Vec<DesignSummary>> {
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
         .and_then(|rows| rows.collect())
         .map_err(err)?;
+    let mut times = connection
+        .prepare(
+            "SELECT dp.design_id, SUM(a.finished_at - a.started_at), MIN(a.started_at), \
+             MAX(a.finished_at) FROM designs d JOIN design_points dp ON dp.design_id = d.id \
+             JOIN attempts a ON a.run_id = dp.run_id WHERE a.submitted_at >= d.created_at \
+             AND a.started_at IS NOT NULL AND a.finished_at IS NOT NULL GROUP BY dp.design_id",
+        )
+        .map_err(err)?;
+    let per_design_time: Vec<(i64, f64, f64, f64)> = times
+        .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?)))
+        .and_then(|rows| rows.collect())
+        .map_err(err)?;
     Ok(rows
         .into_iter()
         .map(|(id, label, size, created_at)| {
@@ -72,12 +95,16 @@ pub fn design_summaries(store: &CampaignStore) -> Result<Vec<DesignSummary>> {
             for (_, status, n) in per_status.iter().filter(|(d, _, _)| *d == id) {
                 counts.add(status, *n as u64);
             }
+            let time = per_design_time.iter().find(|(d, ..)| *d == id);
             DesignSummary {
                 id,
                 label,
                 size: size as u64,
                 created_at,
                 counts,
+                run_seconds: time.map_or(0.0, |t| t.1),
+                first_started_at: time.map(|t| t.2),
+                last_finished_at: time.map(|t| t.3),
             }
         })
         .collect())

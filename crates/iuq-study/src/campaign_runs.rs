@@ -75,7 +75,7 @@ pub fn open_campaign_with(
 }
 
 /// A duration for people: `42s`, `3m05s`, `2h10m`.
-fn seconds(s: f64) -> String {
+pub fn human_duration(s: f64) -> String {
     let s = s.max(0.0).round() as u64;
     match s {
         0..=59 => format!("{s}s"),
@@ -96,8 +96,9 @@ pub fn progress_line(name: &str, p: &Progress) -> String {
         c.running,
         c.queued,
         c.pending,
-        seconds(p.elapsed_seconds),
-        p.eta_seconds.map_or_else(|| "unknown".into(), seconds)
+        human_duration(p.elapsed_seconds),
+        p.eta_seconds
+            .map_or_else(|| "unknown".into(), human_duration)
     )
 }
 

@@ -159,6 +159,72 @@ fn run_status_export_and_retry_of_a_misbehaving_simulator() {
 }
 
 #[test]
+fn status_gives_what_each_designs_runs_cost_since_it_was_recorded() {
+    let dir = scratch("cli-campaign", "design-time");
+    let path = study(&dir, &[(8, 1.0), (8, 2.0)], "max_parallel = 1");
+    let p = path.to_str().unwrap();
+    assert!(iuq(&["run", p]).status.success());
+    // A later design: one point already run (reused: it costs this design nothing) and a new one.
+    let ids = store_of(&dir)
+        .add_design("later", &[vec![8.0, 2.0], vec![8.0, 3.0]])
+        .unwrap();
+    assert!(iuq(&["run", p]).status.success());
+    // And one recorded but not run yet.
+    store_of(&dir)
+        .add_design("waiting", &[vec![8.0, 4.0]])
+        .unwrap();
+    // Each attempt's start and finish, straight from the store.
+    let attempt = |run_id: i64| -> (f64, f64) {
+        store_of(&dir)
+            .connection()
+            .query_row(
+                "SELECT started_at, finished_at FROM attempts WHERE run_id = ?1",
+                [run_id],
+                |r| Ok((r.get(0)?, r.get(1)?)),
+            )
+            .unwrap()
+    };
+    let (first, second, new) = (attempt(ids[0] - 1), attempt(ids[0]), attempt(ids[1]));
+    let v = json_of(&iuq(&["status", p, "--json"]));
+    let designs = v["designs"].as_array().unwrap();
+    assert_eq!(designs.len(), 3, "{v}");
+    let number = |d: &Value, key: &str| d[key].as_f64().unwrap();
+    // Both runs of the first design were made for it, one after the other.
+    let d = &designs[0];
+    let both = (first.1 - first.0) + (second.1 - second.0);
+    assert!((number(d, "run_seconds") - both).abs() < 1e-9, "{d}");
+    assert!(number(d, "run_seconds") >= 0.8, "two runs of 0.4 s: {d}");
+    assert_eq!(number(d, "first_started_at"), first.0);
+    assert_eq!(number(d, "last_finished_at"), second.1);
+    // The later design paid for its new run only.
+    let d = &designs[1];
+    assert!(
+        (number(d, "run_seconds") - (new.1 - new.0)).abs() < 1e-9,
+        "{d}"
+    );
+    assert_eq!(number(d, "first_started_at"), new.0);
+    assert_eq!(number(d, "last_finished_at"), new.1);
+    // Nothing run for the waiting one; the text names what the open design has cost so far.
+    let d = &designs[2];
+    assert_eq!(number(d, "run_seconds"), 0.0);
+    assert!(
+        d["first_started_at"].is_null() && d["last_finished_at"].is_null(),
+        "{d}"
+    );
+    let text = String::from_utf8_lossy(&iuq(&["status", p]).stdout).to_string();
+    assert!(
+        text.contains("`waiting`: 1 points, 0 succeeded, 0 failed, 0 cancelled, 1 pending, 0 queued or running\n")
+            || text.ends_with("`waiting`: 1 points, 0 succeeded, 0 failed, 0 cancelled, 1 pending, 0 queued or running"),
+        "{text}"
+    );
+    assert!(iuq(&["run", p]).status.success());
+    let v = json_of(&iuq(&["status", p, "--json"]));
+    let d = &v["designs"][2];
+    assert!(number(d, "run_seconds") >= 0.4, "{d}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn cancel_sets_an_abandoned_designs_pending_runs_aside_until_a_design_asks_again() {
     let dir = scratch("cli-campaign", "cancel");
     let path = study(&dir, &[(0, 1.0), (0, 2.0)], "max_parallel = 2");

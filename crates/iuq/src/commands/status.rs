@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 
-use iuq_study::campaign_runs::{CampaignStatus, load_study};
+use iuq_study::campaign_runs::{CampaignStatus, human_duration, load_study};
 
 use crate::report_output::{emit, short};
 
@@ -77,6 +77,13 @@ pub fn run(args: &StatusArgs, json: bool) -> Result<()> {
                     c.pending,
                     c.queued + c.running
                 ));
+                if let (Some(first), Some(last)) = (d.first_started_at, d.last_finished_at) {
+                    text.push_str(&format!(
+                        "; run time {} over {}",
+                        human_duration(d.run_seconds),
+                        human_duration(last - first)
+                    ));
+                }
             }
         }
         if !failures.is_empty() {
