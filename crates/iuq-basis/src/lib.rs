@@ -42,6 +42,7 @@
 #![warn(missing_docs)]
 
 pub mod annealing;
+pub mod batch_mixture;
 pub mod checkpoint;
 pub mod curve_model;
 pub mod diagnostics;

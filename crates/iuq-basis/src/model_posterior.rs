@@ -13,7 +13,10 @@
 //!    surrogate posterior that is shifted, too wide or too narrow differs from the model's by
 //!    exactly such an r), the corrected surrogate's posterior is sampled by BASIS (surrogate
 //!    evaluations only), and a new batch of `samples` members of it is run through the model;
-//!    from here on the corrected surrogate is the surrogate (r becomes r − r̂). At most
+//!    both batches are then weighed as one sample of the mixture of the two posteriors
+//!    ([`crate::batch_mixture`]), which is the estimate when its k̂ (or nearly equal weights)
+//!    holds; otherwise the stages go on from the corrected batch alone, with the corrected
+//!    surrogate as the surrogate (r becomes r − r̂). At most
 //!    `corrections` times (0 or 1): this costs one batch where a bridge costs one per stage.
 //!    A corrected posterior that keeps less than half its population inside the batch's box
 //!    ([`MIN_CORRECTED_WITHIN_BATCH`]) is refused before any model run: the fit extrapolates
@@ -74,11 +77,14 @@ use iuq_core::random::{StreamRng, stream};
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
 use crate::annealing::{log_evidence_increment, next_step};
+use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 use crate::member_selection::nested_selection;
 use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch};
-use crate::pareto_smoothing::{normalised_weights, pareto_k_threshold, pareto_smooth};
+use crate::pareto_smoothing::{
+    ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
+};
 use crate::proposal::Proposal;
 use crate::pseudo_marginal::{Members, noisy_estimate};
 use crate::quadratic_regression::QuadraticFit;
@@ -366,8 +372,8 @@ pub struct ModelPosterior {
     pub samples: Vec<Vec<f64>>,
     /// Their normalised smoothed log-weights.
     pub log_weights: Vec<f64>,
-    /// The final stage's raw log-weights Δβ·r (before smoothing); for a noisy model after a
-    /// correction, the mixture weights of both batches ([`crate::pseudo_marginal`]).
+    /// The final stage's raw log-weights Δβ·r (before smoothing); with `both_batches`, the
+    /// mixture weights of both batches ([`crate::batch_mixture`]).
     pub raw_log_weights: Vec<f64>,
     /// ℓ_m of each member (−∞ for a failed run).
     pub model_log_likelihood: Vec<f64>,
@@ -421,6 +427,12 @@ pub struct ModelPosterior {
     /// ([`MIN_CORRECTED_WITHIN_BATCH`]). `None` when none was wanted or it was made.
     #[serde(default)]
     pub correction_not_made: Option<String>,
+    /// Whether the final population is both batches of a correction, weighed as one sample of
+    /// the mixture of the surrogate's posterior and the corrected one
+    /// ([`crate::batch_mixture`]; always after a noisy model's correction, after a reproducible
+    /// model's when their k̂ holds), rather than the corrected batch's stages alone.
+    #[serde(default)]
+    pub both_batches: bool,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.
@@ -582,6 +594,9 @@ pub fn model_posterior(
     let mut corrections = Vec::new();
     let mut correction_not_made = None;
     let corrected_holder: CorrectedLikelihood<'_, BoxedCorrection>;
+    // After a correction: both batches as one sample of ½q + ½q_c, tried before the stages.
+    let mut mixture: Option<(Members, Vec<f64>)> = None;
+    let mut both_batches = false;
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
         let r: Vec<f64> = log_ratios(&lm, &ls);
@@ -669,6 +684,12 @@ pub fn model_posterior(
                     corrected_holder = candidate;
                     surrogate = &corrected_holder;
                     log_evidence_ratio += state.log_evidence - population.log_evidence;
+                    let first = Members {
+                        theta: theta.clone(),
+                        surrogate: ls.clone(),
+                        model: lm.clone(),
+                        prior: lp.clone(),
+                    };
                     let chosen = nested_selection(
                         &mut stream(settings.seed, STREAM_BASE, 1),
                         state.samples.len(),
@@ -687,6 +708,21 @@ pub fn model_posterior(
                     failures += batch_failures;
                     best.offer(&theta, &lm, &lp);
                     stage_evaluations = (s, batch_failures);
+                    let g = |x: &[f64]| (corrected_holder.correction)(x);
+                    let on_population: Vec<f64> = population.samples.iter().map(|x| g(x)).collect();
+                    let on_corrected: Vec<f64> = state.samples.iter().map(|x| g(x)).collect();
+                    let second = Members {
+                        theta: theta.clone(),
+                        surrogate: theta.iter().zip(&ls).map(|(x, l)| l - g(x)).collect(),
+                        model: lm.clone(),
+                        prior: lp.clone(),
+                    };
+                    mixture = Some(mixture_of_batches(
+                        first,
+                        second,
+                        &g,
+                        log_normalising_ratio(&on_population, &on_corrected),
+                    ));
                 }
                 None if !refused.is_empty() => {
                     let reason = format!(
@@ -726,11 +762,32 @@ pub fn model_posterior(
         threshold = estimate.threshold;
         mismatch = estimate.mismatch;
         correction_not_made = estimate.not_corrected;
+        both_batches = !corrections.is_empty();
         (
             estimate.raw,
             estimate.smoothing.log_weights,
             estimate.smoothing.pareto_k,
             estimate.stop,
+        )
+    } else if let Some((members, raw, smoothing, stage)) =
+        mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, failures))
+    {
+        log_evidence_ratio = log_evidence_increment(&raw, 1.0, largest_finite(&raw));
+        threshold = pareto_k_threshold(raw.len());
+        both_batches = true;
+        on_event(ModelPosteriorEvent::Stage(&stage));
+        stages.push(stage);
+        Members {
+            theta,
+            surrogate: ls,
+            model: lm,
+            prior: lp,
+        } = members;
+        (
+            raw,
+            smoothing.log_weights,
+            smoothing.pareto_k,
+            ModelPosteriorStop::Certified,
         )
     } else {
         loop {
@@ -989,9 +1046,43 @@ pub fn model_posterior(
         corrections,
         proposal_mismatch: mismatch,
         correction_not_made,
+        both_batches,
         model_evaluations: evaluations,
         failures,
     })
+}
+
+/// Both batches' mixture weights ([`crate::batch_mixture`]) as the model posterior's one full
+/// step, with its stage record, when their k̂ holds at the threshold of their joint size (or
+/// they are nearly equal); `None` otherwise (the stages go on from the corrected batch).
+fn certified_mixture(
+    members: Members,
+    raw: Vec<f64>,
+    batch: usize,
+    failures: usize,
+) -> Option<(Members, Vec<f64>, ParetoSmoothing, ModelPosteriorStage)> {
+    if !largest_finite(&raw).is_finite() {
+        return None;
+    }
+    let smoothing = pareto_smooth(&raw);
+    let cv = coefficient_of_variation(&raw);
+    if smoothing.pareto_k > pareto_k_threshold(raw.len()) && cv > NEARLY_EQUAL_CV {
+        return None;
+    }
+    let stage = ModelPosteriorStage {
+        stage: 1,
+        beta: 1.0,
+        step: 1.0,
+        cv,
+        pareto_k: smoothing.pareto_k,
+        cv_step: 1.0,
+        effective_sample_size: effective_sample_size(&normalised_weights(&smoothing.log_weights)),
+        model_evaluations: 2 * batch,
+        failures,
+        screen_acceptance: None,
+        confirm_acceptance: None,
+    };
+    Some((members, raw, smoothing, stage))
 }
 
 /// The largest finite value (−∞ when there is none: every model run failed).

@@ -19,7 +19,7 @@
 //!    q_c ∝ q·e^g sampled by BASIS (surrogate evaluations only), and a
 //!    second batch of S members of q_c run. Both batches are weighed as one sample of the
 //!    mixture ½q + ½q_c (the deterministic-mixture, or balance-heuristic, weights of multiple
-//!    importance sampling; Veach & Guibas 1995, Owen & Zhou 2000):
+//!    importance sampling; Veach & Guibas 1995, Owen & Zhou 2000; [`crate::batch_mixture`]):
 //!    w = L̂·π / (½q + ½q_c) ∝ exp(r̂ − ln(½(1 + e^{g − ln c}))), r̂ = ℓ̂_m − ℓ_s,
 //!    c = Z_c/Z_s, estimated by bridge sampling between the surrogate population and the
 //!    corrected one (Meng & Wong 1996; no model runs). No run is wasted, and the weights' second
@@ -46,6 +46,7 @@ use iuq_core::random::stream;
 use iuq_core::weighted_statistics::effective_sample_size;
 
 use crate::annealing::log_evidence_increment;
+use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
@@ -90,15 +91,6 @@ pub(crate) struct NoisyEstimate {
     pub(crate) evaluations: usize,
     /// Of those, failed runs.
     pub(crate) failures: usize,
-}
-
-/// ln(e^a + e^b) without overflow.
-fn log_add_exp(a: f64, b: f64) -> f64 {
-    let m = a.max(b);
-    if m == f64::NEG_INFINITY {
-        return m;
-    }
-    m + ((a - m).exp() + (b - m).exp()).ln()
 }
 
 /// The second batch's members, drawn from the corrected surrogate's posterior q_c ∝ q·e^g, with
@@ -151,42 +143,6 @@ fn corrected_proposal(
         prior: chosen.iter().map(|&i| state.log_prior[i]).collect(),
         log_normalising_ratio: log_normalising_ratio(&on_population, &on_corrected),
     })
-}
-
-/// ln(Z_c/Z_s) for q_c ∝ q·e^g from g at draws of q (`on_q`) and of q_c (`on_corrected`): the
-/// optimal bridge sampling estimate of Meng & Wong (1996, eq. 4.1), iterated from the
-/// importance estimate ln mean_q e^g to a fixed point. Unlike that importance estimate, which
-/// samples q_c from the narrower q exactly where a correction widens it (its variance is
-/// infinite once an axis of q_c is √2 times q's), the bridge weighs both sides.
-fn log_normalising_ratio(on_q: &[f64], on_corrected: &[f64]) -> f64 {
-    let (n_q, n_c) = (on_q.len() as f64, on_corrected.len() as f64);
-    let (ln_s_c, ln_s_q) = ((n_c / (n_q + n_c)).ln(), (n_q / (n_q + n_c)).ln());
-    let log_mean = |values: &mut dyn Iterator<Item = f64>, n: f64| -> f64 {
-        crate::pareto_smoothing::log_sum_exp(&values.collect::<Vec<f64>>()) - n.ln()
-    };
-    let mut rho = log_mean(&mut on_q.iter().copied(), n_q);
-    for _ in 0..1000 {
-        // (1/n_q) Σ_q e^g/(s_c e^g + s_q e^ρ) over (1/n_c) Σ_c 1/(s_c e^g + s_q e^ρ).
-        let numerator = log_mean(
-            &mut on_q
-                .iter()
-                .map(|&g| g - log_add_exp(ln_s_c + g, ln_s_q + rho)),
-            n_q,
-        );
-        let denominator = log_mean(
-            &mut on_corrected
-                .iter()
-                .map(|&g| -log_add_exp(ln_s_c + g, ln_s_q + rho)),
-            n_c,
-        );
-        let next = numerator - denominator;
-        let converged = (next - rho).abs() < 1e-12;
-        rho = next;
-        if converged || !rho.is_finite() {
-            break;
-        }
-    }
-    rho
 }
 
 /// The pseudo-marginal estimate from the `first` batch (drawn from `population`; `failures` of
@@ -280,17 +236,12 @@ pub(crate) fn noisy_estimate(
             };
             let second_failures = second.model.iter().filter(|v| !v.is_finite()).count();
             best.offer(&second.theta, &second.model, &second.prior);
-            let mut members = first;
-            members.theta.extend(second.theta);
-            members.surrogate.extend(second.surrogate);
-            members.model.extend(second.model);
-            members.prior.extend(second.prior);
-            let log_c = proposal.log_normalising_ratio;
-            let raw: Vec<f64> = log_ratios(&members.model, &members.surrogate)
-                .into_iter()
-                .zip(&members.theta)
-                .map(|(r, x)| r - (log_add_exp(0.0, g.log_ratio(x) - log_c) - 2f64.ln()))
-                .collect();
+            let (members, raw) = mixture_of_batches(
+                first,
+                second,
+                &|x: &[f64]| g.log_ratio(x),
+                proposal.log_normalising_ratio,
+            );
             (members, raw, Some(correction), s, second_failures)
         }
         _ => (first, r, None, 0, 0),
@@ -337,35 +288,4 @@ pub(crate) fn noisy_estimate(
         evaluations,
         failures,
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use iuq_core::random::stream;
-    use rand_distr::{Distribution, StandardNormal};
-
-    #[test]
-    fn bridge_sampling_gives_the_ratio_of_normalising_constants() {
-        // q = N(0, 1), q_c ∝ q·e^g with g = x²·(1/2 − 1/(2·2.25)): q_c = N(0, 1.5²) up to its
-        // constant, Z_c/Z_s = 1.5. The importance estimate from q alone has infinite variance
-        // here (q_c's std is above √2 times q's); the bridge is within 0.02 with 20,000 draws
-        // each.
-        let a = 0.5 - 1.0 / (2.0 * 2.25);
-        let mut rng = stream(1, 9, 0);
-        let on_q: Vec<f64> = (0..20_000)
-            .map(|_| {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                a * z * z
-            })
-            .collect();
-        let on_corrected: Vec<f64> = (0..20_000)
-            .map(|_| {
-                let z: f64 = StandardNormal.sample(&mut rng);
-                a * (1.5 * z).powi(2)
-            })
-            .collect();
-        let rho = log_normalising_ratio(&on_q, &on_corrected);
-        assert!((rho - 1.5f64.ln()).abs() < 0.02, "{rho}");
-    }
 }

@@ -212,6 +212,11 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
     assert_eq!(result.corrections.len(), 1);
     assert!(result.corrections[0].pareto_k_before > result.pareto_k_threshold);
     assert_eq!(result.model_evaluations, 800);
+    // Both batches, weighed as one sample of the mixture of the two posteriors, hold at once:
+    // 800 members, no bridge.
+    assert!(result.both_batches);
+    assert_eq!(result.samples.len(), 800);
+    assert_eq!(result.stages.len(), 1);
     assert_matches(&result, &mean, &std, "narrow surrogate, corrected");
     // The model's evidence: Z_m/Z_s = Π s_k/(0.5 s_k) = 4 (ln 4 = 1.386), within the
     // estimate's spread (CV/√S with CV ≲ 1: 0.05; 4 of those).
@@ -400,6 +405,13 @@ fn a_correction_that_would_move_the_posterior_beyond_its_batch_is_refused_before
     let sd1 = 8.0 * (1.0 - 2.0 * a * 0.182649 / (2.0 * 0.894350 - 1.0)).sqrt();
     assert!(result.certified(), "{}", result.stop);
     assert_matches(&result, &[0.0, 0.0], &[1.0, sd1], "wide model, refused fit");
+    // Here both batches together do not hold (the model's x1 is 8 times wider than the
+    // surrogate's): the stages went on from the corrected batch alone.
+    if !result.corrections.is_empty() {
+        assert!(!result.both_batches);
+        assert!(result.stages.len() > 1, "{:?}", result.stages);
+        assert_eq!(result.samples.len(), 400);
+    }
 }
 
 /// SplitMix64: a deterministic hash of a point's bits, the "irregular part" of a chaotic model.

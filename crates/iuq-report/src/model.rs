@@ -131,6 +131,10 @@ pub struct ModelPosteriorReport {
     /// Whether the correction made was the moment-matched one (else a least-squares fit).
     #[serde(default)]
     pub correction_moment_matched: bool,
+    /// Whether the population is both batches of a correction, weighed as one sample of the
+    /// mixture of the two posteriors (else, after a correction, the corrected batch's stages).
+    #[serde(default)]
+    pub both_batches: bool,
     /// Corrections tried and refused before the one made, each with its reason.
     #[serde(default)]
     pub corrections_refused: Vec<String>,

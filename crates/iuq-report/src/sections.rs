@@ -500,10 +500,10 @@ pub(crate) fn build_sections(
     Ok(sections)
 }
 
-/// Members of the first batch: all of them, or half after a noisy model's correction (its second
-/// batch has as many).
+/// Members of the first batch: all of them, or half when both batches of a correction are the
+/// population (the second batch has as many).
 fn first_batch(m: &crate::model::ModelPosteriorReport) -> usize {
-    if m.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
+    if m.both_batches || m.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
         m.samples / 2
     } else {
         m.samples
@@ -527,8 +527,17 @@ fn correction_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         } else {
             "by a quadratic fit of the difference of the two log-likelihoods"
         };
+        let then = if m.both_batches {
+            format!(
+                " Both batches, weighed as one sample of the mixture of the {surrogate}'s posterior and the corrected one, held: they are the estimate ({} members, no bridge).",
+                m.samples
+            )
+        } else {
+            " Both batches together did not hold, so the stages went on from the corrected batch."
+                .to_string()
+        };
         format!(
-            " The first batch's weights did not hold in one stage, so the {surrogate} was corrected {how}{refused} and a new batch drawn from the corrected {surrogate}'s posterior."
+            " The first batch's weights did not hold in one stage, so the {surrogate} was corrected {how}{refused} and a new batch drawn from the corrected {surrogate}'s posterior.{then}"
         )
     } else if let Some(reason) = &m.correction_not_made {
         format!(

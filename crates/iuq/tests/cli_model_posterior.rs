@@ -84,7 +84,12 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     let v = pipeline(&study, &out, &[]);
     let m = &v["model_posterior"];
     assert_eq!(m["certified"], true, "{m}");
-    assert_eq!(m["samples"], 300);
+    // The first batch called for a correction; its batch and the first, weighed as one
+    // sample of the mixture of both posteriors, hold: 600 members, no bridge.
+    assert_eq!(m["corrections"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["both_batches"], true, "{m}");
+    assert_eq!(m["samples"], 600);
+    assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
     assert!(m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap());
     // The closed-form curve repeats under a nudge of its parameters: the probe's 4 members
     // left the method as it is.
@@ -155,6 +160,12 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["report"]["posteriors"].as_array().unwrap().len(), 2);
     assert_eq!(report["report"]["posteriors"][1]["source"], "model");
+    let html = std::fs::read_to_string(out.join("report.html")).unwrap();
+    assert!(
+        html.contains("Both batches, weighed as one sample of the mixture")
+            && html.contains("600 members, no bridge"),
+        "the report says the estimate is both batches'"
+    );
 
     // A rerun reuses every stored run and gives the same posterior, bit for bit.
     let again = pipeline(&study, &dir.join("again"), &[]);

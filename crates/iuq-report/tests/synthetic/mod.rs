@@ -346,6 +346,7 @@ pub fn synthetic_report(
             }),
             correction_not_made: None,
             correction_moment_matched: false,
+            both_batches: true,
             corrections_refused: Vec::new(),
             replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]

@@ -223,6 +223,7 @@ impl ModelPosteriorOutcome {
             "corrections": p.corrections,
             "proposal_mismatch": p.proposal_mismatch,
             "correction_not_made": p.correction_not_made,
+            "both_batches": p.both_batches,
             "pseudo_marginal": self.pseudo_marginal,
             "replicates": self.replicates,
             "replicate_runs": self.replicate_runs,

@@ -280,6 +280,7 @@ fn model_posterior_report(
         }),
         correction_not_made: p.correction_not_made.clone(),
         correction_moment_matched: p.corrections.iter().any(|c| c.moment_matched),
+        both_batches: p.both_batches,
         corrections_refused: p
             .corrections
             .iter()
