@@ -16,6 +16,7 @@
 //! model's is this when its k̂ holds, and the stages from the corrected batch otherwise
 //! ([`crate::model_posterior`]).
 
+use crate::model_posterior::log_ratios;
 use crate::pareto_smoothing::log_sum_exp;
 use crate::pseudo_marginal::Members;
 
@@ -76,19 +77,10 @@ pub(crate) fn mixture_of_batches(
     first.surrogate.extend(second.surrogate);
     first.model.extend(second.model);
     first.prior.extend(second.prior);
-    let raw = first
-        .model
-        .iter()
-        .zip(&first.surrogate)
+    let raw = log_ratios(&first.model, &first.surrogate)
+        .into_iter()
         .zip(&first.theta)
-        .map(|((m, s), x)| {
-            let r = if m.is_finite() {
-                m - s
-            } else {
-                f64::NEG_INFINITY
-            };
-            r - (log_add_exp(0.0, g(x) - log_c) - 2f64.ln())
-        })
+        .map(|(r, x)| r - (log_add_exp(0.0, g(x) - log_c) - 2f64.ln()))
         .collect();
     (first, raw)
 }
