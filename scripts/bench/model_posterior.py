@@ -257,6 +257,9 @@ def main():
     parser.add_argument("--quick", action="store_true", help="one seed per setting")
     parser.add_argument("--problems", default=",".join(PROBLEMS))
     parser.add_argument("--work", default=None)
+    parser.add_argument("--only-iuq", action="store_true",
+                        help="iuq's figure only (after a change to the model posterior; the references "
+                             "do not depend on it)")
     args = parser.parse_args()
     if not os.path.exists(IUQ):
         sys.exit(f"{IUQ} not found: run `cargo build --release -p iuq` first")
@@ -267,9 +270,13 @@ def main():
     for problem in args.problems.split(","):
         exact = exact_posterior(work, problem)
         s, ev, design, detail = bench_iuq(work, problem, exact, [50, 100, 200, 400], seeds)
-        b0 = bench_basis(work, problem, exact, 0, [250, 500, 1000, 2000, 4000, 8000, 16000], seeds)
-        b10 = bench_basis(work, problem, exact, 10, [250, 500, 1000, 2000, 4000, 8000], seeds)
-        da = bench_tinyda(work, problem, exact, [1000, 2000, 4000, 8000, 16000, 32000], seeds)
+        if args.only_iuq:
+            b0 = b10 = (None, None)
+            da = (None, None, "not run (--only-iuq)")
+        else:
+            b0 = bench_basis(work, problem, exact, 0, [250, 500, 1000, 2000, 4000, 8000, 16000], seeds)
+            b10 = bench_basis(work, problem, exact, 10, [250, 500, 1000, 2000, 4000, 8000], seeds)
+            da = bench_tinyda(work, problem, exact, [1000, 2000, 4000, 8000, 16000, 32000], seeds)
         rows.append((problem, s, ev, design, b0, b10, da, detail))
         print(f"{problem}: iuq S = {s} ({ev} evaluations + {design} design runs); "
               f"BASIS burn 0 N = {b0[0]} ({b0[1]}); burn 10 N = {b10[0]} ({b10[1]}); "
