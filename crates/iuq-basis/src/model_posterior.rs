@@ -266,6 +266,33 @@ pub struct ModelPosteriorStage {
     pub confirm_acceptance: Option<f64>,
 }
 
+impl ModelPosteriorStage {
+    /// The record of one full step (β from 0 to 1) with the weights `smoothing` of raw CV `cv`:
+    /// a noisy model's estimate, or both batches of a correction weighed together.
+    pub(crate) fn full_step(
+        smoothing: &ParetoSmoothing,
+        cv: f64,
+        model_evaluations: usize,
+        failures: usize,
+    ) -> Self {
+        Self {
+            stage: 1,
+            beta: 1.0,
+            step: 1.0,
+            cv,
+            pareto_k: smoothing.pareto_k,
+            cv_step: 1.0,
+            effective_sample_size: effective_sample_size(&normalised_weights(
+                &smoothing.log_weights,
+            )),
+            model_evaluations,
+            failures,
+            screen_acceptance: None,
+            confirm_acceptance: None,
+        }
+    }
+}
+
 /// A correction of the surrogate: the first batch's weights would not hold in one stage (or,
 /// for a noisy model, showed the surrogate off), so the surrogate's log-likelihood became
 /// ℓ_s + r̂ (r̂ a quadratic fit of the batch's r, or for a noisy model the moment-matched
@@ -1069,19 +1096,7 @@ fn certified_mixture(
     if smoothing.pareto_k > pareto_k_threshold(raw.len()) && cv > NEARLY_EQUAL_CV {
         return None;
     }
-    let stage = ModelPosteriorStage {
-        stage: 1,
-        beta: 1.0,
-        step: 1.0,
-        cv,
-        pareto_k: smoothing.pareto_k,
-        cv_step: 1.0,
-        effective_sample_size: effective_sample_size(&normalised_weights(&smoothing.log_weights)),
-        model_evaluations: 2 * batch,
-        failures,
-        screen_acceptance: None,
-        confirm_acceptance: None,
-    };
+    let stage = ModelPosteriorStage::full_step(&smoothing, cv, 2 * batch, failures);
     Some((members, raw, smoothing, stage))
 }
 

@@ -43,7 +43,6 @@
 
 use iuq_core::ParameterSpace;
 use iuq_core::random::stream;
-use iuq_core::weighted_statistics::effective_sample_size;
 
 use crate::annealing::log_evidence_increment;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
@@ -58,9 +57,7 @@ use crate::model_posterior::{
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
 };
-use crate::pareto_smoothing::{
-    ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
-};
+use crate::pareto_smoothing::{ParetoSmoothing, pareto_k_threshold, pareto_smooth};
 use crate::sampler::{Basis, Silent};
 use crate::settings::BasisSettings;
 
@@ -261,19 +258,8 @@ pub(crate) fn noisy_estimate(
     } else {
         ModelPosteriorStop::NoisyWeightsTail
     };
-    let stage = ModelPosteriorStage {
-        stage: 1,
-        beta: 1.0,
-        step: 1.0,
-        cv,
-        pareto_k: smoothing.pareto_k,
-        cv_step: 1.0,
-        effective_sample_size: effective_sample_size(&normalised_weights(&smoothing.log_weights)),
-        model_evaluations: s + evaluations,
-        failures: first_failures + failures,
-        screen_acceptance: None,
-        confirm_acceptance: None,
-    };
+    let stage =
+        ModelPosteriorStage::full_step(&smoothing, cv, s + evaluations, first_failures + failures);
     Ok(NoisyEstimate {
         log_evidence_ratio: log_evidence_increment(&raw, 1.0, max_raw),
         members,
