@@ -18,9 +18,9 @@
 //!    holds; otherwise the stages go on from the corrected batch alone, with the corrected
 //!    surrogate as the surrogate (r becomes r − r̂). At most
 //!    `corrections` times (0 or 1): this costs one batch where a bridge costs one per stage.
-//!    A corrected posterior that keeps less than half its population inside the batch's box
-//!    ([`MIN_CORRECTED_WITHIN_BATCH`]) is refused before any model run: the fit extrapolates
-//!    there. The moment-matched log-ratio of the batch's weights
+//!    A corrected posterior that keeps less than half its population inside the batch's range
+//!    of some parameter ([`MIN_CORRECTED_WITHIN_BATCH`]) is refused before any model run: the
+//!    fit extrapolates there. The moment-matched log-ratio of the batch's weights
 //!    ([`crate::moment_matching::GaussianLogRatio`], bounded by construction) is then tried in
 //!    its place; if it is refused too, the stages go on from the first batch.
 //! 3. Stage k from β: the step Δβ by the coefficient-of-variation rule of BASIS (CV of
@@ -99,10 +99,14 @@ use crate::settings::Resampling;
 /// itself, and a few members with a large r would hold k̂ up however small the step.
 pub const NEARLY_EQUAL_CV: f64 = 0.1;
 
-/// A correction whose posterior keeps less than this share of its population inside the box of
-/// the batch it was fitted on is not made: most of its mass would lie where no run informed the
-/// fit, and a second batch there is spent on the fit's extrapolation (the stages go on from the
-/// first batch instead, exactly, at the price of bridges).
+/// A correction whose posterior keeps less than this share of its population inside the range
+/// (minimum to maximum) of some parameter over the batch it was fitted on is not made: most of
+/// its mass would lie where no run informed the fit, and a second batch there is spent on the
+/// fit's extrapolation (the stages go on from the first batch instead, exactly, at the price of
+/// bridges). Parameter by parameter, not the joint box: a correct correction widening a narrow
+/// surrogate posterior in every one of d parameters keeps about p^d inside the box when it
+/// keeps p inside each range (in 10-D, 0.92 each and 0.43 jointly: refused, and the stages' std
+/// came out 8–16 % narrow), whereas an extrapolating fit leaves some range altogether.
 pub const MIN_CORRECTED_WITHIN_BATCH: f64 = 0.5;
 
 /// The smallest population: k̂ needs a tail of 5 weights, ⌈min(0.2·S, 3√S)⌉ ≥ 5 from S = 21.
@@ -690,12 +694,13 @@ pub fn model_posterior(
                         continue;
                     }
                 };
-                let within = share_within_box(&state.samples, &theta);
+                let (parameter, within) = least_share_within_ranges(&state.samples, &theta);
                 if within < MIN_CORRECTED_WITHIN_BATCH {
                     refused.push(format!(
-                        "{kind}: its posterior keeps {:.0} % of its population inside the box of \
-                         the batch it was fitted on (at least {:.0} % needed)",
+                        "{kind}: its posterior keeps {:.0} % of its population inside the range \
+                         of {} over the batch it was fitted on (at least {:.0} % needed)",
                         100.0 * within,
+                        space.names()[parameter],
                         100.0 * MIN_CORRECTED_WITHIN_BATCH
                     ));
                     continue;
@@ -1100,32 +1105,28 @@ fn certified_mixture(
     Some((members, raw, smoothing, stage))
 }
 
-/// The largest finite value (−∞ when there is none: every model run failed).
-/// The share of `samples` inside the box (coordinate-wise minimum to maximum) of `batch`.
-fn share_within_box(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> f64 {
+/// The parameter whose range over `batch` (minimum to maximum) holds the smallest share of
+/// `samples`, and that share (parameter 0 and share 0 for an empty batch).
+fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
     let Some(d) = batch.first().map(Vec::len) else {
-        return 0.0;
+        return (0, 0.0);
     };
-    let bounds: Vec<(f64, f64)> = (0..d)
+    (0..d)
         .map(|k| {
-            batch
+            let (lo, hi) = batch
                 .iter()
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
                     (lo.min(t[k]), hi.max(t[k]))
-                })
+                });
+            let inside = samples.iter().filter(|t| t[k] >= lo && t[k] <= hi).count();
+            (k, inside as f64 / samples.len().max(1) as f64)
         })
-        .collect();
-    let inside = samples
-        .iter()
-        .filter(|t| {
-            t.iter()
-                .zip(&bounds)
-                .all(|(x, (lo, hi))| x >= lo && x <= hi)
+        .fold((0, f64::INFINITY), |least, (k, share)| {
+            if share < least.1 { (k, share) } else { least }
         })
-        .count();
-    inside as f64 / samples.len().max(1) as f64
 }
 
+/// The largest finite value (−∞ when there is none: every model run failed).
 pub(crate) fn largest_finite(values: &[f64]) -> f64 {
     values
         .iter()

@@ -288,14 +288,14 @@ fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
         m.corrections = 1;
         m.correction_moment_matched = true;
         m.corrections_refused =
-            vec!["the least-squares fit of r: its posterior keeps 0 % of its population inside the box of the batch it was fitted on (at least 50 % needed)".into()];
+            vec!["the least-squares fit of r: its posterior keeps 0 % of its population inside the range of kLink over the batch it was fitted on (at least 50 % needed)".into()];
     }
     let dir = fresh_dir("smooth-correction");
     write_report(&report, &dir).unwrap();
     let text = std::fs::read_to_string(dir.join("report.html"))
         .unwrap()
         .replace("&#39;", "'");
-    assert!(text.contains("so the GP surrogate was corrected towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times) (first tried and refused: the least-squares fit of r: its posterior keeps 0 % of its population inside the box"), "{text}");
+    assert!(text.contains("so the GP surrogate was corrected towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times) (first tried and refused: the least-squares fit of r: its posterior keeps 0 % of its population inside the range of kLink"), "{text}");
 
     let m = report.model_posterior.as_mut().unwrap();
     m.corrections = 0;
