@@ -335,6 +335,13 @@ def test_killed_and_called_again_it_repeats_no_finished_run_and_gives_the_same_r
     assert json.loads(again.stdout.splitlines()[-1]) == json.loads(uninterrupted.stdout.splitlines()[-1])
 
 
+def _default_sigint() -> None:
+    """In the child before exec: SIGINT back to its default, as from a terminal. A shell that
+    starts the tests as a background job without job control (`nohup .ci/run &` from a script)
+    hands its children SIGINT ignored, and Python then installs no KeyboardInterrupt handler."""
+    signal.signal(signal.SIGINT, signal.SIG_DFL)
+
+
 def _interrupt_within_a_second(process, store: Path, timeout: float) -> dict:
     """Send SIGINT to `process`; check that it raised KeyboardInterrupt within a second and left
     its store intact; the store's run counts by status."""
@@ -358,7 +365,8 @@ def test_ctrl_c_interrupts_within_a_second_and_leaves_the_store_consistent(tmp_p
     store, log = tmp_path / "store", tmp_path / "run.log"
     # A model call takes 2 s: the interrupt arrives inside the user's function.
     process = subprocess.Popen(
-        [sys.executable, str(script), str(store), str(log), "2"], stderr=subprocess.PIPE, text=True
+        [sys.executable, str(script), str(store), str(log), "2"],
+        stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
     )
     deadline = time.time() + 120
     while len(_logged(log)) < 3 and process.poll() is None and time.time() < deadline:
@@ -396,7 +404,10 @@ def test_ctrl_c_interrupts_the_engine_within_a_second(tmp_path):
     script = tmp_path / "calibrate_engine.py"
     script.write_text(ENGINE_SCRIPT)
     store, log = tmp_path / "store", tmp_path / "calls.log"
-    process = subprocess.Popen([sys.executable, str(script), str(store), str(log)], stderr=subprocess.PIPE, text=True)
+    process = subprocess.Popen(
+        [sys.executable, str(script), str(store), str(log)],
+        stderr=subprocess.PIPE, text=True, preexec_fn=_default_sigint,
+    )
     deadline = time.time() + 300
     while sum(map(int, log.read_text().split())) < 400 if log.exists() else True:
         assert process.poll() is None and time.time() < deadline, "the initial runs did not finish"
