@@ -41,6 +41,7 @@
 
 #![warn(missing_docs)]
 
+pub mod ancestral_variance;
 pub mod annealing;
 pub mod batch_mixture;
 pub mod checkpoint;
@@ -61,6 +62,7 @@ pub mod sampler;
 pub mod settings;
 pub mod summary;
 
+pub use ancestral_variance::{AncestralErrors, ancestral_errors};
 pub use curve_model::CurveModel;
 pub use diagnostics::StageDiagnostics;
 pub use error::{BasisError, Result};

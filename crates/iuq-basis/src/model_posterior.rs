@@ -76,6 +76,7 @@ use iuq_core::ParameterSpace;
 use iuq_core::random::{StreamRng, stream};
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
+use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::{BasisError, Result};
@@ -426,10 +427,16 @@ pub struct ModelPosterior {
     pub mean: Vec<f64>,
     /// Weighted posterior std.
     pub std: Vec<f64>,
-    /// Monte Carlo standard error of each mean.
+    /// Monte Carlo standard error of each mean: self-normalised importance sampling's, its
+    /// terms summed within each group of members that descend from one ancestor through a
+    /// bridge's resampling ([`crate::ancestral_variance`]; without a bridge, member by member).
     pub mcse_mean: Vec<f64>,
-    /// Monte Carlo standard error of each std.
+    /// Monte Carlo standard error of each std (the delta method, grouped as `mcse_mean`).
     pub mcse_std: Vec<f64>,
+    /// Distinct ancestors of the weighted members (S without a bridge; a bridge's resampling
+    /// leaves fewer, and with very few the standard errors are unreliable).
+    #[serde(default)]
+    pub ancestors: usize,
     /// The quantiles' probabilities.
     pub probabilities: Vec<f64>,
     /// `quantiles[k][q]`: weighted quantile q of parameter k.
@@ -769,6 +776,9 @@ pub fn model_posterior(
         }
     }
     let mut mismatch = None;
+    // Each member's ancestor in the batch the stages started from (itself until a bridge
+    // resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
+    let mut ancestor: Vec<usize> = (0..theta.len()).collect();
     let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
         let first = Members {
             theta: std::mem::take(&mut theta),
@@ -787,6 +797,7 @@ pub fn model_posterior(
             model: lm,
             prior: lp,
         } = estimate.members;
+        ancestor = (0..theta.len()).collect();
         evaluations += estimate.evaluations;
         failures += estimate.failures;
         corrections.extend(estimate.correction);
@@ -815,6 +826,7 @@ pub fn model_posterior(
             model: lm,
             prior: lp,
         } = members;
+        ancestor = (0..theta.len()).collect();
         (
             raw,
             smoothing.log_weights,
@@ -903,8 +915,10 @@ pub fn model_posterior(
                 stream(settings.seed, stage_key, crate::sampler::RESAMPLING_STREAM);
             let counts = resample(&weights, s, Resampling::Multinomial, &mut resampling_rng);
             let mut chains: Vec<Chain> = Vec::with_capacity(s);
+            let mut descent: Vec<usize> = Vec::with_capacity(s);
             for (i, &c) in counts.iter().enumerate() {
                 for _ in 0..c {
+                    descent.push(ancestor[i]);
                     let index = chains.len() as u64;
                     chains.push(Chain {
                         theta: theta[i].clone(),
@@ -996,6 +1010,7 @@ pub fn model_posterior(
                 Some(screen_accepted as f64 / screened.max(1) as f64),
                 Some(confirm_accepted as f64 / confirmed.max(1) as f64),
             );
+            ancestor = descent;
             theta = chains.iter().map(|c| c.theta.clone()).collect();
             ls = chains.iter().map(|c| c.surrogate).collect();
             lm = chains.iter().map(|c| c.model).collect();
@@ -1009,37 +1024,17 @@ pub fn model_posterior(
             mean[k] += w * t[k];
         }
     }
-    let mut std = vec![0.0; d];
-    let mut mcse_mean = vec![0.0; d];
-    for k in 0..d {
-        let var: f64 = theta
-            .iter()
-            .zip(&weights)
-            .map(|(t, w)| w * (t[k] - mean[k]).powi(2))
-            .sum();
-        std[k] = var.sqrt();
-        mcse_mean[k] = theta
-            .iter()
-            .zip(&weights)
-            .map(|(t, w)| (w * (t[k] - mean[k])).powi(2))
-            .sum::<f64>()
-            .sqrt();
-    }
-    let mcse_std: Vec<f64> = (0..d)
+    let std: Vec<f64> = (0..d)
         .map(|k| {
-            let var = std[k] * std[k];
-            let v: f64 = theta
+            theta
                 .iter()
                 .zip(&weights)
-                .map(|(t, w)| (w * ((t[k] - mean[k]).powi(2) - var)).powi(2))
-                .sum();
-            if std[k] > 0.0 {
-                v.sqrt() / (2.0 * std[k])
-            } else {
-                0.0
-            }
+                .map(|(t, w)| w * (t[k] - mean[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
         })
         .collect();
+    let errors = ancestral_errors(&theta, &weights, &ancestor, &mean, &std);
     let quantiles = (0..d)
         .map(|k| {
             let values: Vec<f64> = theta.iter().map(|t| t[k]).collect();
@@ -1067,8 +1062,9 @@ pub fn model_posterior(
         stop,
         mean,
         std,
-        mcse_mean,
-        mcse_std,
+        mcse_mean: errors.mean,
+        mcse_std: errors.std,
+        ancestors: errors.ancestors,
         probabilities: settings.probabilities.clone(),
         quantiles,
         map,

@@ -239,6 +239,18 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
     assert_eq!(bridged.stop, ModelPosteriorStop::Certified);
     assert!(bridged.corrections.is_empty());
     assert!(bridged.stages.len() > 1, "bridged");
+    // The bridges' resampling leaves fewer distinct ancestors than members; the standard
+    // errors are summed within their groups.
+    assert!(
+        bridged.ancestors > 1 && bridged.ancestors < bridged.samples.len(),
+        "{}",
+        bridged.ancestors
+    );
+    assert_eq!(
+        result.ancestors,
+        result.samples.len(),
+        "no bridge: every member its own"
+    );
     assert!(bridged.stages[0].pareto_k <= bridged.pareto_k_threshold);
     for stage in &bridged.stages[1..] {
         let (screen, confirm) = (

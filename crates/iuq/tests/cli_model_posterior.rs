@@ -89,6 +89,8 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     assert_eq!(m["corrections"].as_array().unwrap().len(), 1, "{m}");
     assert_eq!(m["both_batches"], true, "{m}");
     assert_eq!(m["samples"], 600);
+    // No bridge: every member is its own ancestor for the standard errors.
+    assert_eq!(m["ancestors"], 600, "{m}");
     assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
     assert!(m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap());
     // The closed-form curve repeats under a nudge of its parameters: the probe's 4 members

@@ -214,6 +214,7 @@ impl ModelPosteriorOutcome {
             "std": by_name(&p.std),
             "mcse_mean": by_name(&p.mcse_mean),
             "mcse_std": by_name(&p.mcse_std),
+            "ancestors": p.ancestors,
             "log_evidence": finite(self.log_evidence),
             "log_evidence_ratio": finite(p.log_evidence_ratio),
             "model_evaluations": p.model_evaluations,
