@@ -102,6 +102,10 @@ pub struct ModelPosteriorReport {
     pub pareto_k_threshold: f64,
     /// Effective sample size of the final weights.
     pub effective_sample_size: f64,
+    /// Distinct ancestors of the weighted members (fewer than `samples` after a bridge's
+    /// resampling; the standard errors are grouped by them).
+    #[serde(default)]
+    pub ancestors: usize,
     /// Model runs the method asked for (stored runs included).
     pub model_runs: usize,
     /// Failed model evaluations.

@@ -310,6 +310,14 @@ fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
         .unwrap()
         .replace("&#39;", "'");
     assert!(text.contains("The first batch's weights did not hold in one stage, and no correction of the GP surrogate was made: both corrections' posteriors lie outside the batch; the stages go on from the first batch."));
+    // Without a bridge the weights' chart says nothing of ancestors; after one, how many the
+    // members descend from.
+    assert!(!text.contains("ancestors)"), "{text}");
+    report.model_posterior.as_mut().unwrap().ancestors = 143;
+    let dir = fresh_dir("smooth-bridged");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html")).unwrap();
+    assert!(text.contains("; 143 ancestors)"), "{text}");
 }
 
 #[test]

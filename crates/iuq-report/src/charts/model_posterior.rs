@@ -32,10 +32,16 @@ pub(crate) struct LogWeightsChart<'a> {
 impl Chart for LogWeightsChart<'_> {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
         let r = self.report;
+        // After a bridge the members descend from fewer ancestors.
+        let ancestors = if r.ancestors > 0 && r.ancestors < r.samples {
+            format!("; {} ancestors", r.ancestors)
+        } else {
+            String::new()
+        };
         let entries = vec![(
             LegendMark::Filled(MODEL_COLOUR, 0.8),
             format!(
-                "members ({} of {}; k̂ = {:.3}, threshold {:.3}; ESS {:.0})",
+                "members ({} of {}; k̂ = {:.3}, threshold {:.3}; ESS {:.0}{ancestors})",
                 r.log_weights.len(),
                 r.samples,
                 r.pareto_k,

@@ -330,6 +330,7 @@ pub fn synthetic_report(
             pareto_k: 0.31,
             pareto_k_threshold: 0.565,
             effective_sample_size: 151.5,
+            ancestors: 200,
             model_runs: 1600,
             failures: 2,
             corrections: 1,

@@ -253,6 +253,7 @@ fn model_posterior_report(
         pareto_k: p.pareto_k,
         pareto_k_threshold: p.pareto_k_threshold,
         effective_sample_size: p.effective_sample_size,
+        ancestors: p.ancestors,
         model_runs: outcome.model_runs,
         failures: p.failures,
         corrections: p.corrections.len(),
