@@ -324,6 +324,11 @@ pub struct SurrogateCorrection {
     /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
     #[serde(default)]
     pub refused: Vec<String>,
+    /// Whether the moment-matched log-ratio was held to the batch
+    /// ([`GaussianLogRatio::held_to_batch`]): the last candidate, where the full one's
+    /// posterior left the batch.
+    #[serde(default)]
+    pub held_to_batch: bool,
 }
 
 /// A correction of the surrogate's log-likelihood, chosen at run time among the candidates.
@@ -655,6 +660,7 @@ pub fn model_posterior(
                 quadratic,
                 moment_matched,
                 refused: Vec::new(),
+                held_to_batch: false,
             };
             let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
             if let Some(fit) = QuadraticFit::fit(&theta, &r) {
@@ -669,9 +675,17 @@ pub fn model_posterior(
                 DEFENSIVE_WIDENING,
                 settings.seed,
             ) {
+                let held = g.held_to_batch(&theta);
                 candidates.push((
                     record(true, true),
                     Box::new(move |x: &[f64]| g.log_ratio(x)),
+                ));
+                candidates.push((
+                    SurrogateCorrection {
+                        held_to_batch: true,
+                        ..record(true, true)
+                    },
+                    Box::new(move |x: &[f64]| held.log_ratio(x)),
                 ));
             }
             let basis_settings = BasisSettings {
@@ -684,10 +698,10 @@ pub fn model_posterior(
             let mut refused = Vec::new();
             let mut accepted = None;
             for (record, correction) in candidates {
-                let kind = if record.moment_matched {
-                    "the moment-matched correction"
-                } else {
-                    "the least-squares fit of r"
+                let kind = match (record.moment_matched, record.held_to_batch) {
+                    (true, true) => "the moment-matched correction held to the batch",
+                    (true, false) => "the moment-matched correction",
+                    _ => "the least-squares fit of r",
                 };
                 let candidate = CorrectedLikelihood {
                     base: surrogate,
@@ -1104,7 +1118,7 @@ fn certified_mixture(
 
 /// The parameter whose range over `batch` (minimum to maximum) holds the smallest share of
 /// `samples`, and that share (parameter 0 and share 0 for an empty batch).
-fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
+pub(crate) fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
     let Some(d) = batch.first().map(Vec::len) else {
         return (0, 0.0);
     };

@@ -50,9 +50,10 @@ use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
 use crate::model_posterior::{
-    Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
-    ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
-    coefficient_of_variation, evaluate, largest_finite, log_ratios,
+    Best, CorrectedLikelihood, MIN_CORRECTED_WITHIN_BATCH, ModelPosteriorEvent,
+    ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE,
+    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
+    least_share_within_ranges, log_ratios,
 };
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
@@ -93,6 +94,8 @@ pub(crate) struct NoisyEstimate {
 /// The second batch's members, drawn from the corrected surrogate's posterior q_c ∝ q·e^g, with
 /// their uncorrected ℓ_s, and ln(Z_c/Z_s).
 struct CorrectedProposal {
+    /// The corrected surrogate's whole population (to check it against the batch).
+    population: Vec<Vec<f64>>,
     theta: Vec<Vec<f64>>,
     surrogate: Vec<f64>,
     prior: Vec<f64>,
@@ -133,6 +136,7 @@ fn corrected_proposal(
     );
     Ok(CorrectedProposal {
         theta: chosen.iter().map(|&i| state.samples[i].clone()).collect(),
+        population: state.samples.clone(),
         surrogate: chosen
             .iter()
             .map(|&i| state.log_likelihood[i] - on_corrected[i])
@@ -197,28 +201,56 @@ pub(crate) fn noisy_estimate(
         )),
         _ => None,
     };
-    let proposal = match &fitted {
-        Some(g) => match corrected_proposal(space, population, surrogate, g, settings, s) {
-            Ok(proposal) => Some(proposal),
-            Err(e) => {
-                not_corrected = Some(format!("sampling the corrected surrogate failed: {e}"));
-                None
+    // The moment-matched log-ratio, then the same held to the batch; the first whose corrected
+    // posterior stays within the batch's range of every parameter, as a reproducible model's
+    // corrections must ([`MIN_CORRECTED_WITHIN_BATCH`]).
+    let mut refused = Vec::new();
+    let mut chosen = None;
+    if let Some(g) = fitted {
+        let held = g.held_to_batch(&first.theta);
+        for (candidate, held_to_batch) in [(g, false), (held, true)] {
+            let kind = if held_to_batch {
+                "the moment-matched correction held to the batch"
+            } else {
+                "the moment-matched correction"
+            };
+            match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
+                Err(e) => refused.push(format!("{kind}: its posterior could not be sampled ({e})")),
+                Ok(proposal) => {
+                    let (parameter, within) =
+                        least_share_within_ranges(&proposal.population, &first.theta);
+                    if within < MIN_CORRECTED_WITHIN_BATCH {
+                        refused.push(format!(
+                            "{kind}: its posterior keeps {:.0} % of its population inside the \
+                             range of {} over the batch it was fitted on (at least {:.0} % needed)",
+                            100.0 * within,
+                            space.names()[parameter],
+                            100.0 * MIN_CORRECTED_WITHIN_BATCH
+                        ));
+                    } else {
+                        chosen = Some((candidate, proposal, held_to_batch));
+                        break;
+                    }
+                }
             }
-        },
-        None => None,
-    };
+        }
+        if chosen.is_none() {
+            not_corrected = Some(refused.join("; "));
+        }
+    }
     if let Some(reason) = &not_corrected {
         on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
     }
-    let (members, raw, correction, evaluations, failures) = match (fitted, proposal) {
-        (Some(g), Some(proposal)) => {
+    let (members, raw, correction, evaluations, failures) = match chosen {
+        Some((g, proposal, held_to_batch)) => {
             let correction = SurrogateCorrection {
                 pareto_k_before: first_smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
                 model_evaluations: s,
                 quadratic: true,
                 moment_matched: true,
-                refused: Vec::new(),
+                refused,
+                held_to_batch,
             };
             on_event(ModelPosteriorEvent::Correction(&correction));
             let second = Members {
@@ -241,7 +273,7 @@ pub(crate) fn noisy_estimate(
             );
             (members, raw, Some(correction), s, second_failures)
         }
-        _ => (first, r, None, 0, 0),
+        None => (first, r, None, 0, 0),
     };
     let max_raw = largest_finite(&raw);
     if !max_raw.is_finite() {
