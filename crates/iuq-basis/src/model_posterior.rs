@@ -324,11 +324,6 @@ pub struct SurrogateCorrection {
     /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
     #[serde(default)]
     pub refused: Vec<String>,
-    /// Whether the moment-matched log-ratio was held to the batch
-    /// ([`GaussianLogRatio::held_to_batch`]): the last candidate, where the full one's
-    /// posterior left the batch.
-    #[serde(default)]
-    pub held_to_batch: bool,
 }
 
 /// A correction of the surrogate's log-likelihood, chosen at run time among the candidates.
@@ -660,7 +655,6 @@ pub fn model_posterior(
                 quadratic,
                 moment_matched,
                 refused: Vec::new(),
-                held_to_batch: false,
             };
             let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
             if let Some(fit) = QuadraticFit::fit(&theta, &r) {
@@ -675,17 +669,9 @@ pub fn model_posterior(
                 DEFENSIVE_WIDENING,
                 settings.seed,
             ) {
-                let held = g.held_to_batch(&theta);
                 candidates.push((
                     record(true, true),
                     Box::new(move |x: &[f64]| g.log_ratio(x)),
-                ));
-                candidates.push((
-                    SurrogateCorrection {
-                        held_to_batch: true,
-                        ..record(true, true)
-                    },
-                    Box::new(move |x: &[f64]| held.log_ratio(x)),
                 ));
             }
             let basis_settings = BasisSettings {
@@ -698,10 +684,10 @@ pub fn model_posterior(
             let mut refused = Vec::new();
             let mut accepted = None;
             for (record, correction) in candidates {
-                let kind = match (record.moment_matched, record.held_to_batch) {
-                    (true, true) => "the moment-matched correction held to the batch",
-                    (true, false) => "the moment-matched correction",
-                    _ => "the least-squares fit of r",
+                let kind = if record.moment_matched {
+                    "the moment-matched correction"
+                } else {
+                    "the least-squares fit of r"
                 };
                 let candidate = CorrectedLikelihood {
                     base: surrogate,

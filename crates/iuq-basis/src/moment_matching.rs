@@ -149,8 +149,6 @@ pub struct GaussianLogRatio {
     proposal: Normal,
     bounds: Vec<(f64, f64)>,
     ceiling: f64,
-    /// Held to the batch: beyond `bounds`, g is at most 0.
-    held: bool,
 }
 
 /// The weighted and the equally weighted normal of `points` (`None`: fewer than 2(d + 1)
@@ -197,7 +195,6 @@ impl GaussianLogRatio {
             proposal,
             bounds,
             ceiling: f64::INFINITY,
-            held: false,
         };
         let mut rng = stream(seed, CEILING_STREAM, 0);
         let mut ceiling = f64::NEG_INFINITY;
@@ -218,8 +215,7 @@ impl GaussianLogRatio {
     }
 
     /// g(θ), θ clamped to the batch's widened box, and at most the ceiling (NaN for a θ of
-    /// another dimension than the batch's); held to the batch, θ clamped to the batch's own
-    /// box, and beyond it at most 0.
+    /// another dimension than the batch's).
     pub fn log_ratio(&self, theta: &[f64]) -> f64 {
         if theta.len() != self.bounds.len() {
             return f64::NAN;
@@ -229,48 +225,7 @@ impl GaussianLogRatio {
             .zip(&self.bounds)
             .map(|(v, (lo, hi))| v.clamp(*lo, *hi))
             .collect();
-        let g = (self.target.log_density(&x) - self.proposal.log_density(&x)).min(self.ceiling);
-        if self.held && x.as_slice() != theta {
-            g.min(0.0)
-        } else {
-            g
-        }
-    }
-
-    /// The same log-ratio held to the batch `points` themselves: θ clamped to their box (not
-    /// widened), g at most its largest value over them, and beyond the box at most 0 (where no
-    /// member informed it, the corrected posterior is not more than the surrogate's). The
-    /// fallback where the corrected
-    /// posterior of [`Self::fit`] leaves the batch: a surrogate posterior whose tails are far
-    /// heavier than a Gaussian's, multiplied by a g that grows outwards up to the target's
-    /// 1-in-10,000 contour, can put most of its mass in those tails (the healthy red-cell
-    /// study's: weighted and unweighted Λ 5.6 ± 1.5 and 5.7 ± 1.3, the corrected posterior's
-    /// Λ 12.3 ± 4.0, beyond every member of the batch). Held to the batch, g stops widening
-    /// where the batch ends: the fallback's price where the surrogate posterior is narrower
-    /// than the model's (a ceiling at the batch's largest g left the stds of a 2-D test problem
-    /// 2 MCSE low on average, module documentation).
-    pub fn held_to_batch(&self, points: &[Vec<f64>]) -> Self {
-        let d = self.bounds.len();
-        let bounds: Vec<(f64, f64)> = (0..d)
-            .map(|k| {
-                points
-                    .iter()
-                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| {
-                        (a.min(p[k]), b.max(p[k]))
-                    })
-            })
-            .collect();
-        let mut held = Self {
-            bounds,
-            held: true,
-            ..self.clone()
-        };
-        let largest = points
-            .iter()
-            .map(|p| held.log_ratio(p))
-            .fold(f64::NEG_INFINITY, f64::max);
-        held.ceiling = self.ceiling.min(largest);
-        held
+        (self.target.log_density(&x) - self.proposal.log_density(&x)).min(self.ceiling)
     }
 
     /// The importance-weighted mean μ_w the correction moves to.
@@ -407,44 +362,6 @@ mod tests {
         for x in [[1.0, 1.0], [-1.0, 0.5], [0.5, -1.5]] {
             assert!((at(x) - offset).abs() < 0.1, "{x:?}: {}", at(x) - offset);
         }
-    }
-
-    #[test]
-    fn held_to_the_batch_the_log_ratio_stops_growing_where_the_batch_ends() {
-        // A target 1.5 times as wide as the proposal in x0: g grows outwards in x0. Unheld, it
-        // keeps growing beyond the batch up to the target's 1-in-10,000 contour; held, it is
-        // g at the batch's edge there and never above its largest value over the batch.
-        let points = draws(400, 2, 5);
-        let lw: Vec<f64> = points
-            .iter()
-            .map(|p| 0.5 * p[0] * p[0] * (1.0 - 1.0 / 2.25))
-            .collect();
-        let g = GaussianLogRatio::fit(&points, &lw, 1.0, 1).unwrap();
-        let held = g.held_to_batch(&points);
-        let top = points
-            .iter()
-            .map(|p| p[0])
-            .fold(f64::NEG_INFINITY, f64::max);
-        let largest = points
-            .iter()
-            .map(|p| g.log_ratio(p))
-            .fold(f64::NEG_INFINITY, f64::max);
-        // Inside the batch the two agree (below the batch's own largest g).
-        for p in points.iter().take(50) {
-            assert_eq!(held.log_ratio(p), g.log_ratio(p).min(largest));
-        }
-        let beyond = [top + 2.0, 0.0];
-        assert!(
-            g.log_ratio(&beyond) > largest + 0.5,
-            "{}",
-            g.log_ratio(&beyond)
-        );
-        assert!(held.log_ratio(&beyond) <= largest);
-        // Beyond the batch's box the held log-ratio is the edge's, but never above 0.
-        assert!(held.log_ratio(&[top, 0.0]) > 0.0);
-        assert_eq!(held.log_ratio(&beyond), 0.0);
-        let below = [top - 1e-9, 0.0];
-        assert!(held.log_ratio(&below) > 0.0);
     }
 
     #[test]

@@ -201,56 +201,46 @@ pub(crate) fn noisy_estimate(
         )),
         _ => None,
     };
-    // The moment-matched log-ratio, then the same held to the batch; the first whose corrected
-    // posterior stays within the batch's range of every parameter, as a reproducible model's
-    // corrections must ([`MIN_CORRECTED_WITHIN_BATCH`]).
-    let mut refused = Vec::new();
-    let mut chosen = None;
-    if let Some(g) = fitted {
-        let held = g.held_to_batch(&first.theta);
-        for (candidate, held_to_batch) in [(g, false), (held, true)] {
-            let kind = if held_to_batch {
-                "the moment-matched correction held to the batch"
-            } else {
-                "the moment-matched correction"
-            };
-            match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
-                Err(e) => refused.push(format!("{kind}: its posterior could not be sampled ({e})")),
-                Ok(proposal) => {
-                    let (parameter, within) =
-                        least_share_within_ranges(&proposal.population, &first.theta);
-                    if within < MIN_CORRECTED_WITHIN_BATCH {
-                        refused.push(format!(
-                            "{kind}: its posterior keeps {:.0} % of its population inside the \
-                             range of {} over the batch it was fitted on (at least {:.0} % needed)",
-                            100.0 * within,
-                            space.names()[parameter],
-                            100.0 * MIN_CORRECTED_WITHIN_BATCH
-                        ));
-                    } else {
-                        chosen = Some((candidate, proposal, held_to_batch));
-                        break;
-                    }
+    // The corrected posterior must stay within the batch's range of every parameter, as a
+    // reproducible model's corrections must ([`MIN_CORRECTED_WITHIN_BATCH`]).
+    let proposal = match &fitted {
+        Some(g) => match corrected_proposal(space, population, surrogate, g, settings, s) {
+            Ok(proposal) => {
+                let (parameter, within) =
+                    least_share_within_ranges(&proposal.population, &first.theta);
+                if within < MIN_CORRECTED_WITHIN_BATCH {
+                    not_corrected = Some(format!(
+                        "the moment-matched correction's posterior keeps {:.0} % of its \
+                         population inside the range of {} over the batch it was fitted on (at \
+                         least {:.0} % needed)",
+                        100.0 * within,
+                        space.names()[parameter],
+                        100.0 * MIN_CORRECTED_WITHIN_BATCH
+                    ));
+                    None
+                } else {
+                    Some(proposal)
                 }
             }
-        }
-        if chosen.is_none() {
-            not_corrected = Some(refused.join("; "));
-        }
-    }
+            Err(e) => {
+                not_corrected = Some(format!("sampling the corrected surrogate failed: {e}"));
+                None
+            }
+        },
+        None => None,
+    };
     if let Some(reason) = &not_corrected {
         on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
     }
-    let (members, raw, correction, evaluations, failures) = match chosen {
-        Some((g, proposal, held_to_batch)) => {
+    let (members, raw, correction, evaluations, failures) = match (fitted, proposal) {
+        (Some(g), Some(proposal)) => {
             let correction = SurrogateCorrection {
                 pareto_k_before: first_smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
                 model_evaluations: s,
                 quadratic: true,
                 moment_matched: true,
-                refused,
-                held_to_batch,
+                refused: Vec::new(),
             };
             on_event(ModelPosteriorEvent::Correction(&correction));
             let second = Members {
@@ -273,7 +263,7 @@ pub(crate) fn noisy_estimate(
             );
             (members, raw, Some(correction), s, second_failures)
         }
-        None => (first, r, None, 0, 0),
+        _ => (first, r, None, 0, 0),
     };
     let max_raw = largest_finite(&raw);
     if !max_raw.is_finite() {

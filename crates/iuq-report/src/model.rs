@@ -135,10 +135,6 @@ pub struct ModelPosteriorReport {
     /// Whether the correction made was the moment-matched one (else a least-squares fit).
     #[serde(default)]
     pub correction_moment_matched: bool,
-    /// Whether that moment-matched correction was held to the batch's box (its full form's
-    /// posterior left the batch).
-    #[serde(default)]
-    pub correction_held_to_batch: bool,
     /// Whether the population is both batches of a correction, weighed as one sample of the
     /// mixture of the two posteriors (else, after a correction, the corrected batch's stages).
     #[serde(default)]

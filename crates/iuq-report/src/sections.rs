@@ -522,9 +522,7 @@ fn correction_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         )
     };
     if m.corrections > 0 {
-        let how = if m.correction_held_to_batch {
-            "towards the moments of the batch's importance weights, held to the batch's box (a Gaussian log-ratio, stds widened 1.2 times, at most its largest value over the batch)"
-        } else if m.correction_moment_matched {
+        let how = if m.correction_moment_matched {
             "towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times)"
         } else {
             "by a quadratic fit of the difference of the two log-likelihoods"
@@ -573,21 +571,8 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         } else {
             "within the weights' noise, but the one step's k̂ did not hold"
         };
-        let held = if m.correction_held_to_batch {
-            ", held to the batch's box"
-        } else {
-            ""
-        };
-        let refused = if m.corrections_refused.is_empty() {
-            String::new()
-        } else {
-            format!(
-                " (first tried and refused: {})",
-                m.corrections_refused.join("; ")
-            )
-        };
         format!(
-            " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times{held}){refused} and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
+            " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times) and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
             t.widening,
             batch = m.samples / 2,
             samples = m.samples

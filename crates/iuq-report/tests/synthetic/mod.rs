@@ -347,7 +347,6 @@ pub fn synthetic_report(
             }),
             correction_not_made: None,
             correction_moment_matched: false,
-            correction_held_to_batch: false,
             both_batches: true,
             corrections_refused: Vec::new(),
             replicates: 4,

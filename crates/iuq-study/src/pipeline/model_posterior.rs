@@ -481,9 +481,7 @@ fn stage_line(stage: &ModelPosteriorStage, groups: usize) -> String {
 
 /// The progress line announcing a correction's batch, before its runs start.
 fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: bool) -> String {
-    let kind = if correction.held_to_batch {
-        "the moment-matched log-ratio of the first batch's weights, held to the batch"
-    } else if correction.moment_matched {
+    let kind = if correction.moment_matched {
         "the moment-matched log-ratio of the first batch's weights"
     } else if correction.quadratic {
         "a quadratic fit of the first batch's log-ratios"

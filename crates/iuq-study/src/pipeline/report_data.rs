@@ -281,7 +281,6 @@ fn model_posterior_report(
         }),
         correction_not_made: p.correction_not_made.clone(),
         correction_moment_matched: p.corrections.iter().any(|c| c.moment_matched),
-        correction_held_to_batch: p.corrections.iter().any(|c| c.held_to_batch),
         both_batches: p.both_batches,
         corrections_refused: p
             .corrections
