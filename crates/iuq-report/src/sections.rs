@@ -363,7 +363,7 @@ pub(crate) fn build_sections(
                 surrogate = m.surrogate_source,
                 samples = first_batch(m),
                 runs = m.model_runs,
-                stop = m.stop,
+                stop = sentence_case(&m.stop),
                 corrected = if m.pseudo_marginal {
                     mismatch_sentence(m)
                 } else {
@@ -548,6 +548,15 @@ fn correction_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     }
 }
 
+/// `text` with its first letter in upper case (a status phrase opening a sentence).
+fn sentence_case(text: &str) -> String {
+    let mut chars = text.chars();
+    chars
+        .next()
+        .map(|first| first.to_uppercase().collect::<String>() + chars.as_str())
+        .unwrap_or_default()
+}
+
 /// What the test of a noisy model's first batch found and what followed.
 fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let (model, surrogate) = (&m.model_source, &m.surrogate_source);
@@ -578,7 +587,11 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
             samples = m.samples
         )
     } else {
-        format!(" Measured on the {model}'s runs, {found}: no correction.{not_made}")
+        if not_made.is_empty() {
+            format!(" Measured on the {model}'s runs, {found}: no correction.")
+        } else {
+            format!(" Measured on the {model}'s runs, {found}.{not_made}")
+        }
     }
 }
 

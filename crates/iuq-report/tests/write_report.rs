@@ -272,10 +272,36 @@ fn the_page_is_self_contained() {
     assert!(text.contains("a second batch of 100 drawn from the corrected GP surrogate's posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that 200 members carry the estimate"));
     assert!(text.contains("100 members of the GP surrogate posterior run through the cell model"));
     assert!(text.contains("Histogram of the log-weights of both batches"));
+    // The status opens a sentence.
+    assert!(
+        text.contains(" Certified: every stage's k̂ is below its threshold."),
+        "{text}"
+    );
     assert_eq!(html.matches("<svg").count(), FIGURES.len());
     for name in FIGURES {
         assert!(html.contains(&format!("href=\"figures/{name}.png\"")));
     }
+}
+
+#[test]
+fn a_noisy_models_refused_correction_is_said_without_a_contradiction() {
+    let mut report = small_report();
+    {
+        let m = report.model_posterior.as_mut().unwrap();
+        m.corrections = 0;
+        m.both_batches = false;
+        m.proposal_mismatch.as_mut().unwrap().corrected = false;
+        m.correction_not_made = Some(
+            "the moment-matched correction's posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed)".into(),
+        );
+    }
+    let dir = fresh_dir("noisy-refused");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .replace("&#39;", "'");
+    assert!(text.contains("(a permutation test of the weights over the members: p = 0.002). The cell model's runs asked for a correction of the GP surrogate, but the moment-matched correction's posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed): the one step stands."), "{text}");
+    assert!(!text.contains("no correction."), "{text}");
 }
 
 #[test]
