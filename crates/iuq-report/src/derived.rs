@@ -20,8 +20,12 @@ pub struct DerivedResults {
     pub posterior_sample_counts: Vec<usize>,
     /// Sum of the wall times of all pipeline stages, in seconds.
     pub total_stage_seconds: f64,
-    /// Share of failed runs among all runs (0 when there were none).
+    /// Share of failed runs among the runs made, succeeded or failed (0 when there were none).
     pub failure_fraction: f64,
+    /// Runs in the campaign store neither succeeded nor failed: pending, abandoned or cancelled
+    /// (a model posterior's batch left when its method changed, say).
+    #[serde(default)]
+    pub not_run: usize,
 }
 
 /// One posterior source's predictions at every data point.
@@ -94,11 +98,12 @@ impl DerivedResults {
             predictions,
             posterior_sample_counts: report.posteriors.iter().map(|p| p.samples.len()).collect(),
             total_stage_seconds: stats.stage_seconds.iter().map(|(_, s)| s).sum(),
-            failure_fraction: if stats.runs > 0 {
-                stats.failed as f64 / stats.runs as f64
+            failure_fraction: if stats.succeeded + stats.failed > 0 {
+                stats.failed as f64 / (stats.succeeded + stats.failed) as f64
             } else {
                 0.0
             },
+            not_run: stats.runs.saturating_sub(stats.succeeded + stats.failed),
         }
     }
 }

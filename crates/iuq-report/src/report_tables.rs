@@ -341,28 +341,35 @@ pub(crate) fn sampler_stages(report: &StudyReport) -> Table {
 /// Counts of model runs.
 pub(crate) fn run_counts(report: &StudyReport, derived: &DerivedResults) -> Table {
     let stats = &report.run_statistics;
+    let mut rows = vec![
+        vec![
+            Cell::text("total"),
+            Cell::count(stats.runs, "/report/run_statistics/runs"),
+        ],
+        vec![
+            Cell::text("succeeded"),
+            Cell::count(stats.succeeded, "/report/run_statistics/succeeded"),
+        ],
+        vec![
+            Cell::text("failed"),
+            Cell::count(stats.failed, "/report/run_statistics/failed"),
+        ],
+        vec![
+            Cell::text("failed (fraction of those made)"),
+            Cell::number(derived.failure_fraction, "/derived/failure_fraction"),
+        ],
+    ];
+    if derived.not_run > 0 {
+        rows.push(vec![
+            Cell::text("not run (pending or cancelled)"),
+            Cell::count(derived.not_run, "/derived/not_run"),
+        ]);
+    }
     Table {
         name: "run_counts".into(),
         title: "Model runs".into(),
         columns: vec![Column::plain("runs"), Column::plain("count")],
-        rows: vec![
-            vec![
-                Cell::text("total"),
-                Cell::count(stats.runs, "/report/run_statistics/runs"),
-            ],
-            vec![
-                Cell::text("succeeded"),
-                Cell::count(stats.succeeded, "/report/run_statistics/succeeded"),
-            ],
-            vec![
-                Cell::text("failed"),
-                Cell::count(stats.failed, "/report/run_statistics/failed"),
-            ],
-            vec![
-                Cell::text("failed (fraction)"),
-                Cell::number(derived.failure_fraction, "/derived/failure_fraction"),
-            ],
-        ],
+        rows,
     }
 }
 

@@ -347,6 +347,33 @@ fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
 }
 
 #[test]
+fn runs_not_made_are_counted_apart_from_the_failure_fraction() {
+    let mut report = small_report();
+    let dir = fresh_dir("all-made");
+    write_report(&report, &dir).unwrap();
+    let counts = std::fs::read_to_string(dir.join("tables/run_counts.csv")).unwrap();
+    assert!(
+        counts.contains("failed (fraction of those made),0.05"),
+        "{counts}"
+    );
+    assert!(!counts.contains("not run"), "{counts}");
+    // 30 runs left pending (say, a batch abandoned when the method changed): counted apart, and
+    // the failure fraction stays that of the runs made (6 of 114 + 6).
+    report.run_statistics.runs = 150;
+    let dir = fresh_dir("some-not-made");
+    write_report(&report, &dir).unwrap();
+    let counts = std::fs::read_to_string(dir.join("tables/run_counts.csv")).unwrap();
+    assert!(
+        counts.contains("not run (pending or cancelled),30"),
+        "{counts}"
+    );
+    assert!(
+        counts.contains("failed (fraction of those made),0.05"),
+        "{counts}"
+    );
+}
+
+#[test]
 fn empty_posteriors_and_sensitivity_omit_their_sections() {
     let dir = fresh_dir("omitted");
     let mut report = small_report();
