@@ -702,15 +702,8 @@ pub fn model_posterior(
                         continue;
                     }
                 };
-                let (parameter, within) = least_share_within_ranges(&state.samples, &theta);
-                if within < MIN_CORRECTED_WITHIN_BATCH {
-                    refused.push(format!(
-                        "{kind}: its posterior keeps {:.0} % of its population inside the range \
-                         of {} over the batch it was fitted on (at least {:.0} % needed)",
-                        100.0 * within,
-                        space.names()[parameter],
-                        100.0 * MIN_CORRECTED_WITHIN_BATCH
-                    ));
+                if let Some(why) = outside_batch(space, &state.samples, &theta) {
+                    refused.push(format!("{kind}: its posterior {why}"));
                     continue;
                 }
                 accepted = Some((record, candidate, state));
@@ -1102,9 +1095,30 @@ fn certified_mixture(
     Some((members, raw, smoothing, stage))
 }
 
+/// Why a corrected posterior's `samples` are refused against the `batch` its correction was
+/// fitted on ("keeps N % of its population inside the range of P …"), where less than
+/// [`MIN_CORRECTED_WITHIN_BATCH`] of them lie inside the batch's range of some parameter P;
+/// `None` when they do not.
+pub(crate) fn outside_batch(
+    space: &ParameterSpace,
+    samples: &[Vec<f64>],
+    batch: &[Vec<f64>],
+) -> Option<String> {
+    let (parameter, within) = least_share_within_ranges(samples, batch);
+    (within < MIN_CORRECTED_WITHIN_BATCH).then(|| {
+        format!(
+            "keeps {:.0} % of its population inside the range of {} over the batch it was \
+             fitted on (at least {:.0} % needed)",
+            100.0 * within,
+            space.names()[parameter],
+            100.0 * MIN_CORRECTED_WITHIN_BATCH
+        )
+    })
+}
+
 /// The parameter whose range over `batch` (minimum to maximum) holds the smallest share of
 /// `samples`, and that share (parameter 0 and share 0 for an empty batch).
-pub(crate) fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
+fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
     let Some(d) = batch.first().map(Vec::len) else {
         return (0, 0.0);
     };

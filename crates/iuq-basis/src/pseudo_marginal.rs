@@ -50,10 +50,9 @@ use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
 use crate::model_posterior::{
-    Best, CorrectedLikelihood, MIN_CORRECTED_WITHIN_BATCH, ModelPosteriorEvent,
-    ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE,
-    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
-    least_share_within_ranges, log_ratios,
+    Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
+    ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
+    coefficient_of_variation, evaluate, largest_finite, log_ratios, outside_batch,
 };
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
@@ -206,17 +205,9 @@ pub(crate) fn noisy_estimate(
     let proposal = match &fitted {
         Some(g) => match corrected_proposal(space, population, surrogate, g, settings, s) {
             Ok(proposal) => {
-                let (parameter, within) =
-                    least_share_within_ranges(&proposal.population, &first.theta);
-                if within < MIN_CORRECTED_WITHIN_BATCH {
-                    not_corrected = Some(format!(
-                        "the moment-matched correction's posterior keeps {:.0} % of its \
-                         population inside the range of {} over the batch it was fitted on (at \
-                         least {:.0} % needed)",
-                        100.0 * within,
-                        space.names()[parameter],
-                        100.0 * MIN_CORRECTED_WITHIN_BATCH
-                    ));
+                if let Some(why) = outside_batch(space, &proposal.population, &first.theta) {
+                    not_corrected =
+                        Some(format!("the moment-matched correction's posterior {why}"));
                     None
                 } else {
                     Some(proposal)
