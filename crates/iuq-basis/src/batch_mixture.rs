@@ -14,7 +14,7 @@
 //! bridge sampling between the two surrogate populations (Meng & Wong 1996; no model runs).
 //! A noisy model's estimate is always this ([`crate::pseudo_marginal`]); a reproducible
 //! model's is this when its k̂ holds, and the stages from the corrected batch otherwise
-//! ([`crate::model_posterior`]).
+//! ([`crate::model_posterior`](mod@crate::model_posterior)).
 
 use crate::model_posterior::log_ratios;
 use crate::pareto_smoothing::log_sum_exp;
@@ -66,11 +66,13 @@ pub(crate) fn log_normalising_ratio(on_q: &[f64], on_corrected: &[f64]) -> f64 {
 }
 
 /// The first batch (from q) followed by the second (from q_c), `surrogate` the uncorrected ℓ_s
-/// of both, and their mixture log-weights r − ln(½(1 + e^{g − ln c})) (module docs).
+/// of both, and their mixture log-weights r − ln(½(1 + e^{g − ln c})) (module docs); `g` is
+/// called with a member's θ and its uncorrected ℓ_s (a tempered q_c's g is a function of ℓ_s,
+/// [`crate::defensive_tempering`]).
 pub(crate) fn mixture_of_batches(
     mut first: Members,
     second: Members,
-    g: &dyn Fn(&[f64]) -> f64,
+    g: &dyn Fn(&[f64], f64) -> f64,
     log_c: f64,
 ) -> (Members, Vec<f64>) {
     first.theta.extend(second.theta);
@@ -79,8 +81,8 @@ pub(crate) fn mixture_of_batches(
     first.prior.extend(second.prior);
     let raw = log_ratios(&first.model, &first.surrogate)
         .into_iter()
-        .zip(&first.theta)
-        .map(|(r, x)| r - (log_add_exp(0.0, g(x) - log_c) - 2f64.ln()))
+        .zip(first.theta.iter().zip(&first.surrogate))
+        .map(|(r, (x, &ls))| r - (log_add_exp(0.0, g(x, ls) - log_c) - 2f64.ln()))
         .collect();
     (first, raw)
 }
@@ -121,7 +123,7 @@ mod tests {
         // ℓ_m − ℓ_s = ln N(x; 0, 1.2²) − ln N(x; 0, 1): exp(raw) must equal
         // N(x; 0, 1.2²)/(½N(x; 0, 1) + ½N(x; 0, 1.5²)) up to one constant.
         let a = 0.5 - 1.0 / (2.0 * 2.25);
-        let g = |x: &[f64]| a * x[0] * x[0];
+        let g = |x: &[f64], _: f64| a * x[0] * x[0];
         let normal = |x: f64, s: f64| (-0.5 * (x / s).powi(2)).exp() / s;
         let points = [-2.0, -0.5, 0.0, 0.7, 1.9, 3.1];
         let members = |xs: &[f64]| Members {

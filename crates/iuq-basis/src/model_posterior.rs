@@ -50,8 +50,9 @@
 //!    then one unbiased draw of the likelihood averaged over the model's irregular part, the
 //!    weights exp(r) stay unbiased (pseudo-marginal importance sampling, Andrieu & Roberts
 //!    2009), and the estimate is one full step, certified by k̂ (or nearly equal weights),
-//!    after a moment-matched correction where the first batch shows the surrogate off
-//!    ([`crate::pseudo_marginal`]). Steps 2–4 are left out: a quadratic fit of a noisy r fits
+//!    after a moment-matched correction where the first batch shows the surrogate off, or,
+//!    where that correction would extrapolate, a defensive batch from the surrogate's posterior
+//!    tempered ([`crate::pseudo_marginal`], [`crate::defensive_tempering`]). Steps 2–4 are left out: a quadratic fit of a noisy r fits
 //!    its mean, which by Jensen's inequality lies below the log of the mean weight, and a
 //!    Metropolis chain on a noisy ratio sticks where a lucky run landed.
 //!
@@ -140,7 +141,9 @@ pub struct ModelPosteriorSettings {
     /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew;
     /// for a noisy model ([`Self::pseudo_marginal`]), where a permutation test finds the
     /// surrogate off or the step's k̂ does not hold, by the moment-matched log-ratio of
-    /// [`crate::moment_matching`], both batches then weighed as one mixture sample.
+    /// [`crate::moment_matching`] (or, where that is refused, a defensive batch from the
+    /// surrogate's posterior tempered, [`crate::defensive_tempering`]), both batches then
+    /// weighed as one mixture sample.
     pub corrections: usize,
     /// Delayed-acceptance moves per member after a bridging stage.
     pub moves: usize,
@@ -320,6 +323,11 @@ pub struct SurrogateCorrection {
     /// second candidate) rather than a least-squares fit of r.
     #[serde(default)]
     pub moment_matched: bool,
+    /// For a noisy model's defensive batch, the tempering β of the surrogate's posterior it was
+    /// drawn from (π·L_s^β, [`crate::defensive_tempering`]; then neither a fit nor
+    /// moment-matched); `None` for a correction by a log-ratio.
+    #[serde(default)]
+    pub tempering: Option<f64>,
     /// The candidates tried before this one and why each was refused (a corrected posterior
     /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
     #[serde(default)]
@@ -460,10 +468,10 @@ pub struct ModelPosterior {
     /// with `corrections = 0`, a reproducible model, or too few effective weights).
     #[serde(default)]
     pub proposal_mismatch: Option<ProposalMismatch>,
-    /// Why a correction that was wanted was not made: for a noisy model, too few effective
-    /// weights to estimate a covariance, or the corrected surrogate's sampling failed; for any
-    /// model, a corrected posterior mostly outside the batch its correction was fitted on
-    /// ([`MIN_CORRECTED_WITHIN_BATCH`]). `None` when none was wanted or it was made.
+    /// Why a correction that was wanted was not made: for a noisy model, every candidate (the
+    /// moment-matched correction and the defensive batch) refused or impossible to sample; for
+    /// a reproducible model, a corrected posterior mostly outside the batch its correction was
+    /// fitted on ([`MIN_CORRECTED_WITHIN_BATCH`]). `None` when none was wanted or it was made.
     #[serde(default)]
     pub correction_not_made: Option<String>,
     /// Whether the final population is both batches of a correction, weighed as one sample of
@@ -654,6 +662,7 @@ pub fn model_posterior(
                 model_evaluations: s,
                 quadratic,
                 moment_matched,
+                tempering: None,
                 refused: Vec::new(),
             };
             let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
@@ -753,7 +762,7 @@ pub fn model_posterior(
                     mixture = Some(mixture_of_batches(
                         first,
                         second,
-                        &g,
+                        &|x: &[f64], _| g(x),
                         log_normalising_ratio(&on_population, &on_corrected),
                     ));
                 }

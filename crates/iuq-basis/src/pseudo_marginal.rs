@@ -1,6 +1,7 @@
 //! The model posterior of a noisy model: one pseudo-marginal importance step, preceded by a
-//! moment-matched correction of the surrogate where the first batch shows the surrogate's
-//! posterior off the model's by more than the weights' noise explains.
+//! moment-matched correction of the surrogate (or a defensive batch from its posterior
+//! tempered) where the first batch shows the surrogate's posterior off the model's by more than
+//! the weights' noise explains, or the step's k̂ does not hold.
 //!
 //! Each run's likelihood L̂ is an unbiased draw of the likelihood L averaged over the model's
 //! irregular part, so the weights L̂/L_s are unbiased (Andrieu & Roberts 2009) and one full step
@@ -34,8 +35,19 @@
 //! Sedki 2019). Measured on the test problems (docs/methods.md §5b), what remains is within
 //! about one MCSE.
 //!
-//! Where a correction is wanted but cannot be made (fewer than 2(d + 1) effective weights, or
-//! the corrected surrogate's sampling fails), the one step stands and the reason is kept.
+//! 4. Where that correction cannot be made — its posterior leaves the batch's range of some
+//!    parameter ([`crate::model_posterior::MIN_CORRECTED_WITHIN_BATCH`]: g, fitted to the
+//!    batch, extrapolates there), fewer than 2(d + 1) effective weights, or BASIS cannot
+//!    sample it — the second batch is drawn from the surrogate's posterior tempered at
+//!    β = ½·min_k σ²_q,k/σ²_w,k ([`crate::defensive_tempering::defensive_tempering`], from ½
+//!    down to 0.1), q_β ∝ π·L_s^β, and weighed with the first in the same
+//!    mixture (g = (β − 1)·ℓ_s): a defensive proposal that needs no fit, keeps the surrogate's
+//!    shape, and caps the weights where the target's tails outreach q's
+//!    ([`crate::defensive_tempering`]). It is not held to the batch: its tails are the
+//!    surrogate's own. The refused candidates and their reasons are kept with it.
+//!
+//! Only where the tempered posterior cannot be sampled either does the one step stand, with
+//! the reasons kept.
 //!
 //! The final weights are certified by k̂ over all members (or nearly equal weights), as the one
 //! step was; otherwise the stop is [`ModelPosteriorStop::NoisyWeightsTail`]. The evidence ratio
@@ -46,6 +58,7 @@ use iuq_core::random::stream;
 
 use crate::annealing::log_evidence_increment;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
+use crate::defensive_tempering::{TemperedLikelihood, defensive_tempering, tempered_log_ratio};
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
@@ -90,6 +103,39 @@ pub(crate) struct NoisyEstimate {
     pub(crate) failures: usize,
 }
 
+/// A second batch's proposal q_c ∝ q·e^g, in the order they are tried.
+enum Candidate {
+    /// The moment-matched log-ratio of the first batch's weights (g a function of θ).
+    MomentMatched(GaussianLogRatio),
+    /// The surrogate's posterior tempered at β (g = (β − 1)·ℓ_s, [`crate::defensive_tempering`]).
+    Tempered(f64),
+}
+
+impl Candidate {
+    /// g at a point θ whose uncorrected surrogate log-likelihood is `surrogate`.
+    fn log_ratio(&self, x: &[f64], surrogate: f64) -> f64 {
+        match self {
+            Self::MomentMatched(g) => g.log_ratio(x),
+            Self::Tempered(beta) => tempered_log_ratio(*beta, surrogate),
+        }
+    }
+
+    /// The uncorrected ℓ_s at θ from the corrected log-likelihood `corrected` there.
+    fn uncorrected(&self, x: &[f64], corrected: f64) -> f64 {
+        match self {
+            Self::MomentMatched(g) => corrected - g.log_ratio(x),
+            Self::Tempered(beta) => corrected / beta,
+        }
+    }
+
+    fn name(&self) -> &'static str {
+        match self {
+            Self::MomentMatched(_) => "the moment-matched correction",
+            Self::Tempered(_) => "the defensive batch",
+        }
+    }
+}
+
 /// The second batch's members, drawn from the corrected surrogate's posterior q_c ∝ q·e^g, with
 /// their uncorrected ℓ_s, and ln(Z_c/Z_s).
 struct CorrectedProposal {
@@ -108,14 +154,10 @@ fn corrected_proposal(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
     surrogate: &dyn LogLikelihood,
-    g: &GaussianLogRatio,
+    candidate: &Candidate,
     settings: &ModelPosteriorSettings,
     s: usize,
 ) -> Result<CorrectedProposal> {
-    let corrected = CorrectedLikelihood {
-        base: surrogate,
-        correction: |x: &[f64]| g.log_ratio(x),
-    };
     let basis_settings = BasisSettings {
         samples: population.samples.len().max(s),
         burn_in: 10,
@@ -123,11 +165,41 @@ fn corrected_proposal(
         ..Default::default()
     }
     .check()?;
-    let state = Basis::new(space, &corrected, basis_settings)?
-        .run(&mut Silent)?
-        .state;
-    let on_population: Vec<f64> = population.samples.iter().map(|x| g.log_ratio(x)).collect();
-    let on_corrected: Vec<f64> = state.samples.iter().map(|x| g.log_ratio(x)).collect();
+    let state = match candidate {
+        Candidate::MomentMatched(g) => {
+            let corrected = CorrectedLikelihood {
+                base: surrogate,
+                correction: |x: &[f64]| g.log_ratio(x),
+            };
+            Basis::new(space, &corrected, basis_settings)?.run(&mut Silent)?
+        }
+        Candidate::Tempered(beta) => {
+            let tempered = TemperedLikelihood {
+                base: surrogate,
+                beta: *beta,
+            };
+            Basis::new(space, &tempered, basis_settings)?.run(&mut Silent)?
+        }
+    }
+    .state;
+    let uncorrected: Vec<f64> = state
+        .samples
+        .iter()
+        .zip(&state.log_likelihood)
+        .map(|(x, &l)| candidate.uncorrected(x, l))
+        .collect();
+    let on_population: Vec<f64> = population
+        .samples
+        .iter()
+        .zip(population.log_likelihood)
+        .map(|(x, &l)| candidate.log_ratio(x, l))
+        .collect();
+    let on_corrected: Vec<f64> = state
+        .samples
+        .iter()
+        .zip(&uncorrected)
+        .map(|(x, &l)| candidate.log_ratio(x, l))
+        .collect();
     let chosen = nested_selection(
         &mut stream(settings.seed, STREAM_BASE, 1),
         state.samples.len(),
@@ -135,12 +207,9 @@ fn corrected_proposal(
     );
     Ok(CorrectedProposal {
         theta: chosen.iter().map(|&i| state.samples[i].clone()).collect(),
-        population: state.samples.clone(),
-        surrogate: chosen
-            .iter()
-            .map(|&i| state.log_likelihood[i] - on_corrected[i])
-            .collect(),
+        surrogate: chosen.iter().map(|&i| uncorrected[i]).collect(),
         prior: chosen.iter().map(|&i| state.log_prior[i]).collect(),
+        population: state.samples,
         log_normalising_ratio: log_normalising_ratio(&on_population, &on_corrected),
     })
 }
@@ -179,59 +248,76 @@ pub(crate) fn noisy_estimate(
         && coefficient_of_variation(&r) > NEARLY_EQUAL_CV;
     let correct = settings.corrections > 0
         && (tail || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
-    let fitted = if correct {
-        GaussianLogRatio::fit(
+    // The candidates in order: the moment-matched correction, then the defensive batch from
+    // the tempered surrogate posterior, which needs no fit and is not held to the batch (its
+    // tails are the surrogate's own, raised).
+    let mut refused = Vec::new();
+    let mut candidates = Vec::new();
+    if correct {
+        match GaussianLogRatio::fit(
             &first.theta,
             &first_smoothing.log_weights,
             DEFENSIVE_WIDENING,
             settings.seed,
-        )
-    } else {
-        None
-    };
-    let mut not_corrected = match (correct, &fitted) {
-        (true, None) => Some(format!(
-            "the first batch's weights have too few effective members to estimate a covariance (a correction was wanted because {})",
+        ) {
+            Some(g) => candidates.push(Candidate::MomentMatched(g)),
+            None => refused.push(
+                "the moment-matched correction: the first batch's weights have too few effective members to estimate a covariance".to_string(),
+            ),
+        }
+        candidates.push(Candidate::Tempered(defensive_tempering(
+            &first.theta,
+            &first_smoothing.log_weights,
+        )));
+    }
+    let mut accepted = None;
+    for candidate in candidates {
+        match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
+            Ok(proposal) => {
+                let held = matches!(candidate, Candidate::MomentMatched(_));
+                if let Some(why) = held
+                    .then(|| outside_batch(space, &proposal.population, &first.theta))
+                    .flatten()
+                {
+                    refused.push(format!("{}: its posterior {why}", candidate.name()));
+                    continue;
+                }
+                accepted = Some((candidate, proposal));
+                break;
+            }
+            Err(e) => refused.push(format!(
+                "{}: its posterior could not be sampled ({e})",
+                candidate.name()
+            )),
+        }
+    }
+    let not_corrected = (correct && accepted.is_none()).then(|| {
+        format!(
+            "{} (a correction was wanted because {})",
+            refused.join("; "),
             if tail {
                 "the step's k̂ does not hold"
             } else {
                 "the surrogate's posterior is off"
             }
-        )),
-        _ => None,
-    };
-    // The corrected posterior must stay within the batch's range of every parameter, as a
-    // reproducible model's corrections must ([`MIN_CORRECTED_WITHIN_BATCH`]).
-    let proposal = match &fitted {
-        Some(g) => match corrected_proposal(space, population, surrogate, g, settings, s) {
-            Ok(proposal) => {
-                if let Some(why) = outside_batch(space, &proposal.population, &first.theta) {
-                    not_corrected =
-                        Some(format!("the moment-matched correction's posterior {why}"));
-                    None
-                } else {
-                    Some(proposal)
-                }
-            }
-            Err(e) => {
-                not_corrected = Some(format!("sampling the corrected surrogate failed: {e}"));
-                None
-            }
-        },
-        None => None,
-    };
+        )
+    });
     if let Some(reason) = &not_corrected {
         on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
     }
-    let (members, raw, correction, evaluations, failures) = match (fitted, proposal) {
-        (Some(g), Some(proposal)) => {
+    let (members, raw, correction, evaluations, failures) = match accepted {
+        Some((candidate, proposal)) => {
             let correction = SurrogateCorrection {
                 pareto_k_before: first_smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
                 model_evaluations: s,
-                quadratic: true,
-                moment_matched: true,
-                refused: Vec::new(),
+                quadratic: matches!(candidate, Candidate::MomentMatched(_)),
+                moment_matched: matches!(candidate, Candidate::MomentMatched(_)),
+                tempering: match candidate {
+                    Candidate::Tempered(beta) => Some(beta),
+                    Candidate::MomentMatched(_) => None,
+                },
+                refused,
             };
             on_event(ModelPosteriorEvent::Correction(&correction));
             let second = Members {
@@ -249,12 +335,12 @@ pub(crate) fn noisy_estimate(
             let (members, raw) = mixture_of_batches(
                 first,
                 second,
-                &|x: &[f64]| g.log_ratio(x),
+                &|x: &[f64], ls: f64| candidate.log_ratio(x, ls),
                 proposal.log_normalising_ratio,
             );
             (members, raw, Some(correction), s, second_failures)
         }
-        _ => (first, r, None, 0, 0),
+        None => (first, r, None, 0, 0),
     };
     let max_raw = largest_finite(&raw);
     if !max_raw.is_finite() {

@@ -132,9 +132,14 @@ pub struct ModelPosteriorReport {
     /// for one; a reproducible one: every candidate's posterior lay mostly outside the batch).
     #[serde(default)]
     pub correction_not_made: Option<String>,
-    /// Whether the correction made was the moment-matched one (else a least-squares fit).
+    /// Whether the correction made was the moment-matched one (else a least-squares fit, or a
+    /// defensive batch).
     #[serde(default)]
     pub correction_moment_matched: bool,
+    /// For a noisy model's defensive batch: the tempering β of the surrogate's posterior it was
+    /// drawn from (π·L_s^β).
+    #[serde(default)]
+    pub correction_tempering: Option<f64>,
     /// Whether the population is both batches of a correction, weighed as one sample of the
     /// mixture of the two posteriors (else, after a correction, the corrected batch's stages).
     #[serde(default)]
@@ -172,8 +177,8 @@ pub struct MismatchTest {
     pub level: f64,
     /// The factor by which a correction widens the weighted stds.
     pub widening: f64,
-    /// Whether a moment-matched correction followed (a second batch, both weighed as one
-    /// mixture sample).
+    /// Whether a second batch followed (the moment-matched correction's, or a defensive one
+    /// from the surrogate's posterior tempered), both weighed as one mixture sample.
     pub corrected: bool,
 }
 

@@ -568,7 +568,13 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         })
         .unwrap_or_default();
     let Some(t) = &m.proposal_mismatch else {
-        return not_made;
+        return match m.correction_tempering {
+            Some(beta) => format!(
+                " The one step's k̂ did not hold.{}",
+                defensive_sentence(m, beta)
+            ),
+            None => not_made,
+        };
     };
     let found = format!(
         "the first batch's importance-weighted mean lies {:.2} posterior stds from the {surrogate}'s and its spread's divergence is {:.3} (a permutation test of the weights over the members: p = {:.3})",
@@ -580,12 +586,18 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         } else {
             "within the weights' noise, but the one step's k̂ did not hold"
         };
-        format!(
-            " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times) and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
-            t.widening,
-            batch = m.samples / 2,
-            samples = m.samples
-        )
+        match m.correction_tempering {
+            Some(beta) => format!(
+                " Measured on the {model}'s runs, {found}: {why}.{}",
+                defensive_sentence(m, beta)
+            ),
+            None => format!(
+                " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times) and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
+                t.widening,
+                batch = m.samples / 2,
+                samples = m.samples
+            ),
+        }
     } else {
         if not_made.is_empty() {
             format!(" Measured on the {model}'s runs, {found}: no correction.")
@@ -593,6 +605,26 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
             format!(" Measured on the {model}'s runs, {found}.{not_made}")
         }
     }
+}
+
+/// The defensive batch drawn from the surrogate's posterior tempered at `beta`, and the
+/// correction refused before it.
+fn defensive_sentence(m: &crate::model::ModelPosteriorReport, beta: f64) -> String {
+    let surrogate = &m.surrogate_source;
+    let refused = if m.corrections_refused.is_empty() {
+        String::new()
+    } else {
+        format!(
+            " The correction towards the weighted moments was refused ({}).",
+            m.corrections_refused.join("; ")
+        )
+    };
+    format!(
+        "{refused} So a defensive second batch of {} was drawn from the {surrogate}'s posterior tempered at β = {beta:.3} (π·L^β: the {surrogate}'s own shape, about {:.1} times as wide, with no fit to extrapolate); both batches are weighed as one sample of the two posteriors' even mixture, so that {} members carry the estimate.",
+        m.samples / 2,
+        beta.recip().sqrt(),
+        m.samples
+    )
 }
 
 /// What the reproducibility probe found, as a sentence of the model posterior's section.

@@ -305,6 +305,33 @@ fn a_noisy_models_refused_correction_is_said_without_a_contradiction() {
 }
 
 #[test]
+fn a_noisy_models_defensive_batch_is_said_with_the_refused_correction() {
+    let mut report = small_report();
+    {
+        let m = report.model_posterior.as_mut().unwrap();
+        m.corrections = 1;
+        m.both_batches = true;
+        m.proposal_mismatch.as_mut().unwrap().corrected = true;
+        m.correction_tempering = Some(0.25);
+        m.corrections_refused = vec![
+            "the moment-matched correction: its posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed)".into(),
+        ];
+    }
+    let samples = report.model_posterior.as_ref().unwrap().samples;
+    let dir = fresh_dir("noisy-defensive");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .replace("&#39;", "'");
+    assert!(text.contains(&format!("The correction towards the weighted moments was refused (the moment-matched correction: its posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed)). So a defensive second batch of {} was drawn from the GP surrogate's posterior tempered at β = 0.250 (π·L^β: the GP surrogate's own shape, about 2.0 times as wide, with no fit to extrapolate); both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.", samples / 2)), "{text}");
+    assert!(
+        !text.contains("corrected towards the weighted moments (stds"),
+        "{text}"
+    );
+    assert!(!text.contains("the one step stands"), "{text}");
+}
+
+#[test]
 fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
     let mut report = small_report();
     {

@@ -209,34 +209,40 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     // A noisy likelihood: one importance step to β = 1, no bridge. A uniform term of width 2 on
     // each of 8 points (measurement std 0.5–0.8) leaves about 4 effective weights of 100: the
     // step's k̂ fails, so a correction is wanted, but 4 are too few for a covariance (2(d + 1) =
-    // 6): none is made, and that is said.
+    // 6): the moment-matched correction cannot be made, and a defensive batch of 100 from the
+    // surrogate's posterior tempered is run instead, both batches weighed as one sample.
     assert_eq!(m["pseudo_marginal"], true);
     println!(
-        "mismatch {}, ESS {}, k̂ {}",
-        m["proposal_mismatch"], m["effective_sample_size"], m["pareto_k"]
+        "mismatch {}, ESS {}, k̂ {}, corrections {}",
+        m["proposal_mismatch"], m["effective_sample_size"], m["pareto_k"], m["corrections"]
     );
-    assert!(m["effective_sample_size"].as_f64().unwrap() < 6.0);
     assert!(m["proposal_mismatch"].is_null());
-    assert_eq!(m["corrections"].as_array().unwrap().len(), 0);
+    assert!(m["correction_not_made"].is_null(), "{m}");
+    let corrections = m["corrections"].as_array().unwrap();
+    assert_eq!(corrections.len(), 1);
+    assert!(corrections[0]["pareto_k_before"].as_f64().unwrap() > 0.7);
+    let beta = corrections[0]["tempering"].as_f64().unwrap();
+    assert!((0.1..=0.5).contains(&beta), "{beta}");
+    assert_eq!(corrections[0]["moment_matched"], false);
     assert!(
-        m["correction_not_made"]
+        corrections[0]["refused"][0]
             .as_str()
             .unwrap()
             .contains("too few effective members"),
         "{m}"
     );
+    assert_eq!(m["both_batches"], true);
     assert!(
-        log.contains(
-            "model posterior: no correction of the surrogate: the first batch's weights have too few effective members"
-        ),
+        log.contains("call for a correction: a defensive batch from the surrogate's posterior tempered at β = ")
+            && log.contains("(refused first: the moment-matched correction: the first batch's weights have too few effective members"),
         "the progress lines say so: {log}"
     );
     let stages = m["stages"].as_array().unwrap();
     assert_eq!(stages.len(), 1);
     assert_eq!(stages[0]["beta"], 1.0);
     assert!(stages[0]["screen_acceptance"].is_null());
-    assert_eq!(m["model_evaluations"], 100);
-    assert_eq!(m["model_runs"], 8 * (100 + 4));
+    assert_eq!(m["model_evaluations"], 200);
+    assert_eq!(m["model_runs"], 8 * (200 + 4));
     // Certified by k̂ (the weights of a noisy likelihood are far from equal: CV above 0.1).
     assert!(stages[0]["cv"].as_f64().unwrap() > 0.1);
     assert_eq!(
@@ -252,8 +258,8 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     assert!(html.contains("did not repeat"), "the report says so");
     assert!(
         html.replace("&#39;", "'")
-            .contains("runs asked for a correction of the GP surrogate, but the first batch's weights have too few effective members to estimate a covariance (a correction was wanted because the step's k̂ does not hold): the one step stands."),
-        "and that no correction could be made"
+            .contains("The one step's k̂ did not hold. The correction towards the weighted moments was refused (the moment-matched correction: the first batch's weights have too few effective members to estimate a covariance). So a defensive second batch of 100 was drawn from the GP surrogate's posterior tempered at β = "),
+        "and that the defensive batch was run"
     );
 
     // `noisy = false` overrides the probe (which still reports what it saw).
@@ -277,7 +283,10 @@ fn a_model_whose_outputs_do_not_repeat_is_found_by_the_probe_and_reweighted_in_o
     let m = &v["model_posterior"];
     assert!(m["probe"].is_null(), "{m}");
     assert_eq!(m["pseudo_marginal"], true);
-    assert_eq!(m["model_runs"], 8 * 100);
+    // Only the members' own runs (100 per batch): none for a probe.
+    let members = m["model_evaluations"].as_u64().unwrap();
+    assert_eq!(members % 100, 0);
+    assert_eq!(m["model_runs"], 8 * members);
 }
 
 /// The cooling measurements (time, temperature, its std) of `dir/cooling.csv`.

@@ -347,6 +347,7 @@ pub fn synthetic_report(
             }),
             correction_not_made: None,
             correction_moment_matched: false,
+            correction_tempering: None,
             both_batches: true,
             corrections_refused: Vec::new(),
             replicates: 4,

@@ -481,22 +481,32 @@ fn stage_line(stage: &ModelPosteriorStage, groups: usize) -> String {
 
 /// The progress line announcing a correction's batch, before its runs start.
 fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: bool) -> String {
-    let kind = if correction.moment_matched {
-        "the moment-matched log-ratio of the first batch's weights"
+    let kind = if let Some(beta) = correction.tempering {
+        format!(
+            "a defensive batch from the surrogate's posterior tempered at β = {beta:.3} (π·L_s^β)"
+        )
+    } else if correction.moment_matched {
+        "the surrogate is corrected by the moment-matched log-ratio of the first batch's weights"
+            .to_string()
     } else if correction.quadratic {
-        "a quadratic fit of the first batch's log-ratios"
+        "the surrogate is corrected by a quadratic fit of the first batch's log-ratios".to_string()
     } else {
-        "a linear fit of the first batch's log-ratios"
+        "the surrogate is corrected by a linear fit of the first batch's log-ratios".to_string()
     };
     let refused = if correction.refused.is_empty() {
         String::new()
     } else {
         format!(" (refused first: {})", correction.refused.join("; "))
     };
+    let at = if correction.tempering.is_some() {
+        "the tempered"
+    } else {
+        "the corrected"
+    };
     format!(
         "model posterior: the first batch's weights (k̂ = {:.3}, CV {:.2}) call for a correction: \
-         the surrogate is corrected by {kind}{refused}; a batch of {} samples at the corrected \
-         surrogate's posterior starts, {} runs{} (results already stored are reused)",
+         {kind}{refused}; a batch of {} samples at {at} surrogate's posterior starts, {} runs{} \
+         (results already stored are reused)",
         correction.pareto_k_before,
         correction.cv_before,
         correction.model_evaluations,

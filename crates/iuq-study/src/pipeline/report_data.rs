@@ -277,10 +277,11 @@ fn model_posterior_report(
             p_value: t.p_value,
             level: iuq_basis::moment_matching::MISMATCH_LEVEL,
             widening: iuq_basis::moment_matching::DEFENSIVE_WIDENING,
-            corrected: p.corrections.iter().any(|c| c.moment_matched),
+            corrected: !p.corrections.is_empty(),
         }),
         correction_not_made: p.correction_not_made.clone(),
         correction_moment_matched: p.corrections.iter().any(|c| c.moment_matched),
+        correction_tempering: p.corrections.iter().find_map(|c| c.tempering),
         both_batches: p.both_batches,
         corrections_refused: p
             .corrections
