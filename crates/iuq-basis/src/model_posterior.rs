@@ -160,8 +160,9 @@ pub struct ModelPosteriorSettings {
     /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
     /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
     /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or
-    /// nearly equal weights), after a moment-matched correction where the first batch shows
-    /// the surrogate off ([`crate::pseudo_marginal`]); no quadratic fit and no bridge, whose
+    /// nearly equal weights), after a moment-matched correction (or a defensive batch from the
+    /// surrogate's posterior tempered) where the first batch shows the surrogate off
+    /// ([`crate::pseudo_marginal`]); no quadratic fit and no bridge, whose
     /// fits and Metropolis ratios assume a reproducible r (a noisy r makes the chains stick
     /// where a lucky run landed).
     #[serde(default)]
@@ -304,9 +305,10 @@ impl ModelPosteriorStage {
 
 /// A correction of the surrogate: the first batch's weights would not hold in one stage (or,
 /// for a noisy model, showed the surrogate off), so the surrogate's log-likelihood became
-/// ℓ_s + r̂ (r̂ a quadratic fit of the batch's r, or for a noisy model the moment-matched
-/// log-ratio of [`crate::moment_matching`]) and a new batch was drawn from the corrected
-/// surrogate's posterior.
+/// ℓ_s + r̂ (r̂ a quadratic fit of the batch's r, or the moment-matched log-ratio of
+/// [`crate::moment_matching`]), or for a noisy model whose moment-matched correction was
+/// refused, β·ℓ_s ([`crate::defensive_tempering`], `tempering`), and a new batch was drawn from
+/// that surrogate's posterior.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SurrogateCorrection {
     /// k̂ of the batch's full-step weights before the correction.
@@ -316,7 +318,7 @@ pub struct SurrogateCorrection {
     /// Model evaluations of the batch the correction was fitted on.
     pub model_evaluations: usize,
     /// Whether the correction had quadratic terms (else linear; a moment-matched one always
-    /// has).
+    /// has; false for a defensive batch, whose log-ratio (β − 1)·ℓ_s is neither).
     pub quadratic: bool,
     /// Whether it was the moment-matched log-ratio of the batch's weights
     /// ([`crate::moment_matching`]; a noisy model's only correction, a reproducible model's
@@ -557,8 +559,9 @@ pub fn selected_members(population_size: usize, settings: &ModelPosteriorSetting
 /// hundreds of model runs learns what the batch is for before it starts.
 #[derive(Debug, Clone, Copy)]
 pub enum ModelPosteriorEvent<'a> {
-    /// The surrogate was corrected; the batch at the corrected surrogate's posterior (this
-    /// many model evaluations, [`SurrogateCorrection::model_evaluations`]) starts now.
+    /// The surrogate was corrected (or, for a noisy model, tempered); the batch at that
+    /// surrogate's posterior (this many model evaluations,
+    /// [`SurrogateCorrection::model_evaluations`]) starts now.
     Correction(&'a SurrogateCorrection),
     /// A correction was wanted but not made (the clause says why); the method goes on without.
     CorrectionNotMade(&'a str),

@@ -39,7 +39,7 @@
 //!    parameter ([`crate::model_posterior::MIN_CORRECTED_WITHIN_BATCH`]: g, fitted to the
 //!    batch, extrapolates there), fewer than 2(d + 1) effective weights, or BASIS cannot
 //!    sample it — the second batch is drawn from the surrogate's posterior tempered at
-//!    β = ½·min_k σ²_q,k/σ²_w,k ([`crate::defensive_tempering::defensive_tempering`], from ½
+//!    β = ½·min_k σ²_q,k/m_w,k ([`crate::defensive_tempering::defensive_tempering`], from ½
 //!    down to 0.1), q_β ∝ π·L_s^β, and weighed with the first in the same
 //!    mixture (g = (β − 1)·ℓ_s): a defensive proposal that needs no fit, keeps the surrogate's
 //!    shape, and caps the weights where the target's tails outreach q's
@@ -273,6 +273,10 @@ pub(crate) fn noisy_estimate(
     let mut accepted = None;
     for candidate in candidates {
         match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
+            Ok(proposal) if !proposal.log_normalising_ratio.is_finite() => refused.push(format!(
+                "{}: the ratio of its normalising constant to the surrogate's could not be estimated",
+                candidate.name()
+            )),
             Ok(proposal) => {
                 let held = matches!(candidate, Candidate::MomentMatched(_));
                 if let Some(why) = held
@@ -293,7 +297,7 @@ pub(crate) fn noisy_estimate(
     }
     let not_corrected = (correct && accepted.is_none()).then(|| {
         format!(
-            "{} (a correction was wanted because {})",
+            "every candidate was refused ({}; a correction was wanted because {})",
             refused.join("; "),
             if tail {
                 "the step's k̂ does not hold"
@@ -324,7 +328,7 @@ pub(crate) fn noisy_estimate(
                 model: evaluate(
                     model,
                     &proposal.theta,
-                    "the model at the corrected surrogate's posterior samples",
+                    "the model at the second batch's samples (the corrected or tempered surrogate's posterior)",
                 )?,
                 theta: proposal.theta,
                 surrogate: proposal.surrogate,

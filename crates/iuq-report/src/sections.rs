@@ -398,7 +398,7 @@ pub(crate) fn build_sections(
                 name: "model_posterior_weights",
                 title: "Importance log-weights",
                 caption: if first_batch(m) < m.samples {
-                    "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's and the corrected surrogate's posteriors, (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the correction: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
+                    "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's posterior and the second batch's (the corrected or the tempered surrogate's), (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the log of the second posterior's ratio to the first: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
                 } else {
                     "Histogram of the final stage's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
                 },

@@ -74,7 +74,7 @@ impl Chart for LogWeightsChart<'_> {
         chart
             .configure_mesh()
             .x_desc(
-                if r.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
+                if r.both_batches || r.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
                     "log-weight in the two batches' mixture"
                 } else {
                     "Δβ·(ℓ model − ℓ surrogate)"
