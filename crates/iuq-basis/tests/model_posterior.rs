@@ -759,10 +759,11 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
     // about twice as wide, the flat tail raised) runs instead, and both batches carry the
     // estimate. Sixteen seeds: at least 12 certified, and for those each mean and std within 4
     // MCSE (64 statistics at most: a false failure below 1 in 250), the average error of each
-    // statistic within 4 of its own spread, 1.5/√n in MCSE units (the MCSE of noisy weights understates the spread about 1.5 times,
-    // docs/methods.md §5b). Measured: 13 certified (the other three had k̂ 0.70–0.73 against
-    // 0.616: k̂ of 800 noisy weights varies that much between seeds), average errors within
-    // 0.4 MCSE. A fixed β = ½ gave the x1 std 1.4 MCSE low on average.
+    // statistic within 4 of its own spread, 1.5/√n in MCSE units (the MCSE of noisy weights
+    // understates the spread about 1.5 times, docs/methods.md §5b). Measured: 13 certified (the
+    // other three had k̂ 0.70–0.73 against 0.616: k̂ of 800 noisy weights varies that much
+    // between seeds), average errors within 0.32 MCSE. A fixed β = ½ gave the x1 std 1.4 MCSE
+    // low on average.
     let (y, sigma, tau): (Vec<f64>, f64, f64) = (vec![1.0, -2.0], 1.0, 0.5);
     let total: f64 = (sigma * sigma + tau * tau).sqrt();
     let model = chaotic_model(&y, sigma, tau);
