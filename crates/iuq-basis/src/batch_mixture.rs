@@ -72,7 +72,7 @@ pub(crate) fn log_normalising_ratio(on_q: &[f64], on_corrected: &[f64]) -> f64 {
 pub(crate) fn mixture_of_batches(
     mut first: Members,
     second: Members,
-    g: &dyn Fn(&[f64], f64) -> f64,
+    g: &dyn Fn(&[f64], f64, f64) -> f64,
     log_c: f64,
 ) -> (Members, Vec<f64>) {
     first.theta.extend(second.theta);
@@ -81,8 +81,8 @@ pub(crate) fn mixture_of_batches(
     first.prior.extend(second.prior);
     let raw = log_ratios(&first.model, &first.surrogate)
         .into_iter()
-        .zip(first.theta.iter().zip(&first.surrogate))
-        .map(|(r, (x, &ls))| r - (log_add_exp(0.0, g(x, ls) - log_c) - 2f64.ln()))
+        .zip(first.theta.iter().zip(&first.surrogate).zip(&first.prior))
+        .map(|(r, ((x, &ls), &lp))| r - (log_add_exp(0.0, g(x, ls, lp) - log_c) - 2f64.ln()))
         .collect();
     (first, raw)
 }
@@ -123,7 +123,7 @@ mod tests {
         // ℓ_m − ℓ_s = ln N(x; 0, 1.2²) − ln N(x; 0, 1): exp(raw) must equal
         // N(x; 0, 1.2²)/(½N(x; 0, 1) + ½N(x; 0, 1.5²)) up to one constant.
         let a = 0.5 - 1.0 / (2.0 * 2.25);
-        let g = |x: &[f64], _: f64| a * x[0] * x[0];
+        let g = |x: &[f64], _: f64, _: f64| a * x[0] * x[0];
         let normal = |x: f64, s: f64| (-0.5 * (x / s).powi(2)).exp() / s;
         let points = [-2.0, -0.5, 0.0, 0.7, 1.9, 3.1];
         let members = |xs: &[f64]| Members {

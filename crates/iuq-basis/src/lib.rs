@@ -16,8 +16,8 @@
 //! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
 //! - [`model_posterior`](mod@model_posterior): from a surrogate's posterior to the model's, by importance stages
 //!   and delayed-acceptance moves, certified by k̂; [`pseudo_marginal`] for a noisy model, with
-//!   [`moment_matching`]'s correction and its test, and [`defensive_tempering`]'s batch where that
-//!   correction cannot be made; [`member_selection`]: the members a batch
+//!   [`moment_matching`]'s correction and its test, and [`defensive_normal`]'s (or [`defensive_tempering`]'s) batch where
+//!   that correction cannot be made; [`member_selection`]: the members a batch
 //!   runs, nested in the batch's size.
 //!
 //! ```
@@ -47,6 +47,7 @@ pub mod annealing;
 pub mod batch_mixture;
 pub mod checkpoint;
 pub mod curve_model;
+pub mod defensive_normal;
 pub mod defensive_tempering;
 pub mod diagnostics;
 pub mod error;

@@ -330,6 +330,10 @@ pub struct SurrogateCorrection {
     /// moment-matched); `None` for a correction by a log-ratio.
     #[serde(default)]
     pub tempering: Option<f64>,
+    /// For a noisy model's defensive batch drawn from a normal fitted to the first batch's
+    /// weights ([`crate::defensive_normal`]; then neither a fit of r nor moment-matched).
+    #[serde(default)]
+    pub defensive_normal: bool,
     /// The candidates tried before this one and why each was refused (a corrected posterior
     /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
     #[serde(default)]
@@ -666,6 +670,7 @@ pub fn model_posterior(
                 quadratic,
                 moment_matched,
                 tempering: None,
+                defensive_normal: false,
                 refused: Vec::new(),
             };
             let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
@@ -765,7 +770,7 @@ pub fn model_posterior(
                     mixture = Some(mixture_of_batches(
                         first,
                         second,
-                        &|x: &[f64], _| g(x),
+                        &|x: &[f64], _, _| g(x),
                         log_normalising_ratio(&on_population, &on_corrected),
                     ));
                 }

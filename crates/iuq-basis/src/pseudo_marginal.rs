@@ -58,6 +58,7 @@ use iuq_core::random::stream;
 
 use crate::annealing::log_evidence_increment;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
+use crate::defensive_normal::DefensiveNormal;
 use crate::defensive_tempering::{TemperedLikelihood, defensive_tempering, tempered_log_ratio};
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
@@ -107,31 +108,29 @@ pub(crate) struct NoisyEstimate {
 enum Candidate {
     /// The moment-matched log-ratio of the first batch's weights (g a function of θ).
     MomentMatched(GaussianLogRatio),
+    /// A normal fitted to the first batch's weights, not multiplied by q
+    /// (g = ln N − ln π − ℓ_s, [`crate::defensive_normal`]).
+    Normal(DefensiveNormal),
     /// The surrogate's posterior tempered at β (g = (β − 1)·ℓ_s, [`crate::defensive_tempering`]).
     Tempered(f64),
 }
 
 impl Candidate {
-    /// g at a point θ whose uncorrected surrogate log-likelihood is `surrogate`.
-    fn log_ratio(&self, x: &[f64], surrogate: f64) -> f64 {
+    /// g at a point θ whose uncorrected surrogate log-likelihood is `surrogate` and log-prior
+    /// `prior`.
+    fn log_ratio(&self, x: &[f64], surrogate: f64, prior: f64) -> f64 {
         match self {
             Self::MomentMatched(g) => g.log_ratio(x),
+            Self::Normal(normal) => normal.log_density(x) - prior - surrogate,
             Self::Tempered(beta) => tempered_log_ratio(*beta, surrogate),
-        }
-    }
-
-    /// The uncorrected ℓ_s at θ from the corrected log-likelihood `corrected` there.
-    fn uncorrected(&self, x: &[f64], corrected: f64) -> f64 {
-        match self {
-            Self::MomentMatched(g) => corrected - g.log_ratio(x),
-            Self::Tempered(beta) => corrected / beta,
         }
     }
 
     fn name(&self) -> &'static str {
         match self {
             Self::MomentMatched(_) => "the moment-matched correction",
-            Self::Tempered(_) => "the defensive batch",
+            Self::Normal(_) => "the defensive normal",
+            Self::Tempered(_) => "the defensive tempered batch",
         }
     }
 }
@@ -139,7 +138,7 @@ impl Candidate {
 /// The second batch's members, drawn from the corrected surrogate's posterior q_c ∝ q·e^g, with
 /// their uncorrected ℓ_s, and ln(Z_c/Z_s).
 struct CorrectedProposal {
-    /// The corrected surrogate's whole population (to check it against the batch).
+    /// The proposal's whole sample (to check it against the batch).
     population: Vec<Vec<f64>>,
     theta: Vec<Vec<f64>>,
     surrogate: Vec<f64>,
@@ -147,9 +146,11 @@ struct CorrectedProposal {
     log_normalising_ratio: f64,
 }
 
-/// BASIS on ℓ_s + g (surrogate evaluations only), `s` of its members (stream
+/// A sample of the candidate's q_c at least as large as the surrogate population (BASIS on
+/// ℓ_s + g, surrogate evaluations only; or direct draws of the defensive normal, stream
+/// (seed, [`STREAM_BASE`], 2), with the surrogate evaluated there), `s` of its members (stream
 /// (seed, [`STREAM_BASE`], 1)), and ln(Z_c/Z_s) by bridge sampling between the surrogate
-/// population and the corrected one.
+/// population and that sample; `Err`: why the candidate is refused.
 fn corrected_proposal(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
@@ -157,60 +158,91 @@ fn corrected_proposal(
     candidate: &Candidate,
     settings: &ModelPosteriorSettings,
     s: usize,
-) -> Result<CorrectedProposal> {
+) -> std::result::Result<CorrectedProposal, String> {
+    let n = population.samples.len().max(s);
     let basis_settings = BasisSettings {
-        samples: population.samples.len().max(s),
+        samples: n,
         burn_in: 10,
         seed: settings.seed,
         ..Default::default()
     }
-    .check()?;
-    let state = match candidate {
+    .check()
+    .map_err(|e| e.to_string())?;
+    let unsampled = |e: BasisError| format!("its posterior could not be sampled ({e})");
+    // (draws, their uncorrected ℓ_s, their log-priors)
+    let (samples, uncorrected, priors): (Vec<Vec<f64>>, Vec<f64>, Vec<f64>) = match candidate {
         Candidate::MomentMatched(g) => {
             let corrected = CorrectedLikelihood {
                 base: surrogate,
                 correction: |x: &[f64]| g.log_ratio(x),
             };
-            Basis::new(space, &corrected, basis_settings)?.run(&mut Silent)?
+            let state = Basis::new(space, &corrected, basis_settings)
+                .and_then(|b| b.run(&mut Silent))
+                .map_err(unsampled)?
+                .state;
+            let ls = state
+                .samples
+                .iter()
+                .zip(&state.log_likelihood)
+                .map(|(x, &l)| l - g.log_ratio(x))
+                .collect();
+            (state.samples, ls, state.log_prior)
         }
         Candidate::Tempered(beta) => {
             let tempered = TemperedLikelihood {
                 base: surrogate,
                 beta: *beta,
             };
-            Basis::new(space, &tempered, basis_settings)?.run(&mut Silent)?
+            let state = Basis::new(space, &tempered, basis_settings)
+                .and_then(|b| b.run(&mut Silent))
+                .map_err(unsampled)?
+                .state;
+            let ls = state.log_likelihood.iter().map(|l| l / beta).collect();
+            (state.samples, ls, state.log_prior)
         }
-    }
-    .state;
-    let uncorrected: Vec<f64> = state
-        .samples
-        .iter()
-        .zip(&state.log_likelihood)
-        .map(|(x, &l)| candidate.uncorrected(x, l))
-        .collect();
+        Candidate::Normal(normal) => {
+            let (draws, priors) = normal
+                .sample(space, n, &mut stream(settings.seed, STREAM_BASE, 2))
+                .ok_or_else(|| "it lies almost wholly outside the prior's support".to_string())?;
+            let ls = evaluate(
+                surrogate,
+                &draws,
+                "the surrogate at the defensive normal's draws",
+            )
+            .map_err(|e| e.to_string())?;
+            if ls.iter().any(|l| !l.is_finite()) {
+                return Err("the surrogate has no finite likelihood at some of its draws".into());
+            }
+            (draws, ls, priors)
+        }
+    };
     let on_population: Vec<f64> = population
         .samples
         .iter()
         .zip(population.log_likelihood)
-        .map(|(x, &l)| candidate.log_ratio(x, l))
+        .zip(population.log_prior)
+        .map(|((x, &l), &p)| candidate.log_ratio(x, l, p))
         .collect();
-    let on_corrected: Vec<f64> = state
-        .samples
+    let on_corrected: Vec<f64> = samples
         .iter()
         .zip(&uncorrected)
-        .map(|(x, &l)| candidate.log_ratio(x, l))
+        .zip(&priors)
+        .map(|((x, &l), &p)| candidate.log_ratio(x, l, p))
         .collect();
-    let chosen = nested_selection(
-        &mut stream(settings.seed, STREAM_BASE, 1),
-        state.samples.len(),
-        s,
-    );
+    let chosen = nested_selection(&mut stream(settings.seed, STREAM_BASE, 1), samples.len(), s);
+    let log_normalising_ratio = log_normalising_ratio(&on_population, &on_corrected);
+    if !log_normalising_ratio.is_finite() {
+        return Err(
+            "the ratio of its normalising constant to the surrogate's could not be estimated"
+                .into(),
+        );
+    }
     Ok(CorrectedProposal {
-        theta: chosen.iter().map(|&i| state.samples[i].clone()).collect(),
+        theta: chosen.iter().map(|&i| samples[i].clone()).collect(),
         surrogate: chosen.iter().map(|&i| uncorrected[i]).collect(),
-        prior: chosen.iter().map(|&i| state.log_prior[i]).collect(),
-        population: state.samples,
-        log_normalising_ratio: log_normalising_ratio(&on_population, &on_corrected),
+        prior: chosen.iter().map(|&i| priors[i]).collect(),
+        population: samples,
+        log_normalising_ratio,
     })
 }
 
@@ -265,6 +297,9 @@ pub(crate) fn noisy_estimate(
                 "the moment-matched correction: the first batch's weights have too few effective members to estimate a covariance".to_string(),
             ),
         }
+        if let Some(normal) = DefensiveNormal::fit(&first.theta, &first_smoothing.log_weights) {
+            candidates.push(Candidate::Normal(normal));
+        }
         candidates.push(Candidate::Tempered(defensive_tempering(
             &first.theta,
             &first_smoothing.log_weights,
@@ -273,10 +308,6 @@ pub(crate) fn noisy_estimate(
     let mut accepted = None;
     for candidate in candidates {
         match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
-            Ok(proposal) if !proposal.log_normalising_ratio.is_finite() => refused.push(format!(
-                "{}: the ratio of its normalising constant to the surrogate's could not be estimated",
-                candidate.name()
-            )),
             Ok(proposal) => {
                 let held = matches!(candidate, Candidate::MomentMatched(_));
                 if let Some(why) = held
@@ -289,10 +320,7 @@ pub(crate) fn noisy_estimate(
                 accepted = Some((candidate, proposal));
                 break;
             }
-            Err(e) => refused.push(format!(
-                "{}: its posterior could not be sampled ({e})",
-                candidate.name()
-            )),
+            Err(why) => refused.push(format!("{}: {why}", candidate.name())),
         }
     }
     let not_corrected = (correct && accepted.is_none()).then(|| {
@@ -319,8 +347,9 @@ pub(crate) fn noisy_estimate(
                 moment_matched: matches!(candidate, Candidate::MomentMatched(_)),
                 tempering: match candidate {
                     Candidate::Tempered(beta) => Some(beta),
-                    Candidate::MomentMatched(_) => None,
+                    _ => None,
                 },
+                defensive_normal: matches!(candidate, Candidate::Normal(_)),
                 refused,
             };
             on_event(ModelPosteriorEvent::Correction(&correction));
@@ -339,7 +368,7 @@ pub(crate) fn noisy_estimate(
             let (members, raw) = mixture_of_batches(
                 first,
                 second,
-                &|x: &[f64], ls: f64| candidate.log_ratio(x, ls),
+                &|x: &[f64], ls: f64, lp: f64| candidate.log_ratio(x, ls, lp),
                 proposal.log_normalising_ratio,
             );
             (members, raw, Some(correction), s, second_failures)

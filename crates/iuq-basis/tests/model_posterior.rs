@@ -755,15 +755,14 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
     // from a core half as wide as the target, came out with an x1 std of 0.795 ± 0.045 against
     // 1.118, with k̂ 0.565 under its threshold 0.616 (the blind spot of k̂ for a proposal
     // narrower than the target, docs/methods.md, "What k̂ cannot see"). The defensive batch from
-    // the surrogate's posterior tempered at β = ½·min_k σ²_q,k/m_w,k (here 0.17–0.29: a core
-    // about twice as wide, the flat tail raised) runs instead, and both batches carry the
-    // estimate. Sixteen seeds: at least 12 certified, and for those each mean and std within 4
-    // MCSE (64 statistics at most: a false failure below 1 in 250), the average error of each
-    // statistic within 4 of its own spread, 1.5/√n in MCSE units (the MCSE of noisy weights
-    // understates the spread about 1.5 times, docs/methods.md §5b). Measured: 13 certified (the
-    // other three had k̂ 0.70–0.73 against 0.616: k̂ of 800 noisy weights varies that much
-    // between seeds), average errors within 0.32 MCSE. A fixed β = ½ gave the x1 std 1.4 MCSE
-    // low on average.
+    // a normal at the weights' mean with twice their second moment about the batch's mean runs
+    // instead, and both batches carry the estimate. Sixteen seeds: at least 14 certified, and
+    // for those each mean and std within 4 of its spread, 1.5 MCSE (the MCSE of noisy weights
+    // understates the spread about 1.5 times, docs/methods.md §5b; 64 statistics at most: a
+    // false failure below 1 in 250), the average error of each statistic within 4 of its own
+    // spread, 1.5/√n in MCSE units. Measured: 16 certified, x1's std 1.07 on average (−4 %,
+    // −1.05 MCSE), the largest single error −4.2 MCSE; with the surrogate's posterior tempered
+    // instead (`iuq_basis::defensive_tempering`), 13 certified.
     let (y, sigma, tau): (Vec<f64>, f64, f64) = (vec![1.0, -2.0], 1.0, 0.5);
     let total: f64 = (sigma * sigma + tau * tau).sqrt();
     let model = chaotic_model(&y, sigma, tau);
@@ -840,8 +839,8 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
         assert!(result.correction_not_made.is_none());
         assert_eq!(result.corrections.len(), 1);
         let correction = &result.corrections[0];
-        let beta = correction.tempering.expect("a defensive batch");
-        assert!((0.1..=0.5).contains(&beta), "{beta}");
+        assert!(correction.defensive_normal, "{correction:?}");
+        assert_eq!(correction.tempering, None);
         assert!(!correction.moment_matched);
         assert_eq!(correction.refused.len(), 1, "{:?}", correction.refused);
         assert!(
@@ -857,7 +856,20 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
             continue;
         }
         certified += 1;
-        assert_matches(&result, &y, &exact_std, &format!("lured, seed {seed}"));
+        for k in 0..2 {
+            let (m, sd) = (result.mean[k], result.std[k]);
+            let (em, es) = (1.5 * result.mcse_mean[k], 1.5 * result.mcse_std[k]);
+            println!("lured, seed {seed}: x{k} mean {m:.4} ± {em:.4}, std {sd:.4} ± {es:.4}");
+            assert!(
+                em < 0.15 * total && es < 0.15 * total,
+                "MCSE too large to test"
+            );
+            assert!((m - y[k]).abs() <= 4.0 * em, "seed {seed}: mean of x{k}");
+            assert!(
+                (sd - exact_std[k]).abs() <= 4.0 * es,
+                "seed {seed}: std of x{k}"
+            );
+        }
         for k in 0..2 {
             z[2 * k] += (result.mean[k] - y[k]) / result.mcse_mean[k];
             z[2 * k + 1] += (result.std[k] - total) / result.mcse_std[k];
@@ -867,7 +879,7 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
     println!(
         "average errors in MCSE units (mean, std of x0; of x1): {z:.2?}, certified {certified}/{seeds}"
     );
-    assert!(certified >= 12, "{certified}");
+    assert!(certified >= 14, "{certified}");
     let bound = 4.0 * 1.5 / (certified as f64).sqrt();
     assert!(z.iter().all(|v| v.abs() < bound), "{z:?}");
 }

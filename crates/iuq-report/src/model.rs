@@ -140,6 +140,10 @@ pub struct ModelPosteriorReport {
     /// drawn from (π·L_s^β).
     #[serde(default)]
     pub correction_tempering: Option<f64>,
+    /// For a noisy model's defensive batch drawn from a normal fitted to the first batch's
+    /// weights (its weighted mean, twice its weighted second moment).
+    #[serde(default)]
+    pub correction_defensive_normal: bool,
     /// Whether the population is both batches of a correction, weighed as one sample of the
     /// mixture of the two posteriors (else, after a correction, the corrected batch's stages).
     #[serde(default)]

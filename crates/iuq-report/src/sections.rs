@@ -568,12 +568,11 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         })
         .unwrap_or_default();
     let Some(t) = &m.proposal_mismatch else {
-        return match m.correction_tempering {
-            Some(beta) => format!(
-                " The one step's k̂ did not hold.{}",
-                defensive_sentence(m, beta)
-            ),
-            None => not_made,
+        return match (m.correction_defensive_normal, m.correction_tempering) {
+            (true, _) | (false, Some(_)) => {
+                format!(" The one step's k̂ did not hold.{}", defensive_sentence(m))
+            }
+            _ => not_made,
         };
     };
     let found = format!(
@@ -586,12 +585,12 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
         } else {
             "within the weights' noise, but the one step's k̂ did not hold"
         };
-        match m.correction_tempering {
-            Some(beta) => format!(
+        match m.correction_defensive_normal || m.correction_tempering.is_some() {
+            true => format!(
                 " Measured on the {model}'s runs, {found}: {why}.{}",
-                defensive_sentence(m, beta)
+                defensive_sentence(m)
             ),
-            None => format!(
+            false => format!(
                 " Measured on the {model}'s runs, {found}: {why}. So the {surrogate} was corrected towards the weighted moments (stds widened {:.1} times) and a second batch of {batch} drawn from the corrected {surrogate}'s posterior; both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.",
                 t.widening,
                 batch = m.samples / 2,
@@ -607,9 +606,9 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     }
 }
 
-/// The defensive batch drawn from the surrogate's posterior tempered at `beta`, and the
-/// correction refused before it.
-fn defensive_sentence(m: &crate::model::ModelPosteriorReport, beta: f64) -> String {
+/// The defensive batch (from a normal fitted to the weights, or from the surrogate's posterior
+/// tempered), and the corrections refused before it.
+fn defensive_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let surrogate = &m.surrogate_source;
     let refused = if m.corrections_refused.is_empty() {
         String::new()
@@ -619,10 +618,16 @@ fn defensive_sentence(m: &crate::model::ModelPosteriorReport, beta: f64) -> Stri
             m.corrections_refused.join("; ")
         )
     };
+    let from = match m.correction_tempering {
+        Some(beta) if !m.correction_defensive_normal => format!(
+            "the {surrogate}'s posterior tempered at β = {beta:.3} (π·L^β: the {surrogate}'s own shape, about {:.1} times as wide, with no fit to extrapolate)",
+            beta.recip().sqrt()
+        ),
+        _ => "a normal at the first batch's importance-weighted mean with twice its weighted second moment (at least √2 times as wide as the weights' estimate of the target, and not multiplied by the surrogate's posterior, whose tail the refused correction raised)".to_string(),
+    };
     format!(
-        "{refused} So a defensive second batch of {} was drawn from the {surrogate}'s posterior tempered at β = {beta:.3} (π·L^β: the {surrogate}'s own shape, about {:.1} times as wide, with no fit to extrapolate); both batches are weighed as one sample of the two posteriors' even mixture, so that {} members carry the estimate.",
+        "{refused} So a defensive second batch of {} was drawn from {from}; both batches are weighed as one sample of the even mixture of the {surrogate}'s posterior and that proposal, so that {} members carry the estimate.",
         m.samples / 2,
-        beta.recip().sqrt(),
         m.samples
     )
 }

@@ -323,12 +323,26 @@ fn a_noisy_models_defensive_batch_is_said_with_the_refused_correction() {
     let text = std::fs::read_to_string(dir.join("report.html"))
         .unwrap()
         .replace("&#39;", "'");
-    assert!(text.contains(&format!("The correction towards the weighted moments was refused (the moment-matched correction: its posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed)). So a defensive second batch of {} was drawn from the GP surrogate's posterior tempered at β = 0.250 (π·L^β: the GP surrogate's own shape, about 2.0 times as wide, with no fit to extrapolate); both batches are weighed as one sample of the two posteriors' even mixture, so that {samples} members carry the estimate.", samples / 2)), "{text}");
+    assert!(text.contains(&format!("The correction towards the weighted moments was refused (the moment-matched correction: its posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed)). So a defensive second batch of {} was drawn from the GP surrogate's posterior tempered at β = 0.250 (π·L^β: the GP surrogate's own shape, about 2.0 times as wide, with no fit to extrapolate); both batches are weighed as one sample of the even mixture of the GP surrogate's posterior and that proposal, so that {samples} members carry the estimate.", samples / 2)), "{text}");
     assert!(
         !text.contains("corrected towards the weighted moments (stds"),
         "{text}"
     );
     assert!(!text.contains("the one step stands"), "{text}");
+
+    // The defensive normal, tried before the tempered posterior.
+    {
+        let m = report.model_posterior.as_mut().unwrap();
+        m.correction_tempering = None;
+        m.correction_defensive_normal = true;
+    }
+    let dir = fresh_dir("noisy-defensive-normal");
+    write_report(&report, &dir).unwrap();
+    let text = std::fs::read_to_string(dir.join("report.html"))
+        .unwrap()
+        .replace("&#39;", "'");
+    assert!(text.contains(&format!("So a defensive second batch of {} was drawn from a normal at the first batch's importance-weighted mean with twice its weighted second moment (at least √2 times as wide as the weights' estimate of the target, and not multiplied by the surrogate's posterior, whose tail the refused correction raised); both batches are weighed", samples / 2)), "{text}");
+    assert!(!text.contains("tempered at"), "{text}");
 }
 
 #[test]

@@ -348,6 +348,7 @@ pub fn synthetic_report(
             correction_not_made: None,
             correction_moment_matched: false,
             correction_tempering: None,
+            correction_defensive_normal: false,
             both_batches: true,
             corrections_refused: Vec::new(),
             replicates: 4,

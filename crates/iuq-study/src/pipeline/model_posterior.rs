@@ -481,7 +481,9 @@ fn stage_line(stage: &ModelPosteriorStage, groups: usize) -> String {
 
 /// The progress line announcing a correction's batch, before its runs start.
 fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: bool) -> String {
-    let kind = if let Some(beta) = correction.tempering {
+    let kind = if correction.defensive_normal {
+        "a defensive batch from a normal at the first batch's weighted mean with twice its weighted second moment".to_string()
+    } else if let Some(beta) = correction.tempering {
         format!(
             "a defensive batch from the surrogate's posterior tempered at β = {beta:.3} (π·L_s^β)"
         )
@@ -498,15 +500,17 @@ fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: 
     } else {
         format!(" (refused first: {})", correction.refused.join("; "))
     };
-    let at = if correction.tempering.is_some() {
-        "the tempered"
+    let at = if correction.defensive_normal {
+        "that normal"
+    } else if correction.tempering.is_some() {
+        "the tempered surrogate's posterior"
     } else {
-        "the corrected"
+        "the corrected surrogate's posterior"
     };
     format!(
         "model posterior: the first batch's weights (k̂ = {:.3}, CV {:.2}) call for a correction: \
-         {kind}{refused}; a batch of {} samples at {at} surrogate's posterior starts, {} runs{} \
-         (results already stored are reused)",
+         {kind}{refused}; a batch of {} samples at {at} starts, {} runs{} (results already \
+         stored are reused)",
         correction.pareto_k_before,
         correction.cv_before,
         correction.model_evaluations,

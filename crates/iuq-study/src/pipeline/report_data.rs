@@ -282,6 +282,7 @@ fn model_posterior_report(
         correction_not_made: p.correction_not_made.clone(),
         correction_moment_matched: p.corrections.iter().any(|c| c.moment_matched),
         correction_tempering: p.corrections.iter().find_map(|c| c.tempering),
+        correction_defensive_normal: p.corrections.iter().any(|c| c.defensive_normal),
         both_batches: p.both_batches,
         corrections_refused: p
             .corrections
