@@ -25,8 +25,8 @@ use iuq_core::ParameterSpace;
 use iuq_core::random::StreamRng;
 use rand_distr::{Distribution, StandardNormal};
 
+use crate::moment_matching::Normal;
 use crate::pareto_smoothing::normalised_weights;
-use crate::proposal::cholesky_lower;
 
 /// The variance factor of the defensive normal over the weights' second moment.
 pub const DEFENSIVE_VARIANCE_FACTOR: f64 = 2.0;
@@ -37,9 +37,7 @@ const MAX_TRIES_PER_DRAW: usize = 100;
 /// N(μ_w, 2·M_w) of a first batch (module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct DefensiveNormal {
-    mean: Vec<f64>,
-    lower: Vec<Vec<f64>>,
-    half_log_det: f64,
+    normal: Normal,
 }
 
 impl DefensiveNormal {
@@ -71,32 +69,14 @@ impl DefensiveNormal {
                 }
             }
         }
-        for a in 0..d {
-            for b in 0..a {
-                cov[b][a] = cov[a][b];
-            }
-        }
-        if (0..d).any(|a| !(cov[a][a].is_finite() && cov[a][a] > 0.0)) {
-            return None;
-        }
-        let lower = cholesky_lower(&cov)?;
-        let half_log_det = (0..d).map(|a| lower[a][a].ln()).sum();
         Some(Self {
-            mean,
-            lower,
-            half_log_det,
+            normal: Normal::with_covariance(mean, cov)?,
         })
     }
 
     /// ln N(x; μ, Σ) + (d/2)·ln 2π.
     pub fn log_density(&self, x: &[f64]) -> f64 {
-        let d = self.mean.len();
-        let mut z = vec![0.0; d];
-        for a in 0..d {
-            let s: f64 = (0..a).map(|b| self.lower[a][b] * z[b]).sum();
-            z[a] = (x[a] - self.mean[a] - s) / self.lower[a][a];
-        }
-        -0.5 * z.iter().map(|v| v * v).sum::<f64>() - self.half_log_det
+        self.normal.log_density(x)
     }
 
     /// `n` draws inside the prior's support of `space` (draws outside it are redrawn), with their
@@ -107,7 +87,7 @@ impl DefensiveNormal {
         n: usize,
         rng: &mut StreamRng,
     ) -> Option<(Vec<Vec<f64>>, Vec<f64>)> {
-        let d = self.mean.len();
+        let d = self.normal.mean.len();
         let (mut points, mut priors) = (Vec::with_capacity(n), Vec::with_capacity(n));
         let mut tries = 0;
         while points.len() < n {
@@ -117,7 +97,10 @@ impl DefensiveNormal {
             }
             let z: Vec<f64> = (0..d).map(|_| StandardNormal.sample(rng)).collect();
             let x: Vec<f64> = (0..d)
-                .map(|a| self.mean[a] + (0..=a).map(|b| self.lower[a][b] * z[b]).sum::<f64>())
+                .map(|a| {
+                    self.normal.mean[a]
+                        + (0..=a).map(|b| self.normal.lower[a][b] * z[b]).sum::<f64>()
+                })
                 .collect();
             match space.log_prior(&x) {
                 Ok(lp) if lp.is_finite() => {
@@ -154,8 +137,8 @@ mod tests {
             .map(|&(a, b)| vec![a, b])
             .collect();
         let normal = DefensiveNormal::fit(&points, &weights).unwrap();
-        assert!((normal.mean[0] - 1.25).abs() < 1e-12);
-        assert!((normal.lower[0][0] - 3.5f64.sqrt()).abs() < 1e-12);
+        assert!((normal.normal.mean[0] - 1.25).abs() < 1e-12);
+        assert!((normal.normal.lower[0][0] - 3.5f64.sqrt()).abs() < 1e-12);
         // Its draws are kept inside the prior U(−1, 3)², with their log-priors.
         let space = ParameterSpace::new(
             (0..2)
@@ -180,17 +163,19 @@ mod tests {
         );
         // One step along the Cholesky factor's first column is one std: the log-density falls
         // by ½.
-        let a = normal.log_density(&normal.mean);
+        let a = normal.log_density(&normal.normal.mean);
         let step: Vec<f64> = (0..2)
-            .map(|k| normal.mean[k] + normal.lower[k][0])
+            .map(|k| normal.normal.mean[k] + normal.normal.lower[k][0])
             .collect();
         let b = normal.log_density(&step);
         assert!((a - b - 0.5).abs() < 1e-12, "{a} {b}");
         // A normal almost wholly outside the prior cannot be sampled.
         let far = DefensiveNormal {
-            mean: vec![100.0, 100.0],
-            lower: vec![vec![0.1, 0.0], vec![0.0, 0.1]],
-            half_log_det: 0.0,
+            normal: Normal::with_covariance(
+                vec![100.0, 100.0],
+                vec![vec![0.01, 0.0], vec![0.0, 0.01]],
+            )
+            .unwrap(),
         };
         assert!(far.sample(&space, 10, &mut stream(3, 1, 0)).is_none());
         // No positive weight: no normal.

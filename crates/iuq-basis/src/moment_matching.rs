@@ -74,10 +74,10 @@ pub const DEFENSIVE_WIDENING: f64 = 1.2;
 
 /// A multivariate normal's mean, Cholesky factor and log-determinant/2.
 #[derive(Debug, Clone, PartialEq)]
-struct Normal {
-    mean: Vec<f64>,
-    lower: Vec<Vec<f64>>,
-    half_log_det: f64,
+pub(crate) struct Normal {
+    pub(crate) mean: Vec<f64>,
+    pub(crate) lower: Vec<Vec<f64>>,
+    pub(crate) half_log_det: f64,
 }
 
 impl Normal {
@@ -101,6 +101,15 @@ impl Normal {
         }
         for a in 0..d {
             cov[a][a] *= 1.0 + 1e-10;
+        }
+        Self::with_covariance(mean, cov)
+    }
+
+    /// The normal N(`mean`, Σ) from the lower triangle of `cov` (the upper is filled from it);
+    /// `None` when Σ is not positive definite.
+    pub(crate) fn with_covariance(mean: Vec<f64>, mut cov: Vec<Vec<f64>>) -> Option<Self> {
+        let d = mean.len();
+        for a in 0..d {
             for b in 0..a {
                 cov[b][a] = cov[a][b];
             }
@@ -129,7 +138,7 @@ impl Normal {
     }
 
     /// ln N(x; μ, Σ) + (d/2)·ln 2π.
-    fn log_density(&self, x: &[f64]) -> f64 {
+    pub(crate) fn log_density(&self, x: &[f64]) -> f64 {
         let d = self.mean.len();
         let mut z = vec![0.0; d];
         for a in 0..d {
