@@ -80,7 +80,7 @@ impl DefensiveNormal {
     }
 
     /// `n` draws inside the prior's support of `space` (draws outside it are redrawn), with their
-    /// log-priors; `None` when fewer than one in [`MAX_TRIES_PER_DRAW`] falls inside.
+    /// log-priors; `None` when fewer than one in `MAX_TRIES_PER_DRAW` (100) falls inside.
     pub fn sample(
         &self,
         space: &ParameterSpace,

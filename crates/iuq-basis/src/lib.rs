@@ -15,7 +15,7 @@
 //! - [`summary`]: MAP, mean, std, quantiles and KDE marginals;
 //! - [`pareto_smoothing`]: Pareto-smoothed importance sampling (k̂, smoothed weights, ESS);
 //! - [`model_posterior`](mod@model_posterior): from a surrogate's posterior to the model's, by importance stages
-//!   and delayed-acceptance moves, certified by k̂; [`pseudo_marginal`] for a noisy model, with
+//!   and delayed-acceptance moves, certified by k̂ and [`spread_ratio`]; [`pseudo_marginal`] for a noisy model, with
 //!   [`moment_matching`]'s correction and its test, and [`defensive_normal`]'s (or [`defensive_tempering`]'s) batch where
 //!   that correction cannot be made; [`member_selection`]: the members a batch
 //!   runs, nested in the batch's size.
@@ -63,6 +63,7 @@ pub mod quadratic_regression;
 pub mod resampling;
 pub mod sampler;
 pub mod settings;
+pub mod spread_ratio;
 pub mod summary;
 
 pub use ancestral_variance::{AncestralErrors, ancestral_errors};

@@ -8,14 +8,16 @@
 //! 1. `samples` members of the surrogate population (uniformly, without replacement) are run
 //!    through the model in one batch: ℓ_m, hence r (a failed run: r = −∞, weight 0).
 //! 2. **Correction.** Where those weights would not hold in one stage (the CV rule does not
-//!    reach β = 1 or k̂ exceeds its threshold), the surrogate is corrected: ℓ_s + r̂, with r̂ a
+//!    reach β = 1, k̂ exceeds its threshold, or the weighted std of some parameter exceeds the
+//!    batch's by more than [`crate::spread_ratio::WIDER_THAN_PROPOSAL`]: a narrow proposal's
+//!    tail that k̂ underestimates), the surrogate is corrected: ℓ_s + r̂, with r̂ a
 //!    quadratic least-squares fit of r over the batch ([`crate::quadratic_regression`]; a
 //!    surrogate posterior that is shifted, too wide or too narrow differs from the model's by
 //!    exactly such an r), the corrected surrogate's posterior is sampled by BASIS (surrogate
 //!    evaluations only), and a new batch of `samples` members of it is run through the model;
 //!    both batches are then weighed as one sample of the mixture of the two posteriors
 //!    ([`crate::batch_mixture`]), which is the estimate when its k̂ (or nearly equal weights)
-//!    holds; otherwise the stages go on from the corrected batch alone, with the corrected
+//!    holds and its spread ratio against the wider batch does; otherwise the stages go on from the corrected batch alone, with the corrected
 //!    surrogate as the surrogate (r becomes r − r̂). At most
 //!    `corrections` times (0 or 1): this costs one batch where a bridge costs one per stage.
 //!    A corrected posterior that keeps less than half its population inside the batch's range
@@ -28,8 +30,10 @@
 //!    when it stays within it; Wu et al. 2017), then, while the Pareto-smoothed weights' k̂
 //!    (Vehtari et al. 2024) exceeds its threshold min(1 − 1/log₁₀ S, 0.7), the step is halved
 //!    (down to `min_step`) until k̂ holds or the weights are nearly equal (CV ≤
-//!    [`NEARLY_EQUAL_CV`]): every stage's incremental weights are certified. One stage when the
-//!    surrogate is good.
+//!    [`NEARLY_EQUAL_CV`]): every stage's incremental weights are certified. A step to β = 1 is
+//!    also halved while its spread ratio exceeds [`crate::spread_ratio::WIDER_THAN_PROPOSAL`]
+//!    (shorter steps are followed by a bridge, which spreads the population). One stage when
+//!    the surrogate is good.
 //! 4. When β reaches 1 the population with its smoothed weights is the model's posterior.
 //!    Otherwise the population is resampled by the weights and every copy makes `moves`
 //!    delayed-acceptance moves at β (Christen & Fox 2005; with a surrogate subchain as the
@@ -94,6 +98,7 @@ use crate::resampling::resample;
 use crate::sampler::{Basis, Silent};
 use crate::settings::BasisSettings;
 use crate::settings::Resampling;
+use crate::spread_ratio::{widest_spread_ratio, within_proposal_spread};
 
 /// A stage's weights whose CV is at most this are certified whatever their k̂: so nearly equal
 /// (ESS/S ≥ 0.99) that their tail cannot carry the estimate. k̂ is a shape, blind to the
@@ -274,12 +279,22 @@ pub struct ModelPosteriorStage {
     pub screen_acceptance: Option<f64>,
     /// Share of the bridge's model confirmations accepted (none for stage 1).
     pub confirm_acceptance: Option<f64>,
+    /// The largest ratio, over the parameters, of the step's weighted std to the members'
+    /// unweighted std ([`crate::spread_ratio`]; above
+    /// [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a deterministic model's step is not
+    /// certified; a noisy model's is judged by [`crate::moment_matching::proposal_mismatch`]
+    /// instead, its weights' noise spreads the ratio too widely); 0 where it cannot be computed.
+    #[serde(default)]
+    pub spread_ratio: f64,
 }
 
 impl ModelPosteriorStage {
-    /// The record of one full step (β from 0 to 1) with the weights `smoothing` of raw CV `cv`:
-    /// a noisy model's estimate, or both batches of a correction weighed together.
+    /// The record of one full step (β from 0 to 1) over the members `points` with the weights
+    /// `smoothing` of raw CV `cv`: a noisy model's estimate, or both batches of a correction
+    /// weighed together.
     pub(crate) fn full_step(
+        points: &[Vec<f64>],
+        batches: usize,
         smoothing: &ParetoSmoothing,
         cv: f64,
         model_evaluations: usize,
@@ -299,6 +314,7 @@ impl ModelPosteriorStage {
             failures,
             screen_acceptance: None,
             confirm_acceptance: None,
+            spread_ratio: recorded_spread_ratio(points, &smoothing.log_weights, batches),
         }
     }
 }
@@ -315,6 +331,11 @@ pub struct SurrogateCorrection {
     pub pareto_k_before: f64,
     /// CV of those weights.
     pub cv_before: f64,
+    /// The widest ratio of those weights' std to the batch's, over the parameters
+    /// ([`crate::spread_ratio`]; above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a
+    /// reproducible model's batch is corrected whatever k̂ says); 0 where it cannot be computed.
+    #[serde(default)]
+    pub spread_ratio_before: f64,
     /// Model evaluations of the batch the correction was fitted on.
     pub model_evaluations: usize,
     /// Whether the correction had quadratic terms (else linear; a moment-matched one always
@@ -657,15 +678,18 @@ pub fn model_posterior(
         let max_r = largest_finite(&r);
         let one_stage = max_r.is_finite() && {
             let rule = next_step(&r, 0.0, settings.cv_target, max_r);
+            let smoothing = pareto_smooth(&r);
             rule.reaches_one
-                && (pareto_smooth(&r).pareto_k <= threshold
+                && (smoothing.pareto_k <= threshold
                     || coefficient_of_variation(&r) <= NEARLY_EQUAL_CV)
+                && within_proposal_spread(&theta, &smoothing.log_weights, 1)
         };
         if !one_stage {
             let smoothing = pareto_smooth(&r);
             let record = |quadratic: bool, moment_matched: bool| SurrogateCorrection {
                 pareto_k_before: smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
+                spread_ratio_before: recorded_spread_ratio(&theta, &smoothing.log_weights, 1),
                 model_evaluations: s,
                 quadratic,
                 moment_matched,
@@ -863,9 +887,14 @@ pub fn model_posterior(
             let mut step = rule.step;
             let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
             let mut smoothing = pareto_smooth(&scaled(step));
+            // A step to β = 1 is the estimate: its target must not be wider than the
+            // population (a narrow proposal's weights hide their tail from k̂). A step short of
+            // it is followed by a bridge, whose moves spread the population.
             let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
-                smoothing.pareto_k <= threshold
-                    || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV
+                (smoothing.pareto_k <= threshold
+                    || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV)
+                    && (!(rule.reaches_one && step == rule.step)
+                        || within_proposal_spread(&theta, &smoothing.log_weights, 1))
             };
             while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
                 step /= 2.0;
@@ -888,6 +917,7 @@ pub fn model_posterior(
                 failures: stage_evaluations.1,
                 screen_acceptance: bridge_rates.0,
                 confirm_acceptance: bridge_rates.1,
+                spread_ratio: recorded_spread_ratio(&theta, &smoothing.log_weights, 1),
             };
             on_event(ModelPosteriorEvent::Stage(&record));
             stages.push(record);
@@ -1108,8 +1138,22 @@ fn certified_mixture(
     if smoothing.pareto_k > pareto_k_threshold(raw.len()) && cv > NEARLY_EQUAL_CV {
         return None;
     }
-    let stage = ModelPosteriorStage::full_step(&smoothing, cv, 2 * batch, failures);
+    if !within_proposal_spread(&members.theta, &smoothing.log_weights, 2) {
+        return None;
+    }
+    let stage =
+        ModelPosteriorStage::full_step(&members.theta, 2, &smoothing, cv, 2 * batch, failures);
     Some((members, raw, smoothing, stage))
+}
+
+/// A step's [`ModelPosteriorStage::spread_ratio`]: the widest ratio of weighted std to the
+/// proposal's over `points` (`batches` batches), 0 where it cannot be computed.
+pub(crate) fn recorded_spread_ratio(
+    points: &[Vec<f64>],
+    log_weights: &[f64],
+    batches: usize,
+) -> f64 {
+    widest_spread_ratio(points, log_weights, batches).map_or(0.0, |(_, ratio)| ratio)
 }
 
 /// Why a corrected posterior's `samples` are refused against the `batch` its correction was

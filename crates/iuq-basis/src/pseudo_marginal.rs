@@ -67,6 +67,7 @@ use crate::model_posterior::{
     Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
     ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
     coefficient_of_variation, evaluate, largest_finite, log_ratios, outside_batch,
+    recorded_spread_ratio,
 };
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
@@ -342,6 +343,11 @@ pub(crate) fn noisy_estimate(
             let correction = SurrogateCorrection {
                 pareto_k_before: first_smoothing.pareto_k,
                 cv_before: coefficient_of_variation(&r),
+                spread_ratio_before: recorded_spread_ratio(
+                    &first.theta,
+                    &first_smoothing.log_weights,
+                    1,
+                ),
                 model_evaluations: s,
                 quadratic: matches!(candidate, Candidate::MomentMatched(_)),
                 moment_matched: matches!(candidate, Candidate::MomentMatched(_)),
@@ -390,8 +396,14 @@ pub(crate) fn noisy_estimate(
     } else {
         ModelPosteriorStop::NoisyWeightsTail
     };
-    let stage =
-        ModelPosteriorStage::full_step(&smoothing, cv, s + evaluations, first_failures + failures);
+    let stage = ModelPosteriorStage::full_step(
+        &members.theta,
+        if correction.is_some() { 2 } else { 1 },
+        &smoothing,
+        cv,
+        s + evaluations,
+        first_failures + failures,
+    );
     Ok(NoisyEstimate {
         log_evidence_ratio: log_evidence_increment(&raw, 1.0, max_raw),
         members,

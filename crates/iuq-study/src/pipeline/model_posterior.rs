@@ -508,11 +508,12 @@ fn correction_line(correction: &SurrogateCorrection, groups: usize, replicated: 
         "the corrected surrogate's posterior"
     };
     format!(
-        "model posterior: the first batch's weights (k̂ = {:.3}, CV {:.2}) call for a correction: \
+        "model posterior: the first batch's weights (k̂ = {:.3}, CV {:.2}, widest std ratio {:.2}) call for a correction: \
          {kind}{refused}; a batch of {} samples at {at} starts, {} runs{} (results already \
          stored are reused)",
         correction.pareto_k_before,
         correction.cv_before,
+        correction.spread_ratio_before,
         correction.model_evaluations,
         correction.model_evaluations * groups,
         if replicated {
