@@ -150,6 +150,19 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     }
     // The surrogate's own posterior is visibly off: there was something to correct.
     assert!(surrogate_off > 0.2, "surrogate off by {surrogate_off}");
+    // The estimate's step keeps the target within 1.2 of the wider batch's spread, and the
+    // correction records the first batch's ratio.
+    let spread = m["stages"][0]["spread_ratio"].as_f64().unwrap();
+    assert!(spread > 0.0 && spread <= 1.2, "{spread}");
+    assert!(m["corrections"][0]["spread_ratio_before"].as_f64().unwrap() > 0.0);
+    let stages_csv = std::fs::read_to_string(out.join("model-posterior/stages.csv")).unwrap();
+    assert!(
+        stages_csv
+            .lines()
+            .next()
+            .unwrap()
+            .ends_with(",spread_ratio")
+    );
     // The files, and the report's second source.
     for file in [
         "model-posterior/summary.json",

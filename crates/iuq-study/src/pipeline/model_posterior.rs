@@ -241,6 +241,7 @@ impl ModelPosteriorOutcome {
                 "failures": s.failures,
                 "screen_acceptance": s.screen_acceptance,
                 "confirm_acceptance": s.confirm_acceptance,
+                "spread_ratio": s.spread_ratio,
             })).collect::<Vec<_>>(),
             "seconds": self.seconds,
         })
@@ -575,6 +576,7 @@ fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
         "failures",
         "screen_acceptance",
         "confirm_acceptance",
+        "spread_ratio",
     ]
     .map(String::from)
     .to_vec();
@@ -593,6 +595,7 @@ fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
                 s.failures as f64,
                 s.screen_acceptance.unwrap_or(f64::NAN),
                 s.confirm_acceptance.unwrap_or(f64::NAN),
+                s.spread_ratio,
             ]
         })
         .collect();
