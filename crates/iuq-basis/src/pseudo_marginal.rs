@@ -12,8 +12,11 @@
 //! 1. The first batch of S members of q is run; [`crate::moment_matching::proposal_mismatch`]
 //!    tests whether the weighted moments differ from q's more than the same weights dealt to
 //!    the members at random would make them.
-//! 2. If not, and the step's k̂ holds, the estimate is that step.
-//! 3. If so, or if k̂ does not hold (and `corrections` allows one), the surrogate is corrected
+//! 2. If not, and the step's k̂ holds, and no parameter's weighted std exceeds the batch's by
+//!    more than [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] (a target wider than the batch,
+//!    whose tail k̂ underestimates and the test, against the weights' noise, can miss), the
+//!    estimate is that step.
+//! 3. Otherwise (and where `corrections` allows one), the surrogate is corrected
 //!    by the moment-matched log-ratio g (ℓ_s + g, [`crate::moment_matching::GaussianLogRatio`],
 //!    towards the weighted moments with the stds widened by
 //!    [`crate::moment_matching::DEFENSIVE_WIDENING`]), the corrected surrogate's posterior
@@ -75,6 +78,7 @@ use crate::moment_matching::{
 use crate::pareto_smoothing::{ParetoSmoothing, pareto_k_threshold, pareto_smooth};
 use crate::sampler::{Basis, Silent};
 use crate::settings::BasisSettings;
+use crate::spread_ratio::within_proposal_spread;
 
 /// Members with their surrogate and model log-likelihoods and log-priors.
 pub(crate) struct Members {
@@ -279,8 +283,11 @@ pub(crate) fn noisy_estimate(
     // certified (a tail the weights cannot carry: the case a correction of the spread helps).
     let tail = first_smoothing.pareto_k > pareto_k_threshold(s)
         && coefficient_of_variation(&r) > NEARLY_EQUAL_CV;
+    // A target wider than the batch in some parameter: a tail k̂ underestimates and the
+    // permutation test, against the weights' noise, may not find.
+    let narrow = !within_proposal_spread(&first.theta, &first_smoothing.log_weights, 1);
     let correct = settings.corrections > 0
-        && (tail || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
+        && (tail || narrow || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
     // The candidates in order: the moment-matched correction, then the defensive batch from
     // the tempered surrogate posterior, which needs no fit and is not held to the batch (its
     // tails are the surrogate's own, raised).
@@ -330,6 +337,8 @@ pub(crate) fn noisy_estimate(
             refused.join("; "),
             if tail {
                 "the step's k̂ does not hold"
+            } else if narrow {
+                "the weighted std of a parameter exceeds the batch's by more than the spread ratio's bound"
             } else {
                 "the surrogate's posterior is off"
             }

@@ -792,6 +792,110 @@ fn a_surrogate_half_as_wide_in_one_parameter_is_corrected_even_where_k_hat_holds
     );
 }
 
+/// A log-density as a named type.
+type BoxedDensity = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
+
+/// The lure problem in `d` parameters: a chaotic model (one run's likelihood N(y; θ + τz, σ²),
+/// σ = 1, τ = 0.5) whose averaged posterior is N(y, T²·I), T = 1.118; the surrogate's posterior
+/// is exact in every parameter but x1, where its core is half as wide as the model's and 0.1 %
+/// of it is a flat tail from the mean to the prior's bound (a GP whose likelihood flattens away
+/// from its runs, as the healthy red-cell study's in Λ). Its population: 4,000 exact draws.
+struct Lure {
+    y: Vec<f64>,
+    total: f64,
+    space: ParameterSpace,
+    surrogate: FnLikelihood<BoxedDensity>,
+    model: FnLikelihood<BoxedDensity>,
+    samples: Vec<Vec<f64>>,
+    log_likelihood: Vec<f64>,
+    log_prior: Vec<f64>,
+}
+
+impl Lure {
+    fn new(d: usize) -> Self {
+        let y: Vec<f64> = [1.0, -2.0, 0.5, 3.0, -1.0, 2.0, 0.0, 1.5][..d].to_vec();
+        let (sigma, tau) = (1.0f64, 0.5f64);
+        let total = (sigma * sigma + tau * tau).sqrt();
+        // As `chaotic_model`, boxed to be named.
+        let model = FnLikelihood::new(d, {
+            let y = y.clone();
+            Box::new(move |x: &[f64]| {
+                -0.5 * (0..y.len())
+                    .map(|k| ((y[k] - x[k] - tau * irregular_normal(x, k)) / sigma).powi(2))
+                    .sum::<f64>()
+            }) as BoxedDensity
+        });
+        let (core, tail_share, bound) = (0.5 * total, 0.001, 10.0);
+        let core_density = move |v: f64, m: f64| {
+            (-0.5 * ((v - m) / core).powi(2)).exp() / (core * (2.0 * std::f64::consts::PI).sqrt())
+        };
+        let surrogate = FnLikelihood::new(d, {
+            let y = y.clone();
+            Box::new(move |x: &[f64]| {
+                let tail = if x[1] >= y[1] {
+                    1.0 / (bound - y[1])
+                } else {
+                    0.0
+                };
+                -0.5 * (0..x.len())
+                    .filter(|&k| k != 1)
+                    .map(|k| ((x[k] - y[k]) / total).powi(2))
+                    .sum::<f64>()
+                    + ((1.0 - tail_share) * core_density(x[1], y[1]) + tail_share * tail).ln()
+            }) as BoxedDensity
+        });
+        let space = space(d);
+        let mut rng = stream(7, 1, 0);
+        let samples: Vec<Vec<f64>> = (0..4000)
+            .map(|_| {
+                let z0: f64 = StandardNormal.sample(&mut rng);
+                let z1: f64 = StandardNormal.sample(&mut rng);
+                let u: f64 = rand::Rng::random(&mut rng);
+                let x1 = if u < tail_share {
+                    y[1] + (bound - y[1]) * u / tail_share
+                } else {
+                    y[1] + core * z1
+                };
+                let mut x = vec![y[0] + total * z0, x1];
+                for &m in &y[2..] {
+                    let z: f64 = StandardNormal.sample(&mut rng);
+                    x.push(m + total * z);
+                }
+                x
+            })
+            .collect();
+        let log_likelihood = surrogate
+            .log_likelihood_batch(&samples)
+            .unwrap()
+            .into_iter()
+            .map(|v| v.unwrap())
+            .collect();
+        let log_prior = samples
+            .iter()
+            .map(|s| space.log_prior(s).unwrap())
+            .collect();
+        Self {
+            y,
+            total,
+            space,
+            surrogate,
+            model,
+            samples,
+            log_likelihood,
+            log_prior,
+        }
+    }
+
+    fn population(&self) -> SurrogatePopulation<'_> {
+        SurrogatePopulation {
+            samples: &self.samples,
+            log_likelihood: &self.log_likelihood,
+            log_prior: &self.log_prior,
+            log_evidence: 0.0,
+        }
+    }
+}
+
 #[test]
 fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_batch_run() {
     // The chaotic model's averaged posterior N((1, −2), 1.118²·I). The surrogate's posterior
@@ -811,56 +915,9 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
     // spread, 1.5/√n in MCSE units. Measured: 16 certified, x1's std 1.07 on average (−4 %,
     // −1.05 MCSE), the largest single error −4.2 MCSE; with the surrogate's posterior tempered
     // instead (`iuq_basis::defensive_tempering`), 13 certified.
-    let (y, sigma, tau): (Vec<f64>, f64, f64) = (vec![1.0, -2.0], 1.0, 0.5);
-    let total: f64 = (sigma * sigma + tau * tau).sqrt();
-    let model = chaotic_model(&y, sigma, tau);
-    let (core, tail_share, bound) = (0.5 * total, 0.001, 10.0);
-    let core_density = |v: f64| {
-        (-0.5 * ((v - y[1]) / core).powi(2)).exp() / (core * (2.0 * std::f64::consts::PI).sqrt())
-    };
-    let surrogate = FnLikelihood::new(2, {
-        let y = y.clone();
-        move |x: &[f64]| {
-            let tail = if x[1] >= y[1] {
-                1.0 / (bound - y[1])
-            } else {
-                0.0
-            };
-            -0.5 * ((x[0] - y[0]) / total).powi(2)
-                + ((1.0 - tail_share) * core_density(x[1]) + tail_share * tail).ln()
-        }
-    });
-    let space = space(2);
-    let mut rng = stream(7, 1, 0);
-    let samples: Vec<Vec<f64>> = (0..4000)
-        .map(|_| {
-            let z0: f64 = StandardNormal.sample(&mut rng);
-            let z1: f64 = StandardNormal.sample(&mut rng);
-            let u: f64 = rand::Rng::random(&mut rng);
-            let x1 = if u < tail_share {
-                y[1] + (bound - y[1]) * u / tail_share
-            } else {
-                y[1] + core * z1
-            };
-            vec![y[0] + total * z0, x1]
-        })
-        .collect();
-    let ll: Vec<f64> = surrogate
-        .log_likelihood_batch(&samples)
-        .unwrap()
-        .into_iter()
-        .map(|v| v.unwrap())
-        .collect();
-    let lp: Vec<f64> = samples
-        .iter()
-        .map(|s| space.log_prior(s).unwrap())
-        .collect();
-    let population = SurrogatePopulation {
-        samples: &samples,
-        log_likelihood: &ll,
-        log_prior: &lp,
-        log_evidence: 0.0,
-    };
+    let lure = Lure::new(2);
+    let (y, total) = (&lure.y, lure.total);
+    let population = lure.population();
     let exact_std = [total, total];
     let seeds = 16;
     let (mut z, mut certified) = ([0.0f64; 4], 0);
@@ -872,10 +929,10 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
             ..Default::default()
         };
         let result = model_posterior(
-            &space,
+            &lure.space,
             population,
-            &surrogate,
-            &model,
+            &lure.surrogate,
+            &lure.model,
             &settings,
             &mut |_| {},
         )
@@ -930,4 +987,68 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
     assert!(certified >= 14, "{certified}");
     let bound = 4.0 * 1.5 / (certified as f64).sqrt();
     assert!(z.iter().all(|v| v.abs() < bound), "{z:?}");
+}
+
+#[test]
+fn a_noisy_models_batch_narrower_than_the_target_is_corrected_where_k_hat_and_the_test_miss_it() {
+    // The lure problem in 6 parameters (x2..x5 exact). On seeds 2, 3 and 6 (of 16), neither the
+    // first batch's k̂ nor the permutation test saw x1's core half as wide as the target, and the
+    // one step was certified with x1's std 20–35 % narrow (0.725, 0.821, 0.744 against 1.118).
+    // Their weighted std of x1 was 1.24–1.32 times the batch's: the spread ratio now asks for
+    // the correction, and the defensive batch follows. Each seed corrected, and where certified,
+    // x1's std within 4 × 1.5 MCSE (the documented understatement of noisy weights' MCSE).
+    // Measured: 1.193 ± 0.143 (not certified), 1.195 ± 0.071 and 0.975 ± 0.062. (The second
+    // batch's chaotic runs move with the last bit of the first batch's weights: a surrogate
+    // written with its terms summed in another order gave 0.917, 1.345 and 0.956.)
+    let lure = Lure::new(6);
+    let population = lure.population();
+    let mut certified = 0;
+    for seed in [2, 3, 6] {
+        let settings = ModelPosteriorSettings {
+            samples: 400,
+            seed,
+            pseudo_marginal: true,
+            ..Default::default()
+        };
+        let result = model_posterior(
+            &lure.space,
+            population,
+            &lure.surrogate,
+            &lure.model,
+            &settings,
+            &mut |_| {},
+        )
+        .unwrap();
+        println!(
+            "seed {seed}: {:?} {:?} {} x1 std {:.3} ± {:.3}",
+            result.corrections,
+            result.proposal_mismatch,
+            result.stop,
+            result.std[1],
+            result.mcse_std[1]
+        );
+        assert_eq!(result.corrections.len(), 1, "seed {seed}");
+        let before = &result.corrections[0];
+        assert!(
+            before.pareto_k_before <= pareto_k_threshold(400)
+                && !result
+                    .proposal_mismatch
+                    .as_ref()
+                    .is_some_and(|m| m.significant()),
+            "seed {seed}: the spread ratio alone asked for the correction ({before:?})"
+        );
+        assert!(
+            before.spread_ratio_before > iuq_basis::spread_ratio::WIDER_THAN_PROPOSAL,
+            "seed {seed}: {before:?}"
+        );
+        if result.certified() {
+            certified += 1;
+            let es = 1.5 * result.mcse_std[1];
+            assert!(
+                (result.std[1] - lure.total).abs() <= 4.0 * es,
+                "seed {seed}: std of x1"
+            );
+        }
+    }
+    assert!(certified >= 2, "{certified}");
 }
