@@ -218,6 +218,10 @@ pub struct ModelPosteriorStageRow {
     pub model_evaluations: usize,
     /// Acceptance of the bridge's surrogate and model steps (none for the first stage).
     pub acceptance: Option<(f64, f64)>,
+    /// The widest ratio of its weighted std to the members' own over the parameters (above 1.2
+    /// a step to β = 1 is not certified; 0 where it could not be computed).
+    #[serde(default)]
+    pub spread_ratio: f64,
 }
 
 /// The model run at both MAPs at one data point.

@@ -631,14 +631,15 @@ pub(crate) fn model_posterior_comparison(m: &ModelPosteriorReport) -> Table {
     }
 }
 
-/// The model posterior's stages: exponent, CV, k̂, ESS, model evaluations and the bridges'
-/// acceptance rates.
+/// The model posterior's stages: exponent, CV, k̂, the spread ratio, ESS, model evaluations and
+/// the bridges' acceptance rates.
 pub(crate) fn model_posterior_stages(m: &ModelPosteriorReport) -> Table {
     let columns = [
         "stage",
         "β",
         "CV",
         "k̂",
+        "std ratio",
         "ESS",
         "model evaluations",
         "surrogate acceptance",
@@ -658,6 +659,7 @@ pub(crate) fn model_posterior_stages(m: &ModelPosteriorReport) -> Table {
                 Cell::number(s.beta, at("beta")),
                 Cell::number(s.cv, at("cv")),
                 Cell::number(s.pareto_k, at("pareto_k")),
+                Cell::number(s.spread_ratio, at("spread_ratio")),
                 Cell::number(s.effective_sample_size, at("effective_sample_size")),
                 Cell::count(s.model_evaluations, at("model_evaluations")),
             ];

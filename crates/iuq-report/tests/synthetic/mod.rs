@@ -380,6 +380,7 @@ pub fn synthetic_report(
                 effective_sample_size: 151.5,
                 model_evaluations: 200,
                 acceptance: None,
+                spread_ratio: 1.04,
             }],
             map_runs: stresses
                 .iter()

@@ -308,6 +308,7 @@ fn model_posterior_report(
                 effective_sample_size: s.effective_sample_size,
                 model_evaluations: s.model_evaluations,
                 acceptance: s.screen_acceptance.zip(s.confirm_acceptance),
+                spread_ratio: s.spread_ratio,
             })
             .collect(),
         map_runs: outcome
