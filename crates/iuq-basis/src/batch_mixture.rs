@@ -75,6 +75,8 @@ pub(crate) fn mixture_of_batches(
     g: &dyn Fn(&[f64], f64, f64) -> f64,
     log_c: f64,
 ) -> (Members, Vec<f64>) {
+    // The even mixture ½q + ½q_c, and the spread ratio of both batches, need equal batches.
+    debug_assert_eq!(first.theta.len(), second.theta.len());
     first.theta.extend(second.theta);
     first.surrogate.extend(second.surrogate);
     first.model.extend(second.model);

@@ -31,7 +31,8 @@
 //!    (Vehtari et al. 2024) exceeds its threshold min(1 − 1/log₁₀ S, 0.7), the step is halved
 //!    (down to `min_step`) until k̂ holds or the weights are nearly equal (CV ≤
 //!    [`NEARLY_EQUAL_CV`]): every stage's incremental weights are certified. A step to β = 1 is
-//!    also halved while its spread ratio exceeds [`crate::spread_ratio::WIDER_THAN_PROPOSAL`]
+//!    also halved (once: the halved step no longer reaches 1) where its spread ratio exceeds
+//!    [`crate::spread_ratio::WIDER_THAN_PROPOSAL`]
 //!    (shorter steps are followed by a bridge, which spreads the population). One stage when
 //!    the surrogate is good.
 //! 4. When β reaches 1 the population with its smoothed weights is the model's posterior.
@@ -145,7 +146,8 @@ pub struct ModelPosteriorSettings {
     /// first batch's weights do not hold in one stage, the surrogate's log-likelihood is
     /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew;
     /// for a noisy model ([`Self::pseudo_marginal`]), where a permutation test finds the
-    /// surrogate off or the step's k̂ does not hold, by the moment-matched log-ratio of
+    /// surrogate off, the step's k̂ does not hold or its spread ratio exceeds
+    /// [`crate::spread_ratio::WIDER_THAN_PROPOSAL`], by the moment-matched log-ratio of
     /// [`crate::moment_matching`] (or, where that is refused, a defensive batch from the
     /// surrogate's posterior tempered, [`crate::defensive_tempering`]), both batches then
     /// weighed as one mixture sample.
@@ -280,10 +282,11 @@ pub struct ModelPosteriorStage {
     /// Share of the bridge's model confirmations accepted (none for stage 1).
     pub confirm_acceptance: Option<f64>,
     /// The largest ratio, over the parameters, of the step's weighted std to the members'
-    /// unweighted std ([`crate::spread_ratio`]; above
-    /// [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a deterministic model's step is not
-    /// certified; a noisy model's is judged by [`crate::moment_matching::proposal_mismatch`]
-    /// instead, its weights' noise spreads the ratio too widely); 0 where it cannot be computed.
+    /// unweighted std (for both batches weighed together, to the wider batch's;
+    /// [`crate::spread_ratio`]). Above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a
+    /// reproducible model's step to β = 1 is not certified (steps short of it are bridged); a
+    /// noisy model's final step is certified by k̂ alone (its first batch's ratio is one of the
+    /// triggers of its correction). 0 where it cannot be computed.
     #[serde(default)]
     pub spread_ratio: f64,
 }
@@ -332,8 +335,9 @@ pub struct SurrogateCorrection {
     /// CV of those weights.
     pub cv_before: f64,
     /// The widest ratio of those weights' std to the batch's, over the parameters
-    /// ([`crate::spread_ratio`]; above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a
-    /// reproducible model's batch is corrected whatever k̂ says); 0 where it cannot be computed.
+    /// ([`crate::spread_ratio`]; above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] the batch is
+    /// corrected whatever k̂ says, for a reproducible model or a noisy one); 0 where it cannot be
+    /// computed.
     #[serde(default)]
     pub spread_ratio_before: f64,
     /// Model evaluations of the batch the correction was fitted on.
@@ -398,7 +402,8 @@ pub enum ModelPosteriorStop {
         /// β reached.
         beta: f64,
     },
-    /// k̂ stayed above its threshold down to the smallest step.
+    /// k̂ stayed above its threshold down to the smallest step (or a step to β = 1 shorter
+    /// than twice the smallest kept its target wider than the population: the spread ratio).
     StepBelowMinimum {
         /// β reached.
         beta: f64,
@@ -421,7 +426,7 @@ impl std::fmt::Display for ModelPosteriorStop {
             ),
             Self::StepBelowMinimum { beta } => write!(
                 f,
-                "not certified: at β = {beta:.4} even the smallest step's weights have k̂ above the threshold (the surrogate posterior misses part of the model's; raise samples or improve the surrogate)"
+                "not certified: at β = {beta:.4} even the smallest step's weights have k̂ above the threshold, or the last step's weighted std exceeds the population's by more than the spread ratio's bound (the surrogate posterior misses part of the model's; raise samples or improve the surrogate)"
             ),
             Self::NoisyWeightsTail => write!(
                 f,

@@ -1,7 +1,8 @@
 //! The model posterior of a noisy model: one pseudo-marginal importance step, preceded by a
 //! moment-matched correction of the surrogate (or a defensive batch from its posterior
 //! tempered) where the first batch shows the surrogate's posterior off the model's by more than
-//! the weights' noise explains, or the step's k̂ does not hold.
+//! the weights' noise explains, the step's k̂ does not hold, or its spread ratio exceeds
+//! [`crate::spread_ratio::WIDER_THAN_PROPOSAL`].
 //!
 //! Each run's likelihood L̂ is an unbiased draw of the likelihood L averaged over the model's
 //! irregular part, so the weights L̂/L_s are unbiased (Andrieu & Roberts 2009) and one full step

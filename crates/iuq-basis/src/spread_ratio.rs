@@ -8,16 +8,17 @@
 //! covers"). The weighted std itself shows the narrowness that k̂ misses: it exceeds the
 //! proposal's std (the members' unweighted std, an equally weighted sample of the proposal) by
 //! the factor the weights can reach, understated but plainly above 1 (1.4 where ρ = 2, 300
-//! members). With a proposal at least as wide as the target, or shifted but as wide, the ratio
-//! stays at 1 within its sampling spread (about 0.05 at 300 members).
+//! members). With a proposal as wide as the target, or shifted but as wide, the ratio stays at
+//! 1 within its sampling spread (about 0.05 at 300 members); with a wider one, below 1.
 //!
 //! A mixture of batches (a first batch and a corrected one, weighed together) has the tails of
 //! its widest component, so its spread in a parameter is the largest of its batches' stds: a
 //! narrow first batch beside a corrected batch as wide as the target is not a narrow proposal.
 
 /// The spread ratio above which a step's target counts as wider than its proposal:
-/// [`crate::model_posterior`](mod@crate::model_posterior) then corrects the surrogate, does not weigh both batches as the
-/// estimate, and halves a stage's step, as where k̂ does not hold. At 1.2 a Gaussian target is
+/// [`crate::model_posterior`](mod@crate::model_posterior) then corrects the surrogate (for a
+/// reproducible model or a noisy one), does not weigh both batches as the estimate, and halves
+/// a stage's step to β = 1 (shorter steps are followed by a bridge), as where k̂ does not hold. At 1.2 a Gaussian target is
 /// at least ρ ≈ 1.2 times as wide (k ≥ 0.3; the estimate understates ρ), four times the
 /// ratio's sampling spread at 300 members above 1.
 pub const WIDER_THAN_PROPOSAL: f64 = 1.2;
