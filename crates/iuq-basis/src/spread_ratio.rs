@@ -42,19 +42,11 @@ pub fn widest_spread_ratio(
         return None;
     }
     let size = points.len() / batches;
-    let top = log_weights
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(f64::NEG_INFINITY, f64::max);
-    if !top.is_finite() {
+    let w = crate::pareto_smoothing::normalised_weights(log_weights);
+    let total: f64 = w.iter().sum();
+    if total == 0.0 {
         return None;
     }
-    let w: Vec<f64> = log_weights
-        .iter()
-        .map(|&v| if v.is_finite() { (v - top).exp() } else { 0.0 })
-        .collect();
-    let total: f64 = w.iter().sum();
     let variance = |batch: &[Vec<f64>], k: usize| {
         let n = batch.len() as f64;
         let mean = batch.iter().map(|p| p[k]).sum::<f64>() / n;
