@@ -76,6 +76,11 @@ fn pipeline_logged(study: &Path, out: &Path, extra: &[&str]) -> (serde_json::Val
     (json_of(&output), log)
 }
 
+/// The model posterior's mean, std and their Monte Carlo standard errors for parameter `p`.
+fn estimate(m: &serde_json::Value, p: &str) -> [f64; 4] {
+    ["mean", "std", "mcse_mean", "mcse_std"].map(|key| m[key][p].as_f64().unwrap())
+}
+
 #[test]
 fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     let dir = cooling("exact");
@@ -121,14 +126,7 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
             exact["std"][p].as_f64().unwrap(),
         );
         let reference = 0.014 * es;
-        let (mean, std) = (
-            m["mean"][p].as_f64().unwrap(),
-            m["std"][p].as_f64().unwrap(),
-        );
-        let (mcse_mean, mcse_std) = (
-            m["mcse_mean"][p].as_f64().unwrap(),
-            m["mcse_std"][p].as_f64().unwrap(),
-        );
+        let [mean, std, mcse_mean, mcse_std] = estimate(m, p);
         println!(
             "{p}: model posterior {mean} ± {mcse_mean}, std {std} ± {mcse_std}; exact {em}, {es}"
         );
@@ -263,14 +261,7 @@ seed = 1
     for (k, p) in ["a", "b"].into_iter().enumerate() {
         let em = moments[k][0] / w_sum;
         let es = (moments[k][1] / w_sum - em * em).sqrt();
-        let (mean, std) = (
-            m["mean"][p].as_f64().unwrap(),
-            m["std"][p].as_f64().unwrap(),
-        );
-        let (mcse_mean, mcse_std) = (
-            m["mcse_mean"][p].as_f64().unwrap(),
-            m["mcse_std"][p].as_f64().unwrap(),
-        );
+        let [mean, std, mcse_mean, mcse_std] = estimate(m, p);
         println!("{p}: model {mean} ± {mcse_mean}, std {std} ± {mcse_std}; exact {em}, {es}");
         assert!(mcse_mean < 0.1 * es && mcse_std < 0.1 * es, "{p}");
         assert!((mean - em).abs() <= 4.0 * mcse_mean, "{p} mean");
@@ -499,14 +490,7 @@ fn a_noisy_models_posterior_with_replicate_runs_is_its_average_over_the_noise() 
         assert_eq!(m["certified"], true, "{m}");
         for (i, p) in ["k", "T0"].into_iter().enumerate() {
             let (em, es) = exact[i];
-            let (mean, std) = (
-                m["mean"][p].as_f64().unwrap(),
-                m["std"][p].as_f64().unwrap(),
-            );
-            let (mcse_mean, mcse_std) = (
-                m["mcse_mean"][p].as_f64().unwrap(),
-                m["mcse_std"][p].as_f64().unwrap(),
-            );
+            let [mean, std, mcse_mean, mcse_std] = estimate(m, p);
             println!(
                 "replicates {replicates}, {p}: {mean} ± {mcse_mean}, std {std} ± {mcse_std}; averaged exactly {em}, {es}"
             );
