@@ -641,6 +641,45 @@ fn a_umbridge_model_with_an_abscissa_is_calibrated_through_its_server() {
     let v = pipeline(&path, &dir.join("umbridge-report"));
     assert_eq!(v["converged"], true, "{v}");
     assert_close_to_exact(&v, &exact);
+
+    // The model's own posterior through the same server: its runs go through the campaign
+    // (the rounds' runs come from the store). Tolerance: 4 of its reported MCSE plus 4 of the
+    // exact reference's own Monte Carlo error (N = 20,000: about 0.014 std on a mean).
+    let text =
+        std::fs::read_to_string(&path).unwrap() + "\n[model_posterior]\nsamples = 200\nseed = 1\n";
+    std::fs::write(&path, text).unwrap();
+    let output = iuq(&[
+        "pipeline",
+        path.to_str().unwrap(),
+        "--out",
+        dir.join("umbridge-model-posterior").to_str().unwrap(),
+        "--model-posterior",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let m = &json_of(&output)["model_posterior"];
+    assert_eq!(m["certified"], true, "{m}");
+    // Every evaluation (the members' and the probe's 4 nudged ones) is a run at each of the 8
+    // measurement times, made by the server.
+    assert!(m["model_evaluations"].as_u64().unwrap() >= 200, "{m}");
+    assert_eq!(
+        m["model_runs"].as_u64().unwrap(),
+        8 * (m["model_evaluations"].as_u64().unwrap() + 4),
+        "{m}"
+    );
+    for (name, exact_mean, exact_std) in &exact {
+        let [mean, std, mcse_mean, mcse_std] =
+            ["mean", "std", "mcse_mean", "mcse_std"].map(|key| m[key][name].as_f64().unwrap());
+        let reference = 0.014 * exact_std;
+        assert!(
+            (mean - exact_mean).abs() <= 4.0 * (mcse_mean + reference),
+            "{name}: mean {mean} ± {mcse_mean} vs exact {exact_mean}"
+        );
+        assert!(
+            (std - exact_std).abs() <= 4.0 * (mcse_std + reference),
+            "{name}: std {std} ± {mcse_std} vs exact {exact_std}"
+        );
+    }
 }
 
 #[test]
