@@ -132,6 +132,54 @@ fn assert_close_to_exact(value: &serde_json::Value, exact: &[(String, f64, f64)]
     }
 }
 
+/// `iuq pipeline STUDY --model-posterior` (200 members) against the exact posterior: certified,
+/// every evaluation a run at each of the 8 measurement times, means and stds within 4 of their
+/// reported MCSE plus 4 of the exact reference's own Monte Carlo error (N = 20,000: about 0.014
+/// std on a mean). The model's runs go through the campaign; the rounds' runs come from the
+/// store.
+fn assert_model_posterior_is_exact(
+    study: &Path,
+    out: &Path,
+    exact: &[(String, f64, f64)],
+) -> serde_json::Value {
+    let text =
+        std::fs::read_to_string(study).unwrap() + "\n[model_posterior]\nsamples = 200\nseed = 1\n";
+    std::fs::write(study, text).unwrap();
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--model-posterior",
+        "--json",
+    ]);
+    assert!(output.status.success(), "{}", stderr_of(&output));
+    let v = json_of(&output);
+    let m = &v["model_posterior"];
+    assert_eq!(m["certified"], true, "{m}");
+    // The members' evaluations and the probe's 4 nudged ones.
+    assert!(m["model_evaluations"].as_u64().unwrap() >= 200, "{m}");
+    assert_eq!(
+        m["model_runs"].as_u64().unwrap(),
+        8 * (m["model_evaluations"].as_u64().unwrap() + 4),
+        "{m}"
+    );
+    for (name, exact_mean, exact_std) in exact {
+        let [mean, std, mcse_mean, mcse_std] =
+            ["mean", "std", "mcse_mean", "mcse_std"].map(|key| m[key][name].as_f64().unwrap());
+        let reference = 0.014 * exact_std;
+        assert!(
+            (mean - exact_mean).abs() <= 4.0 * (mcse_mean + reference),
+            "{name}: mean {mean} ± {mcse_mean} vs exact {exact_mean}"
+        );
+        assert!(
+            (std - exact_std).abs() <= 4.0 * (mcse_std + reference),
+            "{name}: std {std} ± {mcse_std} vs exact {exact_std}"
+        );
+    }
+    m.clone()
+}
+
 /// Squared Mahalanobis distance of θ from the samples' mean under their covariance.
 fn mahalanobis2(samples: &[[f64; 2]], theta: [f64; 2]) -> f64 {
     let n = samples.len() as f64;
@@ -642,44 +690,8 @@ fn a_umbridge_model_with_an_abscissa_is_calibrated_through_its_server() {
     assert_eq!(v["converged"], true, "{v}");
     assert_close_to_exact(&v, &exact);
 
-    // The model's own posterior through the same server: its runs go through the campaign
-    // (the rounds' runs come from the store). Tolerance: 4 of its reported MCSE plus 4 of the
-    // exact reference's own Monte Carlo error (N = 20,000: about 0.014 std on a mean).
-    let text =
-        std::fs::read_to_string(&path).unwrap() + "\n[model_posterior]\nsamples = 200\nseed = 1\n";
-    std::fs::write(&path, text).unwrap();
-    let output = iuq(&[
-        "pipeline",
-        path.to_str().unwrap(),
-        "--out",
-        dir.join("umbridge-model-posterior").to_str().unwrap(),
-        "--model-posterior",
-        "--json",
-    ]);
-    assert!(output.status.success(), "{}", stderr_of(&output));
-    let m = &json_of(&output)["model_posterior"];
-    assert_eq!(m["certified"], true, "{m}");
-    // Every evaluation (the members' and the probe's 4 nudged ones) is a run at each of the 8
-    // measurement times, made by the server.
-    assert!(m["model_evaluations"].as_u64().unwrap() >= 200, "{m}");
-    assert_eq!(
-        m["model_runs"].as_u64().unwrap(),
-        8 * (m["model_evaluations"].as_u64().unwrap() + 4),
-        "{m}"
-    );
-    for (name, exact_mean, exact_std) in &exact {
-        let [mean, std, mcse_mean, mcse_std] =
-            ["mean", "std", "mcse_mean", "mcse_std"].map(|key| m[key][name].as_f64().unwrap());
-        let reference = 0.014 * exact_std;
-        assert!(
-            (mean - exact_mean).abs() <= 4.0 * (mcse_mean + reference),
-            "{name}: mean {mean} ± {mcse_mean} vs exact {exact_mean}"
-        );
-        assert!(
-            (std - exact_std).abs() <= 4.0 * (mcse_std + reference),
-            "{name}: std {std} ± {mcse_std} vs exact {exact_std}"
-        );
-    }
+    // The model's own posterior through the same server.
+    assert_model_posterior_is_exact(&path, &dir.join("umbridge-model-posterior"), &exact);
 }
 
 #[test]
@@ -721,13 +733,25 @@ fn a_batch_command_model_runs_many_runs_per_process_and_converges() {
     // The program refuses k > 0.5: its `error` column makes those runs failures.
     assert!(v["failed"].as_u64().unwrap() > 0);
     assert_close_to_exact(&v, &exact);
-    let batches = std::fs::read_dir(dir.join("batch.campaign/batches"))
-        .unwrap()
-        .count();
+    let processes = || {
+        std::fs::read_dir(dir.join("batch.campaign/batches"))
+            .unwrap()
+            .count()
+    };
+    let batches = processes();
     // Runs go to processes in batches of up to 4 (rounds add fewer): on average at least two
     // runs per process.
     let runs = v["runs"].as_u64().unwrap() as usize;
     assert!(2 * batches <= runs, "{batches} processes for {runs} runs");
+    // The model's own posterior runs in batches too: its members' runs (8 a member) fill most
+    // of them (measured: 410 processes for 1,632 runs).
+    let m = assert_model_posterior_is_exact(&path, &dir.join("batch-model-posterior"), &exact);
+    let model_runs = m["model_runs"].as_u64().unwrap() as usize;
+    assert!(
+        3 * (processes() - batches) <= model_runs,
+        "{} processes for {model_runs} runs",
+        processes() - batches
+    );
 }
 
 #[test]
