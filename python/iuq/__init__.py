@@ -10,7 +10,9 @@ numpy arrays in and out, any Python function as the model:
 - :func:`iuq.calibrate`: calibrate a Python function on data with the adaptive engine (a
   store that survives the session, results as numpy, pandas and ArviZ);
 - :class:`iuq.Study`: a study file's calibration pipeline (the adaptive engine included),
-  campaign status and export.
+  campaign status and export;
+- :class:`iuq.ModelPosteriorSamples`: the model's own posterior (``model_posterior=True``) as
+  weighted members, and in ArviZ.
 
 Every function calls the Rust libraries of the ``iuq`` command line: for the same seeds the
 results equal the CLI's bit for bit. Python callables are called in batches (one 2-D array per
@@ -23,6 +25,7 @@ from . import _native, design
 from ._basis import BasisResult, basis
 from ._calibrate import CalibrationResult, calibrate
 from ._gp import GaussianProcess
+from ._model_posterior import ModelPosteriorSamples
 from ._sensitivity import SobolResult, sobol
 from ._study import CampaignStatus, PipelineResult, Study
 
@@ -37,6 +40,7 @@ __all__ = [
     "BasisResult",
     "calibrate",
     "CalibrationResult",
+    "ModelPosteriorSamples",
     "Study",
     "PipelineResult",
     "CampaignStatus",

@@ -18,6 +18,7 @@ import numpy as np
 
 from . import _native
 from ._args import count, parameter_priors, real, seed_of, vector
+from ._model_posterior import ModelPosteriorSamples, read_model_posterior
 
 __all__ = ["calibrate", "CalibrationResult"]
 
@@ -41,7 +42,8 @@ class CalibrationResult:
     the surrogate (initial design and rounds; the rest are the posterior check's and the model
     posterior's). ``data`` holds the abscissae ``x``, the
     observations ``y`` and their stds ``y_std``. ``model_posterior`` is the model's own
-    posterior (with ``model_posterior=True``). ``out`` is the pipeline's output directory
+    posterior (with ``model_posterior=True``): its summary, and in ``model_posterior_samples``
+    its weighted members as arrays (:class:`iuq.ModelPosteriorSamples`). ``out`` is the pipeline's output directory
     (report, tables, figures; ``None`` when it was temporary), ``store`` the campaign store.
     """
 
@@ -69,6 +71,7 @@ class CalibrationResult:
     seconds: float
     posterior_predictive: Optional[np.ndarray] = field(default=None, repr=False)
     raw: Dict[str, Any] = field(default_factory=dict, repr=False)
+    model_posterior_samples: Optional[ModelPosteriorSamples] = field(default=None, repr=False)
 
     def summary(self) -> Dict[str, Dict[str, float]]:
         """``{name: {"map", "mean", "std", "q05", "q95"}}`` per column."""
@@ -89,14 +92,28 @@ class CalibrationResult:
 
         return pd.DataFrame(self.samples, columns=self.names)
 
-    def to_arviz(self):
+    def to_arviz(self, source: str = "surrogate"):
         """The calibration as ArviZ ``InferenceData``: the posterior (one chain of the N
         equally weighted samples), ``sample_stats`` (``lp``, the log-likelihood), the
         ``observed_data`` ``y`` (dimension ``point``, coordinate ``x``) and, where the surrogate
         is a GP per data point, the ``posterior_predictive`` ``y``: the surrogate's mean at each
         posterior sample plus the likelihood's Gaussian noise (measurement and modelling error).
+        ``source="model"``: the model's own posterior instead
+        (:meth:`iuq.ModelPosteriorSamples.to_arviz`, with ``observed_data``), which needs
+        ``calibrate(..., model_posterior=True)``.
         """
         import arviz as az
+
+        if source == "model":
+            if self.model_posterior_samples is None:
+                raise ValueError("source: 'model' needs the model posterior (calibrate(..., model_posterior=True))")
+            return self.model_posterior_samples.to_arviz(
+                observed_data={"y": np.asarray(self.data["y"])},
+                coords={"point": np.asarray(self.data["x"])},
+                dims={"y": ["point"]},
+            )
+        if source != "surrogate":
+            raise ValueError(f"source: {source!r} is neither 'surrogate' nor 'model'")
 
         posterior = {n: self.samples[None, :, k] for k, n in enumerate(self.names)}
         coords = {"point": np.asarray(self.data["x"])}
@@ -458,6 +475,7 @@ def _result(
         runs=runs,
         data={"x": x, "y": y, "y_std": y_std},
         model_posterior=raw.get("model_posterior"),
+        model_posterior_samples=read_model_posterior(out, raw.get("model_posterior")),
         sensitivity=sensitivity,
         out=out,
         store=store,

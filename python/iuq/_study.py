@@ -15,6 +15,7 @@ from . import _native
 from ._args import count, real, seed_of
 from ._basis import BasisResult
 from ._basis import result_from_raw as _basis_result
+from ._model_posterior import ModelPosteriorSamples, read_model_posterior
 from ._sensitivity import SobolResult
 from ._sensitivity import result_from_raw as _sobol_result
 
@@ -35,7 +36,8 @@ class PipelineResult:
     ``model_posterior`` (with ``model_posterior=True``) the model's own posterior from the
     surrogate's: ``mean``, ``std``, ``mcse_mean``, ``mcse_std``, ``map`` by parameter,
     ``pareto_k`` with its threshold, ``effective_sample_size``, ``certified``, the ``stages`` and
-    the ``model_runs`` it asked for.
+    the ``model_runs`` it asked for; ``model_posterior_samples`` its weighted members as arrays
+    (:class:`iuq.ModelPosteriorSamples`, with ``to_arviz()``).
     """
 
     study: str
@@ -53,6 +55,7 @@ class PipelineResult:
     stage_seconds: Dict[str, float]
     seconds: float
     raw: Dict[str, Any] = field(repr=False, default_factory=dict)
+    model_posterior_samples: Optional[ModelPosteriorSamples] = field(default=None, repr=False)
 
 
 @dataclass(frozen=True)
@@ -182,6 +185,7 @@ class Study:
             stage_seconds={s["stage"]: s["seconds"] for s in raw.get("stage_seconds", [])},
             seconds=raw["seconds"],
             raw=raw,
+            model_posterior_samples=read_model_posterior(Path(raw["out"]), raw.get("model_posterior")),
         )
 
     def sobol(

@@ -187,6 +187,24 @@ def test_the_posterior_check_and_the_model_posterior_run_the_function(tmp_path):
     assert result.model_runs == len(result.runs)
     assert 4 <= result.model_runs - result.surrogate_runs - posterior["model_runs"] <= 6
     assert result.surrogate_runs < 30
+    # The weighted members as arrays; in ArviZ they are one chain resampled systematically,
+    # whose mean differs from the weighted mean by less than a multinomial resample's 3
+    # standard errors (3·std/√n; systematic resampling's are smaller).
+    members = result.model_posterior_samples
+    assert members is not None and members.names == ["a", "k"]
+    n = len(members.weights)
+    data = result.to_arviz(source="model")
+    assert data.posterior.sizes["draw"] == n and data.posterior.sizes["chain"] == 1
+    assert data.posterior.attrs["pareto_k"] == posterior["pareto_k"]
+    assert data.posterior.attrs["certified"] == 1
+    assert list(data.observed_data["y"].values) == list(y)
+    for k, name in enumerate(members.names):
+        assert members.mean[k] == pytest.approx(posterior["mean"][name], rel=1e-12)
+        drawn = float(data.posterior[name].mean())
+        assert abs(drawn - members.mean[k]) < 3 * members.std[k] / np.sqrt(n), name
+    assert np.isfinite(data.sample_stats["lp"].values).all()
+    with pytest.raises(ValueError, match="source"):
+        result.to_arviz(source="models")
 
 
 def chaotic_decay(theta):
@@ -434,6 +452,9 @@ def test_to_arviz_round_trips_through_arviz_summary(calibrated):
     assert np.all(np.abs(centre - y) < 3 * predictive.std(axis=(0, 1)))
     assert "<table>" in result._repr_html_()
     assert result.to_pandas().shape == result.samples.shape
+    assert result.model_posterior_samples is None
+    with pytest.raises(ValueError, match="model_posterior=True"):
+        result.to_arviz(source="model")
 
 
 @pytest.mark.parametrize(

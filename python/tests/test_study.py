@@ -143,6 +143,14 @@ def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
     assert set(m["mean"]) == {"k", "T0"}
     expected = cli("pipeline", study_file, "--model-posterior", "--out", tmp_path / "cli")
     assert without_timings(result.raw["model_posterior"]) == without_timings(expected["model_posterior"])
+    # The members as arrays: their weighted moments are the summary's (the same numbers, summed
+    # in another order).
+    members = result.model_posterior_samples
+    assert members is not None and members.names == ["k", "T0"]
+    assert members.samples.shape == (100, 2) and abs(members.weights.sum() - 1) < 1e-12
+    for k, name in enumerate(members.names):
+        assert members.mean[k] == pytest.approx(m["mean"][name], rel=1e-12)
+        assert members.std[k] == pytest.approx(m["std"][name], rel=1e-9)
 
 
 STUDY_FOR_INTERRUPT = '''

@@ -1,0 +1,114 @@
+"""The model's own posterior as arrays: the weighted members ``iuq pipeline --model-posterior``
+writes to ``model-posterior/samples.csv``, and an ArviZ view of them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+__all__ = ["ModelPosteriorSamples"]
+
+#: The columns of ``samples.csv`` after the parameters' (``docs/methods.md`` §5b).
+_WEIGHT_COLUMNS = ("weight", "log_weight", "raw_log_weight", "ll_model", "ll_surrogate", "lp")
+
+
+@dataclass(frozen=True)
+class ModelPosteriorSamples:
+    """The members of the model's posterior with their importance weights.
+
+    ``samples`` (n, p): the members' parameters (columns ``names``; ``sigma_m`` too when the
+    modelling error is sampled); ``weights``: their normalised Pareto-smoothed weights (sum 1),
+    so that ``weights @ samples`` is the posterior mean; ``log_likelihood``: the model's own
+    log-likelihood at each member (−inf where its run failed); ``log_prior``: the prior's.
+    ``summary`` is the method's summary (``iuq pipeline --json``'s ``model_posterior``: k̂, the
+    effective sample size, the Monte Carlo standard errors, whether it is certified, …).
+    """
+
+    names: List[str]
+    samples: np.ndarray
+    weights: np.ndarray
+    log_likelihood: np.ndarray
+    log_prior: np.ndarray
+    summary: Dict[str, Any] = field(default_factory=dict, repr=False)
+
+    @property
+    def mean(self) -> np.ndarray:
+        """The weighted mean of each column."""
+        return self.weights @ self.samples
+
+    @property
+    def std(self) -> np.ndarray:
+        """The weighted standard deviation of each column."""
+        centred = self.samples - self.mean
+        return np.sqrt(self.weights @ (centred * centred))
+
+    def resample(self, draws: Optional[int] = None, seed: int = 0) -> np.ndarray:
+        """Indices of ``draws`` (default: as many as members) equally weighted draws by
+        systematic resampling (one uniform offset from ``seed``; Kitagawa 1996): member i is
+        drawn ⌊draws·wᵢ⌋ or ⌈draws·wᵢ⌉ times."""
+        n = len(self.weights) if draws is None else int(draws)
+        if n < 1:
+            raise ValueError(f"draws: {draws!r} is not a positive number of draws")
+        offset = np.random.default_rng(seed).uniform()
+        positions = (offset + np.arange(n)) / n
+        cumulative = np.cumsum(self.weights)
+        cumulative[-1] = 1.0
+        return np.searchsorted(cumulative, positions, side="right").clip(max=len(self.weights) - 1)
+
+    def to_arviz(self, draws: Optional[int] = None, seed: int = 0, **groups: Any):
+        """ArviZ ``InferenceData`` of the model's posterior: one chain of equally weighted draws
+        resampled from the members (:meth:`resample`; copies of a member repeat it), with
+        ``sample_stats`` ``lp`` (the model's log-likelihood plus the log-prior at each draw) and
+        ``log_weight`` (the draw's member's normalised log-weight). ArviZ reads the draws as an
+        unweighted sample, so its own ``ess`` counts the copies; the method's effective sample
+        size, k̂ and certificate are the posterior group's attributes (``pareto_k``,
+        ``pareto_k_threshold``, ``effective_sample_size``, ``certified``). ``groups`` are
+        further arguments of ``arviz.from_dict`` (``observed_data``, ``coords``, ``dims``, …)."""
+        import arviz as az
+
+        chosen = self.resample(draws, seed)
+        posterior = {n: self.samples[None, chosen, k] for k, n in enumerate(self.names)}
+        with np.errstate(divide="ignore"):
+            log_weight = np.log(self.weights[chosen])
+        stats = {
+            "lp": (self.log_likelihood + self.log_prior)[None, chosen],
+            "log_weight": log_weight[None, :],
+        }
+        # Numbers only: netCDF has no booleans (``certified`` is 1 or 0).
+        attrs = {
+            key: float(self.summary[key])
+            for key in ("pareto_k", "pareto_k_threshold", "effective_sample_size")
+            if isinstance(self.summary.get(key), (int, float))
+        }
+        if "certified" in self.summary:
+            attrs["certified"] = int(bool(self.summary["certified"]))
+        attrs["source"] = "model posterior (iuq --model-posterior), systematic resample"
+        return az.from_dict(posterior=posterior, sample_stats=stats, posterior_attrs=attrs, **groups)
+
+
+def read_model_posterior(out: Path, summary: Optional[Dict[str, Any]]) -> Optional[ModelPosteriorSamples]:
+    """The members in ``out/model-posterior/samples.csv`` (``None`` where the pipeline made no
+    model posterior by importance stages, e.g. without ``--model-posterior`` or with
+    ``method = "basis"``)."""
+    path = Path(out) / "model-posterior" / "samples.csv"
+    if summary is None or not path.is_file():
+        return None
+    table = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
+    columns = list(table.dtype.names)
+    names = columns[: columns.index("weight")]
+    missing = [c for c in _WEIGHT_COLUMNS if c not in columns]
+    if missing:
+        raise ValueError(f"{path}: no column {missing[0]!r}")
+    samples = np.column_stack([table[c] for c in names]).astype(np.float64)
+    weights = np.asarray(table["weight"], dtype=np.float64)
+    return ModelPosteriorSamples(
+        names=names,
+        samples=samples,
+        weights=weights / weights.sum(),
+        log_likelihood=np.asarray(table["ll_model"], dtype=np.float64),
+        log_prior=np.asarray(table["lp"], dtype=np.float64),
+        summary=dict(summary),
+    )
