@@ -92,15 +92,15 @@ class CalibrationResult:
 
         return pd.DataFrame(self.samples, columns=self.names)
 
-    def to_arviz(self, source: str = "surrogate"):
+    def to_arviz(self, source: str = "surrogate", draws: Optional[int] = None, seed: int = 0):
         """The calibration as ArviZ ``InferenceData``: the posterior (one chain of the N
         equally weighted samples), ``sample_stats`` (``lp``, the log-likelihood), the
         ``observed_data`` ``y`` (dimension ``point``, coordinate ``x``) and, where the surrogate
         is a GP per data point, the ``posterior_predictive`` ``y``: the surrogate's mean at each
         posterior sample plus the likelihood's Gaussian noise (measurement and modelling error).
         ``source="model"``: the model's own posterior instead
-        (:meth:`iuq.ModelPosteriorSamples.to_arviz`, with ``observed_data``), which needs
-        ``calibrate(..., model_posterior=True)``.
+        (:meth:`iuq.ModelPosteriorSamples.to_arviz`: ``draws`` resampled by ``seed``, with
+        ``observed_data``), which needs ``calibrate(..., model_posterior=True)``.
         """
         import arviz as az
 
@@ -108,6 +108,8 @@ class CalibrationResult:
             if self.model_posterior_samples is None:
                 raise ValueError("source: 'model' needs the model posterior (calibrate(..., model_posterior=True))")
             return self.model_posterior_samples.to_arviz(
+                draws,
+                seed,
                 observed_data={"y": np.asarray(self.data["y"])},
                 coords={"point": np.asarray(self.data["x"])},
                 dims={"y": ["point"]},

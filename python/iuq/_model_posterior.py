@@ -3,11 +3,14 @@ writes to ``model-posterior/samples.csv``, and an ArviZ view of them."""
 
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Dict, List, Optional
 
 import numpy as np
+
+from ._args import count, seed_of
 
 __all__ = ["ModelPosteriorSamples"]
 
@@ -46,23 +49,24 @@ class ModelPosteriorSamples:
         return np.sqrt(self.weights @ (centred * centred))
 
     def resample(self, draws: Optional[int] = None, seed: int = 0) -> np.ndarray:
-        """Indices of ``draws`` (default: as many as members) equally weighted draws by
-        systematic resampling (one uniform offset from ``seed``; Kitagawa 1996): member i is
-        drawn ⌊draws·wᵢ⌋ or ⌈draws·wᵢ⌉ times."""
-        n = len(self.weights) if draws is None else int(draws)
-        if n < 1:
-            raise ValueError(f"draws: {draws!r} is not a positive number of draws")
-        offset = np.random.default_rng(seed).uniform()
-        positions = (offset + np.arange(n)) / n
+        """The member indices of ``draws`` (default: as many as members) equally weighted draws,
+        by systematic resampling (one uniform offset from ``seed``; Kitagawa 1996): member i is
+        drawn ⌊draws·wᵢ⌋ or ⌈draws·wᵢ⌉ times, a member of weight 0 never."""
+        n = len(self.weights) if draws is None else count("draws", draws, 1)
+        seed = seed_of(seed)
+        if len(self.weights) == 0:
+            raise ValueError("draws: the model posterior has no members to draw from")
         cumulative = np.cumsum(self.weights)
-        cumulative[-1] = 1.0
+        offset = np.random.default_rng(seed).uniform()
+        positions = (offset + np.arange(n)) / n * cumulative[-1]
         return np.searchsorted(cumulative, positions, side="right").clip(max=len(self.weights) - 1)
 
     def to_arviz(self, draws: Optional[int] = None, seed: int = 0, **groups: Any):
         """ArviZ ``InferenceData`` of the model's posterior: one chain of equally weighted draws
         resampled from the members (:meth:`resample`; copies of a member repeat it), with
-        ``sample_stats`` ``lp`` (the model's log-likelihood plus the log-prior at each draw) and
-        ``log_weight`` (the draw's member's normalised log-weight). ArviZ reads the draws as an
+        ``sample_stats`` ``lp`` (as in :meth:`iuq.CalibrationResult.to_arviz`: the
+        log-likelihood, here the model's own, at each draw) and ``log_weight`` (the draw's
+        member's normalised log-weight). ArviZ reads the draws as an
         unweighted sample, so its own ``ess`` counts the copies; the method's effective sample
         size, k̂ and certificate are the posterior group's attributes (``pareto_k``,
         ``pareto_k_threshold``, ``effective_sample_size``, ``certified``). ``groups`` are
@@ -74,7 +78,7 @@ class ModelPosteriorSamples:
         with np.errstate(divide="ignore"):
             log_weight = np.log(self.weights[chosen])
         stats = {
-            "lp": (self.log_likelihood + self.log_prior)[None, chosen],
+            "lp": self.log_likelihood[None, chosen],
             "log_weight": log_weight[None, :],
         }
         # Numbers only: netCDF has no booleans (``certified`` is 1 or 0).
@@ -92,23 +96,23 @@ class ModelPosteriorSamples:
 def read_model_posterior(out: Path, summary: Optional[Dict[str, Any]]) -> Optional[ModelPosteriorSamples]:
     """The members in ``out/model-posterior/samples.csv`` (``None`` where the pipeline made no
     model posterior by importance stages, e.g. without ``--model-posterior`` or with
-    ``method = "basis"``)."""
+    ``method = "basis"``). Columns by position: the parameters, then ``_WEIGHT_COLUMNS``."""
     path = Path(out) / "model-posterior" / "samples.csv"
     if summary is None or not path.is_file():
         return None
-    table = np.genfromtxt(path, delimiter=",", names=True, ndmin=1)
-    columns = list(table.dtype.names)
-    names = columns[: columns.index("weight")]
-    missing = [c for c in _WEIGHT_COLUMNS if c not in columns]
-    if missing:
-        raise ValueError(f"{path}: no column {missing[0]!r}")
-    samples = np.column_stack([table[c] for c in names]).astype(np.float64)
-    weights = np.asarray(table["weight"], dtype=np.float64)
+    with open(path, newline="") as f:
+        header = next(csv.reader(f), [])
+    p = len(header) - len(_WEIGHT_COLUMNS)
+    if p < 1 or tuple(header[p:]) != _WEIGHT_COLUMNS:
+        raise ValueError(f"{path}: expected the parameters' columns, then {', '.join(_WEIGHT_COLUMNS)}")
+    table = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2, dtype=np.float64)
+    column = {name: table[:, p + k] for k, name in enumerate(_WEIGHT_COLUMNS)}
+    weights = column["weight"]
     return ModelPosteriorSamples(
-        names=names,
-        samples=samples,
+        names=header[:p],
+        samples=table[:, :p].copy(),
         weights=weights / weights.sum(),
-        log_likelihood=np.asarray(table["ll_model"], dtype=np.float64),
-        log_prior=np.asarray(table["lp"], dtype=np.float64),
+        log_likelihood=column["ll_model"].copy(),
+        log_prior=column["lp"].copy(),
         summary=dict(summary),
     )

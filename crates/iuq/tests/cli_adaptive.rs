@@ -134,8 +134,9 @@ fn assert_close_to_exact(value: &serde_json::Value, exact: &[(String, f64, f64)]
 
 /// `iuq pipeline STUDY --model-posterior` (200 members) against the exact posterior: certified,
 /// every evaluation a run at each of the 8 measurement times, means and stds within 4 of their
-/// reported MCSE plus 4 of the exact reference's own Monte Carlo error (N = 20,000: about 0.014
-/// std on a mean). The model's runs go through the campaign; the rounds' runs come from the
+/// reported MCSE (each below 0.15 std, so that the check has teeth) plus 4 of the exact
+/// reference's own Monte Carlo error (N = 20,000 BASIS samples: about std/√(N/4) = 0.014 std on
+/// a mean). The model's runs go through the campaign; the rounds' runs come from the
 /// store.
 fn assert_model_posterior_is_exact(
     study: &Path,
@@ -168,6 +169,10 @@ fn assert_model_posterior_is_exact(
         let [mean, std, mcse_mean, mcse_std] =
             ["mean", "std", "mcse_mean", "mcse_std"].map(|key| m[key][name].as_f64().unwrap());
         let reference = 0.014 * exact_std;
+        assert!(
+            mcse_mean < 0.15 * exact_std && mcse_std < 0.15 * exact_std,
+            "{name}: MCSE {mcse_mean}, {mcse_std} against a std of {exact_std}"
+        );
         assert!(
             (mean - exact_mean).abs() <= 4.0 * (mcse_mean + reference),
             "{name}: mean {mean} ± {mcse_mean} vs exact {exact_mean}"

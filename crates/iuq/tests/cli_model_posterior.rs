@@ -242,6 +242,9 @@ seed = 1
     let m = &v["model_posterior"];
     assert_eq!(m["certified"], true, "{m}");
     assert_eq!(m["samples"], 300, "{m}");
+    // The adaptive engine's surrogate is close enough for one importance stage.
+    assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(m["model_evaluations"], 300, "{m}");
 
     let n = 1201;
     let (mut w_sum, mut moments) = (0.0, [[0.0; 2]; 2]);
