@@ -286,9 +286,11 @@ def calibrate(
     (``on_error="fail"``, their reason stored) that a classifier keeps the posterior away from;
     ``on_error="raise"`` stops and raises the exception. ``posterior_check`` runs the model at
     the posterior's MAP and that many samples; ``model_posterior`` also gives the model's own
-    posterior, certified from the surrogate's (a few hundred runs, twice that where a noisy
-    function's first batch shows the surrogate off); a dict instead of ``True``
-    gives its ``[model_posterior]`` keys (``docs/study-file.md``), e.g. ``{"samples": 400,
+    posterior, certified from the surrogate's (``samples`` runs, 300 by default, where one
+    importance stage holds; a batch more where the first shows the surrogate off, and up to
+    ``samples`` more for each bridging stage, at most ``max_stages``); a dict instead of ``True``
+    gives its ``[model_posterior]`` keys (``docs/study-file.md``; its ``seed`` is ``seed``
+    unless the dict gives one), e.g. ``{"samples": 400,
     "replicates": 4}`` for a stochastic or chaotic function (found by the method's probe and
     weighed pseudo-marginally: its irregular outputs then measured by 4 calls each; a bad key or
     value is a ``ValueError`` naming ``model_posterior.<key>``). ``samples`` is the final

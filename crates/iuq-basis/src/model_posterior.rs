@@ -56,8 +56,10 @@
 //!    weights exp(r) stay unbiased (pseudo-marginal importance sampling, Andrieu & Roberts
 //!    2009), and the estimate is one full step, certified by k̂ (or nearly equal weights),
 //!    after a moment-matched correction where the first batch shows the surrogate off, or,
-//!    where that correction would extrapolate, a defensive batch from the surrogate's posterior
-//!    tempered ([`crate::pseudo_marginal`], [`crate::defensive_tempering`]). Steps 2–4 are left out: a quadratic fit of a noisy r fits
+//!    where that correction would extrapolate, a defensive batch from a normal fitted to the
+//!    weights, or from the surrogate's posterior tempered where no such normal can be drawn
+//!    ([`crate::pseudo_marginal`], [`crate::defensive_normal`], [`crate::defensive_tempering`]).
+//!    Steps 2–4 are left out: a quadratic fit of a noisy r fits
 //!    its mean, which by Jensen's inequality lies below the log of the mean weight, and a
 //!    Metropolis chain on a noisy ratio sticks where a lucky run landed.
 //!
@@ -65,7 +67,9 @@
 //! μ = Σ w̄θ, std σ = √(Σ w̄(θ − μ)²), weighted quantiles; the Monte Carlo standard errors of
 //! self-normalised importance sampling (Vehtari et al. 2024, eq. 6 and the delta method)
 //! MCSE(μ) = √(Σ w̄²(θ − μ)²), MCSE(σ) = √(Σ w̄²((θ − μ)² − σ²)²)/(2σ); after bridging stages
-//! they ignore the correlation the resampling leaves between members (a lower bound). The MAP is
+//! the terms are summed within each ancestor's group before squaring
+//! ([`crate::ancestral_variance`]), for the correlation the resampling leaves between members.
+//! The MAP is
 //! the model-evaluated point with the largest ℓ_m + ln π.
 //!
 //! Every random draw is keyed by (seed, stage, chain) and each batch of likelihood evaluations
@@ -204,10 +208,10 @@ impl ModelPosteriorSettings {
                 reason: reason.to_string(),
             })
         };
-        if self.samples < 10 {
+        if self.samples < MIN_SAMPLES {
             return bad(
                 "samples",
-                "must be at least 10 (k̂ needs a tail of 5 weights)",
+                "must be at least 25 (k̂ needs a tail of 5 weights)",
             );
         }
         if !(self.cv_target.is_finite() && self.cv_target > 0.0) {

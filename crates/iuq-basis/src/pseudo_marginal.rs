@@ -1,6 +1,6 @@
 //! The model posterior of a noisy model: one pseudo-marginal importance step, preceded by a
-//! moment-matched correction of the surrogate (or a defensive batch from its posterior
-//! tempered) where the first batch shows the surrogate's posterior off the model's by more than
+//! moment-matched correction of the surrogate (or a defensive batch from a normal fitted to the
+//! weights, or from the surrogate's posterior tempered) where the first batch shows the surrogate's posterior off the model's by more than
 //! the weights' noise explains, the step's k̂ does not hold, or its spread ratio exceeds
 //! [`crate::spread_ratio::WIDER_THAN_PROPOSAL`].
 //!
@@ -42,7 +42,9 @@
 //! 4. Where that correction cannot be made — its posterior leaves the batch's range of some
 //!    parameter ([`crate::model_posterior::MIN_CORRECTED_WITHIN_BATCH`]: g, fitted to the
 //!    batch, extrapolates there), fewer than 2(d + 1) effective weights, or BASIS cannot
-//!    sample it — the second batch is drawn from the surrogate's posterior tempered at
+//!    sample it — the second batch is drawn from a normal fitted to the first batch's weights
+//!    ([`crate::defensive_normal`]), or, where no such normal can be fitted or drawn, from the
+//!    surrogate's posterior tempered at
 //!    β = ½·min_k σ²_q,k/m_w,k ([`crate::defensive_tempering::defensive_tempering`], from ½
 //!    down to 0.1), q_β ∝ π·L_s^β, and weighed with the first in the same
 //!    mixture (g = (β − 1)·ℓ_s): a defensive proposal that needs no fit, keeps the surrogate's
