@@ -211,7 +211,7 @@ impl ModelPosteriorSettings {
         if self.samples < MIN_SAMPLES {
             return bad(
                 "samples",
-                "must be at least 25 (k̂ needs a tail of 5 weights)",
+                &format!("must be at least {MIN_SAMPLES} (k̂ needs a tail of 5 weights)"),
             );
         }
         if !(self.cv_target.is_finite() && self.cv_target > 0.0) {
