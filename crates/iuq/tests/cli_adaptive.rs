@@ -102,19 +102,7 @@ fn per_time_study_with_model(dir: &Path, model: impl AsRef<str>) -> String {
 }
 
 fn pipeline(study: &Path, out: &Path) -> serde_json::Value {
-    let output = iuq(&[
-        "pipeline",
-        study.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--json",
-    ]);
-    assert!(
-        output.status.success(),
-        "{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    json_of(&output)
+    common::pipeline(study, out, &[]).0
 }
 
 fn assert_close_to_exact(value: &serde_json::Value, exact: &[(String, f64, f64)]) {
@@ -146,16 +134,7 @@ fn assert_model_posterior_is_exact(
     let text =
         std::fs::read_to_string(study).unwrap() + "\n[model_posterior]\nsamples = 200\nseed = 1\n";
     std::fs::write(study, text).unwrap();
-    let output = iuq(&[
-        "pipeline",
-        study.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--model-posterior",
-        "--json",
-    ]);
-    assert!(output.status.success(), "{}", stderr_of(&output));
-    let v = json_of(&output);
+    let v = common::pipeline(study, out, &["--model-posterior"]).0;
     let m = &v["model_posterior"];
     assert_eq!(m["certified"], true, "{m}");
     // The members' evaluations and the probe's 4 nudged ones.

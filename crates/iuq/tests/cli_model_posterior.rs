@@ -59,21 +59,11 @@ fn pipeline(study: &Path, out: &Path, extra: &[&str]) -> serde_json::Value {
     pipeline_logged(study, out, extra).0
 }
 
-/// The pipeline's `--json` and its progress lines (stderr).
+/// The pipeline with `--model-posterior`: its `--json` and its progress lines (stderr).
 fn pipeline_logged(study: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
-    let mut args = vec![
-        "pipeline",
-        study.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--model-posterior",
-        "--json",
-    ];
+    let mut args = vec!["--model-posterior"];
     args.extend(extra);
-    let output = iuq(&args);
-    let log = stderr_of(&output);
-    assert!(output.status.success(), "{log}");
-    (json_of(&output), log)
+    common::pipeline(study, out, &args)
 }
 
 /// The model posterior's mean, std and their Monte Carlo standard errors for parameter `p`.

@@ -323,6 +323,17 @@ fn replay_study(
     store: &str,
     edit: &dyn Fn(&str) -> String,
 ) -> (serde_json::Value, std::path::PathBuf) {
+    replay_study_with(label, name, store, edit, &[])
+}
+
+/// [`replay_study`] with the pipeline's further arguments `extra`.
+fn replay_study_with(
+    label: &str,
+    name: &str,
+    store: &str,
+    edit: &dyn Fn(&str) -> String,
+    extra: &[&str],
+) -> (serde_json::Value, std::path::PathBuf) {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let dir = scratch("pipeline", label);
     let study = format!("examples/{name}.toml");
@@ -351,6 +362,7 @@ fn replay_study(
             out.to_str().unwrap(),
             "--json",
         ])
+        .args(extra)
         .stdout(std::process::Stdio::piped())
         .stderr(std::process::Stdio::piped())
         .spawn()

@@ -112,6 +112,23 @@ pub fn stderr_of(output: &Output) -> String {
     String::from_utf8_lossy(&output.stderr).into_owned()
 }
 
+/// `iuq pipeline <study> --out <out> --json <extra…>`, which must succeed: its `--json` summary
+/// and its progress lines (stderr).
+pub fn pipeline(study: &Path, out: &Path, extra: &[&str]) -> (serde_json::Value, String) {
+    let mut args = vec![
+        "pipeline",
+        study.to_str().expect("a UTF-8 path"),
+        "--out",
+        out.to_str().expect("a UTF-8 path"),
+        "--json",
+    ];
+    args.extend(extra);
+    let output = iuq(&args);
+    let log = stderr_of(&output);
+    assert!(output.status.success(), "{log}");
+    (json_of(&output), log)
+}
+
 /// A short native run (`iuq rbc shear` at 4 Pa, kLink 30, from strain 0.3) with its ten frames
 /// written to `dir/shapes` (in `format`, or the default one): the JSON result and the shape
 /// files in frame order — the raw material of the HemoCell-format tests.
