@@ -152,9 +152,10 @@ pub struct ModelPosteriorSettings {
     /// for a noisy model ([`Self::pseudo_marginal`]), where a permutation test finds the
     /// surrogate off, the step's k̂ does not hold or its spread ratio exceeds
     /// [`crate::spread_ratio::WIDER_THAN_PROPOSAL`], by the moment-matched log-ratio of
-    /// [`crate::moment_matching`] (or, where that is refused, a defensive batch from the
-    /// surrogate's posterior tempered, [`crate::defensive_tempering`]), both batches then
-    /// weighed as one mixture sample.
+    /// [`crate::moment_matching`] (or, where that is refused, a defensive batch from a normal
+    /// fitted to the first batch's weights, [`crate::defensive_normal`], or from the
+    /// surrogate's posterior tempered where no such normal can be drawn,
+    /// [`crate::defensive_tempering`]), both batches then weighed as one mixture sample.
     pub corrections: usize,
     /// Delayed-acceptance moves per member after a bridging stage.
     pub moves: usize,
@@ -171,8 +172,9 @@ pub struct ModelPosteriorSettings {
     /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
     /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
     /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or
-    /// nearly equal weights), after a moment-matched correction (or a defensive batch from the
-    /// surrogate's posterior tempered) where the first batch shows the surrogate off
+    /// nearly equal weights), after a moment-matched correction (or a defensive batch from a
+    /// normal fitted to the weights, or from the surrogate's posterior tempered where no such
+    /// normal can be drawn) where the first batch shows the surrogate off
     /// ([`crate::pseudo_marginal`]); no quadratic fit and no bridge, whose
     /// fits and Metropolis ratios assume a reproducible r (a noisy r makes the chains stick
     /// where a lucky run landed).

@@ -195,8 +195,9 @@ pub struct ComparedParameter {
     pub surrogate: (f64, f64, f64),
     /// MAP, mean and std of the model's posterior.
     pub model: (f64, f64, f64),
-    /// (model − surrogate)/|surrogate| of MAP, mean and std.
-    pub relative_difference: (f64, f64, f64),
+    /// (model − surrogate)/|surrogate| of MAP, mean and std; `None` ("–" in the table) where
+    /// the surrogate's is 0.
+    pub relative_difference: (Option<f64>, Option<f64>, Option<f64>),
     /// Monte Carlo standard errors of the model posterior's mean and std.
     pub mcse: (f64, f64),
 }
@@ -235,6 +236,29 @@ pub struct MapRunsAtPoint {
     pub at_surrogate_map: Option<f64>,
     /// The model at the model posterior's MAP.
     pub at_model_map: Option<f64>,
+    /// |run − datum| at the surrogate's MAP and at the model's (`None` where the run failed).
+    #[serde(default)]
+    pub absolute_error: (Option<f64>, Option<f64>),
+}
+
+impl MapRunsAtPoint {
+    /// Both MAP runs at the data point `x` with the measurement `datum` (value, std), their
+    /// absolute errors computed.
+    pub fn new(
+        x: f64,
+        datum: (f64, f64),
+        at_surrogate_map: Option<f64>,
+        at_model_map: Option<f64>,
+    ) -> Self {
+        let error = |run: Option<f64>| run.map(|v| (v - datum.0).abs());
+        Self {
+            x,
+            datum,
+            at_surrogate_map,
+            at_model_map,
+            absolute_error: (error(at_surrogate_map), error(at_model_map)),
+        }
+    }
 }
 
 /// The model itself run at the MAP of the surrogate's posterior and at posterior samples, beside

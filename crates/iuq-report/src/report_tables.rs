@@ -615,9 +615,9 @@ pub(crate) fn model_posterior_comparison(m: &ModelPosteriorReport) -> Table {
                 Cell::number(c.model.0, at("model/0")),
                 Cell::number(c.model.1, at("model/1")),
                 Cell::number(c.model.2, at("model/2")),
-                Cell::number(c.relative_difference.0, at("relative_difference/0")),
-                Cell::number(c.relative_difference.1, at("relative_difference/1")),
-                Cell::number(c.relative_difference.2, at("relative_difference/2")),
+                Cell::optional(c.relative_difference.0, at("relative_difference/0")),
+                Cell::optional(c.relative_difference.1, at("relative_difference/1")),
+                Cell::optional(c.relative_difference.2, at("relative_difference/2")),
                 Cell::number(c.mcse.0, at("mcse/0")),
                 Cell::number(c.mcse.1, at("mcse/1")),
             ]
@@ -707,14 +707,24 @@ pub(crate) fn model_posterior_map_runs(report: &StudyReport, m: &ModelPosteriorR
                 Cell::number(p.datum.0, at("datum/0")),
                 Cell::number(p.datum.1, at("datum/1")),
             ];
-            for (value, field) in [
-                (p.at_surrogate_map, "at_surrogate_map"),
-                (p.at_model_map, "at_model_map"),
+            for (value, error, field, error_field) in [
+                (
+                    p.at_surrogate_map,
+                    p.absolute_error.0,
+                    "at_surrogate_map",
+                    "absolute_error/0",
+                ),
+                (
+                    p.at_model_map,
+                    p.absolute_error.1,
+                    "at_model_map",
+                    "absolute_error/1",
+                ),
             ] {
-                match value {
-                    Some(v) => {
+                match value.zip(error) {
+                    Some((v, e)) => {
                         row.push(Cell::number(v, at(field)));
-                        row.push(Cell::text(format!("{:.4}", (v - p.datum.0).abs())));
+                        row.push(Cell::number(e, at(error_field)));
                     }
                     None => {
                         row.push(Cell::text("failed"));

@@ -39,6 +39,14 @@ impl Cell {
         }
     }
 
+    /// A numeric cell, or "–" where there is no value (an undefined ratio).
+    pub(crate) fn optional(value: Option<f64>, pointer: impl Into<String>) -> Self {
+        match value {
+            Some(value) => Self::number(value, pointer),
+            None => Self::text("–"),
+        }
+    }
+
     /// A numeric cell for a count.
     pub(crate) fn count(value: usize, pointer: impl Into<String>) -> Self {
         Self::number(value as f64, pointer)

@@ -388,6 +388,51 @@ fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
 }
 
 #[test]
+fn the_model_posteriors_tables_hold_the_map_runs_errors_and_no_ratio_to_zero() {
+    let mut report = small_report();
+    {
+        let m = report.model_posterior.as_mut().unwrap();
+        m.parameters[0].surrogate.1 = 0.0;
+        m.parameters[0].relative_difference.1 = None;
+        m.map_runs[1].at_model_map = None;
+        m.map_runs[1].absolute_error.1 = None;
+    }
+    let dir = fresh_dir("model-posterior-tables");
+    write_report(&report, &dir).unwrap();
+    let table = |name: &str| -> Value {
+        serde_json::from_str(
+            &std::fs::read_to_string(dir.join(format!("tables/{name}.json"))).unwrap(),
+        )
+        .unwrap()
+    };
+    let m = report.model_posterior.as_ref().unwrap();
+    let compared = table("model_posterior");
+    // The relative difference to a surrogate mean of 0 is undefined: "–", not inf or NaN.
+    let key = "relative difference mean";
+    assert_eq!(compared["rows"][0][key], "–", "{compared}");
+    let expected = m.parameters[1].relative_difference.1;
+    assert_eq!(compared["rows"][1][key].as_f64(), expected);
+    let runs = table("model_posterior_map_runs");
+    let error_key = |source: &str| format!("at the {source} MAP |error|");
+    for (j, p) in m.map_runs.iter().enumerate() {
+        let row = &runs["rows"][j];
+        // Each absolute error is |run − datum|, a number in the table (so also in report.json).
+        let at_s = p.at_surrogate_map.unwrap();
+        assert_eq!(
+            row[error_key(&m.surrogate_source)].as_f64(),
+            Some((at_s - p.datum.0).abs()),
+            "{row}"
+        );
+        let at_model = row[error_key(&m.model_source)].clone();
+        match p.at_model_map {
+            Some(at_m) => assert_eq!(at_model.as_f64(), Some((at_m - p.datum.0).abs())),
+            None => assert_eq!(at_model, "–", "{row}"),
+        }
+    }
+    assert_numbers_match_report_json(&dir);
+}
+
+#[test]
 fn runs_not_made_are_counted_apart_from_the_failure_fraction() {
     let mut report = small_report();
     let dir = fresh_dir("all-made");

@@ -363,9 +363,9 @@ pub fn synthetic_report(
                         surrogate: s,
                         model: m,
                         relative_difference: (
-                            (m.0 - s.0) / s.0,
-                            (m.1 - s.1) / s.1,
-                            (m.2 - s.2) / s.2,
+                            Some((m.0 - s.0) / s.0),
+                            Some((m.1 - s.1) / s.1),
+                            Some((m.2 - s.2) / s.2),
                         ),
                         mcse: (0.2, 0.15),
                     }
@@ -385,11 +385,8 @@ pub fn synthetic_report(
             map_runs: stresses
                 .iter()
                 .zip(&y)
-                .map(|(&x, &el)| MapRunsAtPoint {
-                    x,
-                    datum: (el, 0.01),
-                    at_surrogate_map: Some(el + 0.01),
-                    at_model_map: Some(el - 0.003),
+                .map(|(&x, &el)| {
+                    MapRunsAtPoint::new(x, (el, 0.01), Some(el + 0.01), Some(el - 0.003))
                 })
                 .collect(),
         }),

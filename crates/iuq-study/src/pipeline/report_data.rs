@@ -226,7 +226,7 @@ fn model_posterior_report(
     labels: &Labels,
 ) -> ModelPosteriorReport {
     let p = &outcome.posterior;
-    let relative = |m: f64, s: f64| (m - s) / s.abs();
+    let relative = |m: f64, s: f64| (s != 0.0).then(|| (m - s) / s.abs());
     let parameters = p
         .names
         .iter()
@@ -315,14 +315,16 @@ fn model_posterior_report(
             .map_runs
             .iter()
             .enumerate()
-            .map(|(j, (at_s, at_m))| MapRunsAtPoint {
-                x: data.x[j],
-                datum: (
-                    data.observations.values[j],
-                    measurement_std.as_ref().map_or(0.0, |s| s[j]),
-                ),
-                at_surrogate_map: *at_s,
-                at_model_map: *at_m,
+            .map(|(j, (at_s, at_m))| {
+                MapRunsAtPoint::new(
+                    data.x[j],
+                    (
+                        data.observations.values[j],
+                        measurement_std.as_ref().map_or(0.0, |s| s[j]),
+                    ),
+                    *at_s,
+                    *at_m,
+                )
             })
             .collect(),
     }
