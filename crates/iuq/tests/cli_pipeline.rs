@@ -696,3 +696,108 @@ fn the_healthy_study_made_from_scratch_replays_to_its_324_runs() {
         ],
     );
 }
+
+/// The README's Table 2 for `study` (`"healthy cells"` or `"TBHP cells"`): for each row, the
+/// parameter's name in the study and the six numbers as printed (GP MAP, mean, std, then the
+/// cell model's).
+fn readme_table2(study: &str) -> Vec<(String, Vec<String>)> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let header = format!("| {study} |");
+    let mut lines = readme
+        .lines()
+        .skip_while(|l| !l.starts_with(&header))
+        .skip(2);
+    let mut rows = Vec::new();
+    while let Some(line) = lines.next().filter(|l| l.starts_with('|')) {
+        let cells: Vec<String> = line
+            .trim_matches('|')
+            .split('|')
+            .map(|c| c.trim().to_string())
+            .collect();
+        let name = match cells[0].as_str() {
+            "Λ" => "viscosityRatio",
+            "σ_m" => "sigma_m",
+            other => other,
+        };
+        rows.push((name.to_string(), cells[1..].to_vec()));
+    }
+    assert_eq!(rows.len(), 4, "the README's table for {study}");
+    rows
+}
+
+/// `value` as the README prints `printed`: rounded to as many decimals as it shows.
+fn as_printed(value: f64, printed: &str) -> String {
+    let decimals = printed.split_once('.').map_or(0, |(_, d)| d.len());
+    format!("{value:.decimals$}")
+}
+
+/// The cell model's own posterior of the shipped study `name` replays from its store: certified,
+/// no model run, and the numbers of the README's Table 2 (both columns) are this replay's.
+fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value {
+    let store = format!("examples/{name}.campaign/campaign.sqlite");
+    let (summary, dir) = replay_study_with(
+        &format!("shipped-model-posterior-{name}"),
+        name,
+        &store,
+        &|text| text.to_string(),
+        &["--model-posterior"],
+    );
+    let m = &summary["model_posterior"];
+    assert_eq!(m["certified"], true, "{m}");
+    assert!(m["samples"].as_u64().unwrap() >= 200, "{m}");
+    assert!(
+        m["pareto_k"].as_f64().unwrap() <= m["pareto_k_threshold"].as_f64().unwrap(),
+        "{m}"
+    );
+    let gp = summary["posterior"][0]["parameters"].as_array().unwrap();
+    for (parameter, printed) in readme_table2(table) {
+        let g = gp.iter().find(|p| p["parameter"] == parameter).unwrap();
+        let ours = [
+            g["map"].as_f64().unwrap(),
+            g["mean"].as_f64().unwrap(),
+            g["std"].as_f64().unwrap(),
+            m["map"][&parameter].as_f64().unwrap(),
+            m["mean"][&parameter].as_f64().unwrap(),
+            m["std"][&parameter].as_f64().unwrap(),
+        ];
+        for (value, shown) in ours.iter().zip(&printed) {
+            assert_eq!(&as_printed(*value, shown), shown, "{table}, {parameter}");
+        }
+    }
+    // Both MAP runs at every stress, and the cell's shapes at the model's MAP read back from the
+    // store (the portraits' runs were made by the pipeline that completed the campaign).
+    let out = dir.join("report");
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let stresses = summary["posterior_check"].as_array().unwrap().len();
+    let map_runs = report["report"]["model_posterior"]["map_runs"]
+        .as_array()
+        .unwrap();
+    assert_eq!(map_runs.len(), stresses);
+    let portraits = report["report"]["cell_portraits"]["portraits"]
+        .as_array()
+        .unwrap();
+    assert_eq!(portraits.len(), stresses);
+    for figure in [
+        "cell_shapes",
+        "elongation_trace",
+        "model_posterior_map_runs",
+        "model_posterior_weights",
+    ] {
+        assert!(
+            out.join(format!("figures/{figure}.png")).is_file(),
+            "{figure}"
+        );
+    }
+    summary
+}
+
+#[test]
+fn the_shipped_tbhp_study_replays_the_cell_models_certified_posterior() {
+    let summary = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
+    let m = &summary["model_posterior"];
+    // The runs of PROVENANCE.md: 1,198 model evaluations and the probe's 4, at 6 stresses.
+    assert_eq!(m["model_runs"], 7212, "{m}");
+    assert_eq!(m["stages"].as_array().unwrap().len(), 5, "{m}");
+}
