@@ -188,6 +188,18 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
             && html.contains("600 members, no bridge"),
         "the report says the estimate is both batches'"
     );
+    // The corner plot overlays both posteriors: each legend entry's colour draws its marginals
+    // and its contours, not only the legend's line.
+    let corner = std::fs::read_to_string(out.join("figures/corner.svg")).unwrap();
+    for source in ["GP surrogate", "model"] {
+        let legend = corner
+            .find(&format!(">\n{source}\n</text>"))
+            .unwrap_or_else(|| panic!("{source} in the corner plot's legend"));
+        let stroke_at = corner[..legend].rfind("stroke=\"#").unwrap() + "stroke=\"".len();
+        let colour = &corner[stroke_at..stroke_at + 7];
+        let drawn = corner.matches(&format!("stroke=\"{colour}\"")).count();
+        assert!(drawn > 4, "{source} ({colour}) drawn {drawn} times");
+    }
 
     // A rerun reuses every stored run and gives the same posterior, bit for bit.
     let again = pipeline(&study, &dir.join("again"), &[]);
