@@ -931,6 +931,24 @@ fn kill_and_rerun(
         per_run.iter().all(|(_, n)| *n <= 1),
         "a run has two successful executions: {per_run:?}"
     );
+    // The runs the model posterior reports are the store's distinct runs of its batches,
+    // bridges, probe (whose members are the first batch's runs) and replicates, not the two MAP
+    // runs.
+    let stored: i64 = store
+        .connection()
+        .query_row(
+            "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
+             WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(
+        v["model_posterior"]["model_runs"].as_i64(),
+        Some(stored),
+        "{}",
+        v["model_posterior"]
+    );
     drop(store);
     // The program ran each run the store had finished before the kill exactly once.
     let text = std::fs::read_to_string(&log).unwrap();
