@@ -252,6 +252,30 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
         "no bridge: every member its own"
     );
     assert!(bridged.stages[0].pareto_k <= bridged.pareto_k_threshold);
+    // Each step is the CV rule's (the target CV of its weights: `cv_target` 1 for the first,
+    // `bridge_cv_target` 0.5 after a bridge, less where it reaches β = 1), halved until k̂
+    // holds: here the first stage's rule step was too long for k̂ and was halved once.
+    for (k, stage) in bridged.stages.iter().enumerate() {
+        let halvings = (stage.cv_step / stage.step).log2();
+        assert!(
+            (halvings - halvings.round()).abs() < 1e-9 && halvings.round() >= 0.0,
+            "stage {k}: step {} against the rule's {}",
+            stage.step,
+            stage.cv_step
+        );
+        let target = if k == 0 { 1.0 } else { 0.5 };
+        if stage.step == stage.cv_step && stage.beta < 1.0 {
+            assert!(
+                (stage.cv - target).abs() < 1e-6,
+                "stage {k}: CV {}",
+                stage.cv
+            );
+        } else {
+            assert!(stage.cv < target, "stage {k}: CV {}", stage.cv);
+        }
+        assert!(stage.pareto_k <= bridged.pareto_k_threshold, "stage {k}");
+    }
+    assert_eq!(bridged.stages[0].step, bridged.stages[0].cv_step / 2.0);
     for stage in &bridged.stages[1..] {
         let (screen, confirm) = (
             stage.screen_acceptance.unwrap(),
