@@ -319,6 +319,33 @@ fn a_surrogate_one_stage_cannot_carry_is_bridged_to_the_exact_posterior() {
     for p in ["k", "T0"] {
         assert_exact_within_errors(m, &exact, p);
     }
+    // The model posterior's propagated output is the model's own: at every data point, each
+    // sample is the curve 20 + (T0 − 20)·e^(−k t) of a member with weight, and its MAP value
+    // the model run at its MAP.
+    let document: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let model = &document["report"]["posteriors"][1];
+    assert_eq!(model["source"], "model");
+    let times = document["report"]["data"]["x"].as_array().unwrap();
+    for (j, point) in model["propagated"].as_array().unwrap().iter().enumerate() {
+        let t = times[j].as_f64().unwrap();
+        let curves: Vec<f64> = rows
+            .iter()
+            .filter(|r| r[column("weight")] > 0.0)
+            .map(|r| 20.0 + (r[column("T0")] - 20.0) * (-r[column("k")] * t).exp())
+            .collect();
+        for sample in point["samples"].as_array().unwrap() {
+            let y = sample.as_f64().unwrap();
+            assert!(
+                curves.iter().any(|c| (c - y).abs() < 1e-9 * c.abs()),
+                "t = {t}: {y} is no member's output"
+            );
+        }
+        assert_eq!(
+            point["map_prediction"],
+            document["report"]["model_posterior"]["map_runs"][j]["at_model_map"]
+        );
+    }
     // The report's stage table has the bridges' acceptance rates.
     let report: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("tables/model_posterior_stages.json")).unwrap(),

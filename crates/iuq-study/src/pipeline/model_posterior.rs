@@ -180,6 +180,10 @@ pub struct ModelPosteriorOutcome {
     pub map_runs: Vec<(Option<f64>, Option<f64>)>,
     /// The surrogate posterior's MAP (model parameters).
     pub surrogate_map: Vec<f64>,
+    /// The model's outputs (one per data point) at each member of the final population, read
+    /// back from the member's stored run; `None` for a member without weight (a failed run).
+    /// The report propagates the model's posterior with these, not with the surrogate.
+    pub member_outputs: Vec<Option<Vec<f64>>>,
     /// Whether the model's outputs repeated under a nudge of the parameters (`None`: no probe).
     pub probe: Option<ReproducibilityProbe>,
     /// Whether the likelihood was taken as noisy (pseudo-marginal: one step, certified by k̂).
@@ -438,9 +442,11 @@ pub fn reweight_to_model(
             )
         })
         .collect();
+    let member_outputs = member_outputs(model_runs, &posterior, d)?;
     let outcome = ModelPosteriorOutcome {
         map_runs,
         surrogate_map,
+        member_outputs,
         log_evidence: state.log_evidence + posterior.log_evidence_ratio,
         model_runs: (posterior.model_evaluations
             + probe.as_ref().map_or(0, |p| p.model_evaluations))
@@ -460,6 +466,43 @@ pub fn reweight_to_model(
     };
     write_results(&outcome, &out.join("model-posterior"))?;
     Ok(outcome)
+}
+
+/// The model's outputs at every member of `posterior` with weight, from the members' runs,
+/// which the stages made and stored (each distinct member asked for once; recorded as
+/// `model-posterior-members`, so that no run is made for it).
+fn member_outputs(
+    model_runs: &ModelRuns,
+    posterior: &ModelPosterior,
+    d: usize,
+) -> Result<Vec<Option<Vec<f64>>>> {
+    let weights = posterior.weights();
+    let mut distinct: Vec<Vec<f64>> = Vec::new();
+    let mut index_of: std::collections::HashMap<Vec<u64>, usize> = Default::default();
+    let slots: Vec<Option<usize>> = posterior
+        .samples
+        .iter()
+        .zip(&weights)
+        .map(|(theta, &w)| {
+            (w > 0.0).then(|| {
+                let theta = &theta[..d];
+                *index_of.entry(bits(theta)).or_insert_with(|| {
+                    distinct.push(theta.to_vec());
+                    distinct.len() - 1
+                })
+            })
+        })
+        .collect();
+    let outcomes = model_runs
+        .model_at_data()
+        .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-members"), &distinct)
+        .map_err(|e| {
+            StudyError::from(e).context("the model's outputs at its posterior's members")
+        })?;
+    Ok(slots
+        .into_iter()
+        .map(|slot| slot.and_then(|k| outcomes[k].as_ref().ok().map(|e| e.outputs.clone())))
+        .collect())
 }
 
 /// The progress line of a finished stage.

@@ -153,7 +153,8 @@ fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
 
 /// The model's weighted posterior as a report source: its weighted summary, and as samples an
 /// equally weighted systematic resample (u_k = (k + ½)/S, no random draw) of its population for
-/// the density plots and the propagation through the surrogate.
+/// the density plots; its propagated output is the model's own (each resampled member's stored
+/// run, and the model run at its MAP), the surrogate's prediction only where a run is missing.
 fn reweighted_result(
     source: &str,
     outcome: &ModelPosteriorOutcome,
@@ -165,6 +166,7 @@ fn reweighted_result(
     let weights = p.weights();
     let n = p.samples.len();
     let mut samples = Vec::with_capacity(n);
+    let mut resampled = Vec::with_capacity(n);
     let mut cumulative = 0.0;
     let mut i = 0;
     for k in 0..n {
@@ -174,6 +176,7 @@ fn reweighted_result(
             i += 1;
         }
         samples.push(p.samples[i].clone());
+        resampled.push(i);
     }
     let quantile = |k: usize, q: f64| {
         let column: Vec<f64> = p.samples.iter().map(|s| s[k]).collect();
@@ -200,11 +203,25 @@ fn reweighted_result(
     let mut propagated = Vec::with_capacity(stresses.len());
     let means = emulator.predict_means(&theta)?;
     let at_map = emulator.predict_means(&map)?;
-    for ((samples, at_map), s) in means.into_iter().zip(at_map).zip(stresses) {
+    for (j, ((mut samples, at_map), s)) in means.into_iter().zip(at_map).zip(stresses).enumerate() {
+        for (value, &i) in samples.iter_mut().zip(&resampled) {
+            if let Some(&run) = outcome
+                .member_outputs
+                .get(i)
+                .and_then(|o| o.as_ref())
+                .and_then(|o| o.get(j))
+            {
+                *value = run;
+            }
+        }
         propagated.push(PropagatedOutput {
             x: *s,
             samples,
-            map_prediction: at_map[0],
+            map_prediction: outcome
+                .map_runs
+                .get(j)
+                .and_then(|r| r.1)
+                .unwrap_or(at_map[0]),
         });
     }
     Ok(PosteriorResult {
@@ -561,7 +578,11 @@ pub fn write_pipeline_report(
         ),
         (
             "propagation".to_string(),
-            "GP surrogate means at every posterior sample (both posteriors)".to_string(),
+            if results.reweighted.is_some() {
+                "GP surrogate means at every sample of its posterior; the model's own runs at the members of the model's posterior".to_string()
+            } else {
+                "GP surrogate means at every posterior sample (both posteriors)".to_string()
+            },
         ),
     ];
     if let Some(last) = stage_seconds.last_mut() {
