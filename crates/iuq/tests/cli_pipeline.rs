@@ -394,6 +394,10 @@ fn replay_study_with(
         made, 0,
         "the shipped store should hold every run of the study"
     );
+    // Nor a run in the pipeline's own process (the cell's portraits at the MAP come from the
+    // store).
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert!(!stderr.contains("in pictures"), "{stderr}");
     (json_of(&output), dir)
 }
 
@@ -797,7 +801,15 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
 fn the_shipped_tbhp_study_replays_the_cell_models_certified_posterior() {
     let summary = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
     let m = &summary["model_posterior"];
-    // The runs of PROVENANCE.md: 1,198 model evaluations and the probe's 4, at 6 stresses.
+    // The figures of README.md and PROVENANCE.md: 1,198 model evaluations and the probe's 4, at
+    // 6 stresses; 5 stages; k̂ 0.556, ESS 186 and 66 ancestors.
     assert_eq!(m["model_runs"], 7212, "{m}");
+    assert_eq!(m["model_evaluations"], 1198, "{m}");
     assert_eq!(m["stages"].as_array().unwrap().len(), 5, "{m}");
+    assert_eq!(m["ancestors"], 66, "{m}");
+    assert_eq!(format!("{:.3}", m["pareto_k"].as_f64().unwrap()), "0.556");
+    assert_eq!(
+        format!("{:.0}", m["effective_sample_size"].as_f64().unwrap()),
+        "186"
+    );
 }

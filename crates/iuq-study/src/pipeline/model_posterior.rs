@@ -181,8 +181,10 @@ pub struct ModelPosteriorOutcome {
     /// The surrogate posterior's MAP (model parameters).
     pub surrogate_map: Vec<f64>,
     /// The model's outputs (one per data point) at each member of the final population, read
-    /// back from the member's stored run; `None` for a member without weight (a failed run).
-    /// The report propagates the model's posterior with these, not with the surrogate.
+    /// back from the member's stored run; `None` for a member without weight (a failed run, or
+    /// a weight that underflows to 0) and where reading the run back failed. The report
+    /// propagates the model's posterior with these (the surrogate only for a `None` it meets,
+    /// said in the report's provenance).
     pub member_outputs: Vec<Option<Vec<f64>>>,
     /// Whether the model's outputs repeated under a nudge of the parameters (`None`: no probe).
     pub probe: Option<ReproducibilityProbe>,
@@ -469,8 +471,8 @@ pub fn reweight_to_model(
 }
 
 /// The model's outputs at every member of `posterior` with weight, from the members' runs,
-/// which the stages made and stored (each distinct member asked for once; recorded as
-/// `model-posterior-members`, so that no run is made for it).
+/// which the stages made and stored, so that no run is made (each distinct member asked for
+/// once; the request is recorded as the design `model-posterior-members`).
 fn member_outputs(
     model_runs: &ModelRuns,
     posterior: &ModelPosterior,

@@ -155,13 +155,14 @@ fn model_part(samples: &[Vec<f64>], d: usize) -> Vec<Vec<f64>> {
 /// equally weighted systematic resample (u_k = (k + ½)/S, no random draw) of its population for
 /// the density plots; its propagated output is the model's own (each resampled member's stored
 /// run, and the model run at its MAP), the surrogate's prediction only where a run is missing.
+/// Also returns how many propagated values (samples and MAP values) came from the surrogate.
 fn reweighted_result(
     source: &str,
     outcome: &ModelPosteriorOutcome,
     emulator: &Emulator,
     stresses: &[f64],
     d: usize,
-) -> Result<PosteriorResult> {
+) -> Result<(PosteriorResult, usize)> {
     let p = &outcome.posterior;
     let weights = p.weights();
     let n = p.samples.len();
@@ -203,35 +204,43 @@ fn reweighted_result(
     let mut propagated = Vec::with_capacity(stresses.len());
     let means = emulator.predict_means(&theta)?;
     let at_map = emulator.predict_means(&map)?;
+    let mut from_surrogate = 0;
     for (j, ((mut samples, at_map), s)) in means.into_iter().zip(at_map).zip(stresses).enumerate() {
         for (value, &i) in samples.iter_mut().zip(&resampled) {
-            if let Some(&run) = outcome
+            match outcome
                 .member_outputs
                 .get(i)
                 .and_then(|o| o.as_ref())
                 .and_then(|o| o.get(j))
             {
-                *value = run;
+                Some(&run) => *value = run,
+                None => from_surrogate += 1,
             }
         }
+        let map_prediction = match outcome.map_runs.get(j).and_then(|r| r.1) {
+            Some(run) => run,
+            None => {
+                from_surrogate += 1;
+                at_map[0]
+            }
+        };
         propagated.push(PropagatedOutput {
             x: *s,
             samples,
-            map_prediction: outcome
-                .map_runs
-                .get(j)
-                .and_then(|r| r.1)
-                .unwrap_or(at_map[0]),
+            map_prediction,
         });
     }
-    Ok(PosteriorResult {
-        source: source.into(),
-        summary,
-        log_evidence: outcome.log_evidence,
-        samples,
-        stages: Vec::new(),
-        propagated,
-    })
+    Ok((
+        PosteriorResult {
+            source: source.into(),
+            summary,
+            log_evidence: outcome.log_evidence,
+            samples,
+            stages: Vec::new(),
+            propagated,
+        },
+        from_surrogate,
+    ))
 }
 
 /// The model posterior's section of the report: Table 2 (from the GP posterior's summary and
@@ -479,14 +488,12 @@ pub fn write_pipeline_report(
             d,
         )?);
     }
+    let mut propagated_by_surrogate = 0;
     if let Some(m) = results.reweighted {
-        posteriors.push(reweighted_result(
-            labels.model_source,
-            m,
-            results.emulator,
-            &stresses,
-            d,
-        )?);
+        let (result, from_surrogate) =
+            reweighted_result(labels.model_source, m, results.emulator, &stresses, d)?;
+        posteriors.push(result);
+        propagated_by_surrogate = from_surrogate;
     }
     let mut sensitivity = Vec::new();
     if let Some(m) = results.model_sobol {
@@ -579,7 +586,13 @@ pub fn write_pipeline_report(
         (
             "propagation".to_string(),
             if results.reweighted.is_some() {
-                "GP surrogate means at every sample of its posterior; the model's own runs at the members of the model's posterior".to_string()
+                let mut text = "GP surrogate means at every sample of its posterior; the model's own runs at the members of the model's posterior and at its MAP".to_string();
+                if propagated_by_surrogate > 0 {
+                    text.push_str(&format!(
+                        " ({propagated_by_surrogate} of its values the surrogate's, where a run failed)"
+                    ));
+                }
+                text
             } else {
                 "GP surrogate means at every posterior sample (both posteriors)".to_string()
             },
