@@ -38,11 +38,11 @@ pub use error::{ReportError, Result};
 pub use figure::FigureInfo;
 pub use format::format_number;
 pub use model::{
-    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, Convergence, ConvergenceRound,
-    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, MismatchTest, ModelPosteriorReport,
-    ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
-    PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
-    SensitivityResult, StudyReport,
+    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, ComparedTraces, Convergence,
+    ConvergenceRound, DataSeries, ElongationTrace, FailureMapPanel, GpDiagnostic, MapRunsAtPoint,
+    MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
+    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
 };
 pub use report::{REPORT_FORMAT, ReportDocument, ReportFiles, write_report};
 pub use tables::TableInfo;

@@ -60,6 +60,31 @@ pub struct CellPortraits {
     pub source: String,
     /// One per stress, in increasing stress.
     pub portraits: Vec<CellPortrait>,
+    /// The cell run at the other MAP (the surrogate posterior's), drawn beside these in the
+    /// elongation-against-strain figure; `None` where it was not run.
+    #[serde(default)]
+    pub compared: Option<ComparedTraces>,
+}
+
+/// The elongation index through the runs at a second point, to set beside a
+/// [`CellPortraits`]' own (the published study's Fig. 8 runs the model at both MAPs).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ComparedTraces {
+    /// Whose MAP, e.g. "the GP surrogate posterior's MAP".
+    pub source: String,
+    /// One per stress, in the order of the portraits.
+    pub traces: Vec<ElongationTrace>,
+}
+
+/// One run's elongation index against strain.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ElongationTrace {
+    /// The shear stress in Pa.
+    pub x: f64,
+    /// The run's elongation index over the measuring window, and its std.
+    pub elongation_index: (f64, f64),
+    /// (strain, elongation index) through the run.
+    pub trace: Vec<(f64, f64)>,
 }
 
 /// One stress of [`CellPortraits`] (lengths in µm, centred on the shape's centroid).

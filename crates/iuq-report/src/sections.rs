@@ -417,8 +417,15 @@ pub(crate) fn build_sections(
             "cell-shapes",
             "The cell at the MAP",
             format!(
-                "The cell model run at {} at every stress: the final shape in the shear plane, whose contour (per bin along the flow, the outermost vertices across it) the elongation index is measured on with its fitted ellipse, and from the side; and the elongation index through the whole run, from the cell at rest to the end of the measuring window (shaded), whose frames give the measured value.",
-                portraits.source
+                "The cell model run at {} at every stress: the final shape in the shear plane, whose contour (per bin along the flow, the outermost vertices across it) the elongation index is measured on with its fitted ellipse, and from the side; and the elongation index through the whole run, from the cell at rest to the end of the measuring window (shaded), whose frames give the measured value{}.",
+                portraits.source,
+                portraits
+                    .compared
+                    .as_ref()
+                    .map_or(String::new(), |c| format!(
+                        ", beside the same runs at {}",
+                        c.source
+                    ))
             ),
         );
         let chart = CellShapesChart { portraits };
@@ -437,7 +444,13 @@ pub(crate) fn build_sections(
             FigureSpec {
                 name: "elongation_trace",
                 title: "Elongation index against strain",
-                caption: "The elongation index of the shear-plane contour through each run (one line per stress, darker for higher stress); shaded, the measuring window whose frames give the run's value.".to_string(),
+                caption: match &portraits.compared {
+                    Some(compared) => format!(
+                        "The elongation index of the shear-plane contour through each run (one colour per stress, darker for higher stress): solid, the cell at {}; dashed, at {}. Shaded, the measuring window whose frames give the run's value.",
+                        portraits.source, compared.source
+                    ),
+                    None => "The elongation index of the shear-plane contour through each run (one line per stress, darker for higher stress); shaded, the measuring window whose frames give the run's value.".to_string(),
+                },
                 size: (920, 520),
                 tables: &[],
             },

@@ -559,10 +559,14 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
     let (summary, stderr) = run();
     let m = &summary["model_posterior"];
     assert_eq!(m["samples"], 25, "{m}");
-    assert!(
-        stderr.contains("the cell at the MAP in pictures: 2 runs"),
-        "{stderr}"
-    );
+    for whose in ["model", "surrogate"] {
+        assert!(
+            stderr.contains(&format!(
+                "the cell at the {whose} posterior's MAP in pictures: 2 runs"
+            )),
+            "{stderr}"
+        );
+    }
     for figure in [
         "cell_shapes",
         "elongation_trace",
@@ -591,6 +595,20 @@ fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
         assert!(trace.len() > 10, "{}", trace.len());
         assert!(p["outline"].as_array().unwrap().len() > 10);
         assert!(p["side"].as_array().unwrap().len() > 10);
+    }
+    // Beside them, the elongation through the runs at the surrogate posterior's MAP, the same
+    // as the campaign's run there.
+    let compared = &report["report"]["cell_portraits"]["compared"];
+    assert_eq!(
+        compared["source"], "the GP surrogate posterior's MAP",
+        "{compared}"
+    );
+    let traces = compared["traces"].as_array().unwrap();
+    assert_eq!(traces.len(), 2);
+    for (t, run) in traces.iter().zip(map_runs) {
+        assert_eq!(t["x"], run["x"]);
+        assert_eq!(t["elongation_index"][0], run["at_surrogate_map"], "{t}");
+        assert!(t["trace"].as_array().unwrap().len() > 10);
     }
     // A replay reads the portraits back from the campaign store: no cell-model run.
     let (again, stderr) = run();
@@ -769,8 +787,9 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
             assert_eq!(&as_printed(*value, shown), shown, "{table}, {parameter}");
         }
     }
-    // Both MAP runs at every stress, and the cell's shapes at the model's MAP read back from the
-    // store (the portraits' runs were made by the pipeline that completed the campaign).
+    // Both MAP runs at every stress, the cell's shapes at the model's MAP and its elongation
+    // through the runs at both MAPs, read back from the store (the portraits' runs were made by
+    // the pipeline that completed the campaign).
     let out = dir.join("report");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -783,6 +802,14 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
         .as_array()
         .unwrap();
     assert_eq!(portraits.len(), stresses);
+    let traces = report["report"]["cell_portraits"]["compared"]["traces"]
+        .as_array()
+        .unwrap();
+    assert_eq!(traces.len(), stresses);
+    for (t, run) in traces.iter().zip(map_runs) {
+        assert_eq!(t["x"], run["x"]);
+        assert!(t["trace"].as_array().unwrap().len() > 10);
+    }
     for figure in [
         "cell_shapes",
         "elongation_trace",

@@ -135,6 +135,7 @@ fn stress_colour(i: usize, n: usize) -> RGBColor {
 impl Chart for ElongationTraceChart<'_> {
     fn draw<DB: DrawingBackend>(&self, area: &DrawingArea<DB, Shift>) -> DrawResult<DB> {
         let portraits = &self.portraits.portraits;
+        let compared = self.portraits.compared.as_ref();
         let n = portraits.len();
         let mut entries: Vec<(LegendMark, String)> = portraits
             .iter()
@@ -146,19 +147,47 @@ impl Chart for ElongationTraceChart<'_> {
                 )
             })
             .collect();
+        if let Some(compared) = compared {
+            entries.push((
+                LegendMark::Line(RGBColor(90, 90, 90), 2),
+                self.portraits.source.clone(),
+            ));
+            entries.push((
+                LegendMark::Dashed(RGBColor(90, 90, 90), 2),
+                compared.source.clone(),
+            ));
+        }
         entries.push((
             LegendMark::Filled(GRID_COLOUR, 1.0),
             "measuring window".to_string(),
         ));
-        let body = header(
-            area,
-            &format!("Elongation index against strain, {}", self.portraits.source),
-            &entries,
-            0,
-        )?;
-        let x_hi = portraits.iter().map(|p| p.window.1).fold(1.0f64, f64::max) * 1.02;
-        let (lo, hi) = extent(portraits.iter().flat_map(|p| p.trace.iter().map(|t| t.1)))
-            .unwrap_or((0.0, 1.0));
+        let title = match compared {
+            Some(_) => "Elongation index against strain at both MAPs".to_string(),
+            None => format!("Elongation index against strain, {}", self.portraits.source),
+        };
+        let body = header(area, &title, &entries, 0)?;
+        let x_hi = portraits
+            .iter()
+            .map(|p| p.window.1)
+            .chain(compared.into_iter().flat_map(|c| {
+                c.traces
+                    .iter()
+                    .filter_map(|t| t.trace.last().map(|point| point.0))
+            }))
+            .fold(1.0f64, f64::max)
+            * 1.02;
+        let (lo, hi) = extent(
+            portraits
+                .iter()
+                .map(|p| &p.trace)
+                .chain(
+                    compared
+                        .into_iter()
+                        .flat_map(|c| c.traces.iter().map(|t| &t.trace)),
+                )
+                .flat_map(|trace| trace.iter().map(|t| t.1)),
+        )
+        .unwrap_or((0.0, 1.0));
         let y_lo = lo.min(0.0);
         let y_hi = hi * 1.08 + 1e-3;
         let mut chart = ChartBuilder::on(&body)
@@ -191,6 +220,16 @@ impl Chart for ElongationTraceChart<'_> {
                 p.trace.iter().copied(),
                 stress_colour(i, n).stroke_width(2),
             ))?;
+        }
+        if let Some(compared) = compared {
+            for (i, t) in compared.traces.iter().enumerate() {
+                chart.draw_series(DashedLineSeries::new(
+                    t.trace.iter().copied(),
+                    7,
+                    5,
+                    stress_colour(i, n).stroke_width(2),
+                ))?;
+            }
         }
         Ok(())
     }

@@ -27,6 +27,8 @@ use crate::style::{FONT, LEGEND_SIZE, TITLE_SIZE};
 pub(crate) enum LegendMark {
     /// A line of the colour and stroke width.
     Line(RGBColor, u32),
+    /// A dashed line of the colour and stroke width.
+    Dashed(RGBColor, u32),
     /// A filled square of the colour at the opacity.
     Filled(RGBColor, f64),
     /// A light square (colour at the opacity) with a border of the full colour.
@@ -129,6 +131,15 @@ fn draw_mark<DB: DrawingBackend>(
                 vec![(x, y), (x + swatch, y)],
                 colour.stroke_width(width),
             ))?;
+        }
+        LegendMark::Dashed(colour, width) => {
+            let dash = (swatch / 5).max(2);
+            for start in [x, x + 2 * dash, x + swatch - dash] {
+                area.draw(&PathElement::new(
+                    vec![(start, y), (start + dash, y)],
+                    colour.stroke_width(width),
+                ))?;
+            }
         }
         LegendMark::Filled(colour, opacity) => {
             area.draw(&Rectangle::new(

@@ -3,11 +3,11 @@
 //! samples from a seeded random generator, one or two sources.
 
 use iuq_report::{
-    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, Convergence, ConvergenceRound,
-    DataSeries, FailureMapPanel, GpDiagnostic, MapRunsAtPoint, MismatchTest, ModelPosteriorReport,
-    ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
-    PropagatedOutput, RunStatistics, RunsAtPoint, SamplerStage, SensitivityIndex,
-    SensitivityResult, StudyReport,
+    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, ComparedTraces, Convergence,
+    ConvergenceRound, DataSeries, ElongationTrace, FailureMapPanel, GpDiagnostic, MapRunsAtPoint,
+    MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
+    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
 };
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, Normal};
@@ -421,6 +421,25 @@ pub fn synthetic_report(
                     }
                 })
                 .collect(),
+            compared: Some(ComparedTraces {
+                source: "the GP surrogate posterior's MAP".to_string(),
+                traces: stresses
+                    .iter()
+                    .map(|&x| {
+                        let el = 0.11 + 0.05 * x;
+                        ElongationTrace {
+                            x,
+                            elongation_index: (el, 0.002),
+                            trace: (0..60)
+                                .map(|i| {
+                                    let strain = i as f64 * 0.16;
+                                    (strain, el * (1.0 - (-strain).exp()))
+                                })
+                                .collect(),
+                        }
+                    })
+                    .collect(),
+            }),
         }),
     }
 }

@@ -1,6 +1,7 @@
 //! The cell at a MAP at every stress, in pictures (`rbc-shear` studies): the native cell model
 //! run again at the MAP with its shape read through the whole run ([`iuq_rbc::shear_portrait`]),
-//! for the report's shapes and elongation-against-strain figures.
+//! for the report's shapes and elongation-against-strain figures (the model posterior's MAP, and
+//! the surrogate posterior's beside it in the latter).
 //!
 //! The portraits are recorded in the campaign store as a derived result (key
 //! [`PORTRAITS_KEY`], fingerprinted by the MAP, the stresses, the `[model]` section and iuq's
@@ -20,13 +21,14 @@ pub const PORTRAITS_KEY: &str = "cell-portraits-at-map";
 /// Points of each run's elongation trace.
 const TRACE_POINTS: usize = 80;
 
-/// The cell at `map` (the model's parameters) at every stress of `runs`, read back from the
-/// campaign store or run now (in parallel) and recorded; `None` for a study whose model is not
-/// the cell model.
+/// The cell at `map` (the model's parameters; `whose` names it in messages, e.g. "the model
+/// posterior's MAP") at every stress of `runs`, read back from the campaign store or run now
+/// (in parallel) and recorded; `None` for a study whose model is not the cell model.
 pub fn portraits_at(
     study: &Study,
     runs: &ModelRuns,
     map: &[f64],
+    whose: &str,
     message: &mut dyn FnMut(String),
 ) -> Result<Option<Vec<ShearPortrait>>> {
     let ModelSection::RbcShear { table } = &study.model else {
@@ -55,19 +57,19 @@ pub fn portraits_at(
         return Ok(Some(portraits));
     }
     message(format!(
-        "the cell at the MAP in pictures: {} runs of the cell model in this process (recorded in the campaign store for replays)",
+        "the cell at {whose} in pictures: {} runs of the cell model in this process (recorded in the campaign store for replays)",
         stresses.len()
     ));
     let cell = model
         .cell_parameters(map)
-        .map_err(|e| StudyError::Failure(format!("the cell at the MAP: {e}")))?;
+        .map_err(|e| StudyError::Failure(format!("the cell at {whose}: {e}")))?;
     let portraits = stresses
         .par_iter()
         .map(|&stress| {
             let mut experiment = model.experiment(&cell, stress);
             experiment.parallel = false;
             shear_portrait(&experiment, TRACE_POINTS).map_err(|e| {
-                StudyError::Failure(format!("the cell at the MAP at {stress} Pa: {e}"))
+                StudyError::Failure(format!("the cell at {whose} at {stress} Pa: {e}"))
             })
         })
         .collect::<Result<Vec<_>>>()?;

@@ -907,32 +907,35 @@ fn run_stages(
         }
         _ => None,
     };
-    let portraits = match &reweighted {
+    // Pictures only: a cell that cannot be portrayed (a run that fails where the campaign's
+    // did not) costs the figures, not the model posterior just made.
+    let portray = |map: &[f64], whose: &str| {
+        let d = model_runs.parameters().len();
+        match cell_portraits::portraits_at(study, &model_runs, &map[..d], whose, &mut |line| {
+            events.message(line)
+        }) {
+            Ok(portraits) => portraits,
+            Err(e) => {
+                events.message(format!(
+                    "the cell at {whose} in pictures: {e} (the report goes without them)"
+                ));
+                None
+            }
+        }
+    };
+    let (portraits, compared_portraits) = match &reweighted {
         Some(outcome) => {
             let stage = Instant::now();
-            let d = model_runs.parameters().len();
-            // Pictures only: a cell that cannot be portrayed (a run that fails where the
-            // campaign's did not) costs the figures, not the model posterior just made.
-            let portraits = match cell_portraits::portraits_at(
-                study,
-                &model_runs,
-                &outcome.posterior.map[..d],
-                &mut |line| events.message(line),
-            ) {
-                Ok(portraits) => portraits,
-                Err(e) => {
-                    events.message(format!(
-                        "the cell at the MAP in pictures: {e} (the report goes without them)"
-                    ));
-                    None
-                }
-            };
-            if portraits.is_some() {
-                stage_seconds.push(("the cell at the MAP".into(), stage.elapsed().as_secs_f64()));
+            let at_model_map = portray(&outcome.posterior.map, "the model posterior's MAP");
+            let at_surrogate_map = at_model_map
+                .as_ref()
+                .and_then(|_| portray(&outcome.surrogate_map, "the surrogate posterior's MAP"));
+            if at_model_map.is_some() {
+                stage_seconds.push(("the cell at the MAPs".into(), stage.elapsed().as_secs_f64()));
             }
-            portraits
+            (at_model_map, at_surrogate_map)
         }
-        None => None,
+        None => (None, None),
     };
     let model_posterior: Option<SampledPosterior> = match model_sampler_settings {
         Some(settings) => {
@@ -963,6 +966,7 @@ fn run_stages(
         model_posterior: model_posterior.as_ref(),
         reweighted: reweighted.as_ref(),
         portraits: portraits.as_deref(),
+        compared_portraits: compared_portraits.as_deref(),
         campaign_runs: model_runs
             .campaign()
             .run_statistics()

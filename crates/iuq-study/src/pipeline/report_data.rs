@@ -11,10 +11,11 @@ use serde_json::{Value, json};
 use super::emulator::Emulator;
 use iuq_campaign::StatusCounts;
 use iuq_report::{
-    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, DataSeries, GpDiagnostic,
-    MapRunsAtPoint, MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
-    PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, SamplerStage,
-    SensitivityIndex, SensitivityResult, StudyReport, write_report,
+    CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, ComparedTraces, DataSeries,
+    ElongationTrace, GpDiagnostic, MapRunsAtPoint, MismatchTest, ModelPosteriorReport,
+    ModelPosteriorStageRow, ParameterSummary, PosteriorCheckReport, PosteriorResult,
+    PropagatedOutput, RunStatistics, SamplerStage, SensitivityIndex, SensitivityResult,
+    StudyReport, write_report,
 };
 use iuq_sensitivity::SensitivityReport;
 
@@ -81,6 +82,9 @@ pub struct PipelineResults<'a> {
     pub reweighted: Option<&'a ModelPosteriorOutcome>,
     /// The cell at the model posterior's MAP in pictures (cell-model studies).
     pub portraits: Option<&'a [iuq_rbc::ShearPortrait]>,
+    /// The cell at the surrogate posterior's MAP, whose elongation traces the report sets
+    /// beside the model MAP's.
+    pub compared_portraits: Option<&'a [iuq_rbc::ShearPortrait]>,
     /// The campaign store's runs by status and the reasons of its failed runs.
     pub campaign_runs: (StatusCounts, Vec<String>),
     /// The adaptive engine's rounds, when it ran.
@@ -652,6 +656,17 @@ pub fn write_pipeline_report(
                     side: p.side.clone(),
                 })
                 .collect(),
+            compared: results.compared_portraits.map(|compared| ComparedTraces {
+                source: "the GP surrogate posterior's MAP".to_string(),
+                traces: compared
+                    .iter()
+                    .map(|p| ElongationTrace {
+                        x: p.stress,
+                        elongation_index: p.elongation_index,
+                        trace: p.trace.clone(),
+                    })
+                    .collect(),
+            }),
         }),
         run_statistics: RunStatistics {
             runs,
