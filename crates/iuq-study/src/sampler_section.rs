@@ -66,14 +66,25 @@ pub fn parse_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<Chec
 }
 
 /// Read the `[model_sampler]` section (BASIS on the model itself in `iuq pipeline`) as
-/// [`parse_sampler`] reads `[sampler]`.
+/// [`parse_sampler`] reads `[sampler]`, but with the published study's chains where the section
+/// says nothing of the mixing: one step without burn-in (`burn = 0`; `max_chain` defaults to 1
+/// in both sections), samples × stages model evaluations. A `burn` (a count or `"auto"`),
+/// `correlation` or `max_burn` given in the section is honoured.
 pub fn parse_model_sampler(study: &Study, overrides: &SamplerOverrides) -> Result<CheckedSettings> {
     let file = study.path.display().to_string();
-    parse_section(
-        StudySection::optional(study.model_sampler.as_ref(), "model_sampler", &file),
-        overrides,
-    )
+    let mut section = StudySection::optional(study.model_sampler.as_ref(), "model_sampler", &file);
+    let mixing_given = ["burn", "correlation", "max_burn"]
+        .iter()
+        .any(|key| section.value(key).is_some());
+    let burn = overrides
+        .burn
+        .or((!mixing_given).then_some(PUBLISHED_MODEL_BURN_IN));
+    parse_section(section, &SamplerOverrides { burn, ..*overrides })
 }
+
+/// Burn-in steps of BASIS on the model by default: none, as the published study's chains of one
+/// step (each model evaluation a stage's proposal, none spent decorrelating).
+pub const PUBLISHED_MODEL_BURN_IN: usize = 0;
 
 fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Result<CheckedSettings> {
     let d = BasisSettings::default();

@@ -238,6 +238,23 @@ fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
             "{p}: BASIS std {std}, exact {es}"
         );
     }
+    // By default the published study's chains: one step, no burn-in; a burn-in the section
+    // gives is honoured (the benchmark's second baseline, burn = 10).
+    let settings = |out: &Path| -> serde_json::Value {
+        let text = std::fs::read_to_string(out.join("basis-model/summary.json")).unwrap();
+        serde_json::from_str::<serde_json::Value>(&text).unwrap()["settings"].clone()
+    };
+    let published = settings(&out);
+    assert_eq!(published["burn_in"], 0, "{published}");
+    assert_eq!(published["max_chain_length"], 1, "{published}");
+    let burned = expression_study(
+        &dir,
+        "method = \"basis\"\n[model_sampler]\nsamples = 200\nburn = 10\nseed = 2",
+    );
+    let out = dir.join("basis-burn");
+    pipeline(&burned, &out, &[]);
+    let burned = settings(&out);
+    assert_eq!(burned["burn_in"], 10, "{burned}");
 }
 
 /// Without a correction (`corrections = 0`) the 6-run surrogate's posterior is carried to the

@@ -539,14 +539,7 @@ fn run_stages(
         .transpose()?;
     let model_sampler_settings =
         if model_posterior_method == Some(model_posterior::ModelPosteriorMethod::Basis) {
-            Some(parse_model_sampler(
-                study,
-                &SamplerOverrides {
-                    burn: Some(0),
-                    max_chain: Some(1),
-                    ..Default::default()
-                },
-            )?)
+            Some(parse_model_sampler(study, &SamplerOverrides::default())?)
         } else {
             None
         };

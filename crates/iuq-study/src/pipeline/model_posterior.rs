@@ -7,8 +7,8 @@
 //! evaluation is a campaign run recorded under `model-posterior-<k>` (its k-th batch): runs the
 //! store already holds are reused, so a rerun after an interruption (even `kill -9`) requests
 //! the same points in the same order and makes only the runs that were missing.
-//! `method = "basis"` keeps plain BASIS on the model (`[model_sampler]`, chains of one step
-//! without burn-in, as the published study).
+//! `method = "basis"` keeps plain BASIS on the model (`[model_sampler]`, by default chains of
+//! one step without burn-in, as the published study).
 //!
 //! Results in `DIR/model-posterior/`: `summary.json` (everything below), `samples.csv` (the
 //! population with its weights and both log-likelihoods) and `stages.csv`.
