@@ -291,6 +291,39 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
     assert_matches(&bridged, &mean, &std, "narrow surrogate, bridged");
 }
 
+/// Stopped short of β = 1 (`max_stages = 1`, no correction) the result says so: not certified,
+/// the β its one stage reached, and the final weights those of the rest of the way in one step
+/// from the population's β (here 0), whose k̂ — the full step's, which does not hold — is the
+/// one reported. The stage record keeps the step the stage took.
+#[test]
+fn a_model_posterior_stopped_short_is_not_certified_and_reports_the_remaining_step() {
+    let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
+    let model = FnLikelihood::new(2, gaussian(mean.clone(), std.clone()));
+    let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        corrections: 0,
+        max_stages: 1,
+        ..Default::default()
+    };
+    let result = run(2, &mean, &s_std, &model, &settings);
+    println!("{:#?} k̂ {}", result.stages, result.pareto_k);
+    assert!(!result.certified());
+    assert_eq!(result.stages.len(), 1);
+    let reached = result.stages[0].beta;
+    assert!(reached > 0.0 && reached < 1.0, "β {reached}");
+    assert_eq!(result.stop, ModelPosteriorStop::MaxStages { beta: reached });
+    assert!(result.stop.to_string().starts_with("not certified"));
+    // The stage itself held; the weights of the remaining step do not.
+    assert!(result.stages[0].pareto_k <= result.pareto_k_threshold);
+    assert!(
+        result.pareto_k > result.pareto_k_threshold,
+        "k̂ {} of the remaining step",
+        result.pareto_k
+    );
+    assert_eq!(result.model_evaluations, 400);
+}
+
 #[test]
 fn where_the_model_fails_the_posterior_is_cut_and_the_failures_counted() {
     // The model fails for x0 > 0.5; its posterior is N(0, 1) cut there (x1 unaffected).

@@ -400,7 +400,7 @@ pub(crate) fn build_sections(
                 caption: if first_batch(m) < m.samples {
                     "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's posterior and the second batch's (the corrected or the tempered surrogate's), (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the log of the second posterior's ratio to the first: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
                 } else {
-                    "Histogram of the final stage's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
+                    "Histogram of the final step's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded (the last stage's; where the method stopped uncertified, the rest of the way to β = 1 in one step): a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
                 },
                 size: (920, 460),
                 tables: &["model_posterior_stages"],
