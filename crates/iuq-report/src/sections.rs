@@ -358,7 +358,12 @@ pub(crate) fn build_sections(
             "model-posterior",
             "The model's own posterior",
             format!(
-                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.",
+                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.{noisy}",
+                noisy = if m.pseudo_marginal {
+                    noisy_caveat(m)
+                } else {
+                    String::new()
+                },
                 model = m.model_source,
                 surrogate = m.surrogate_source,
                 samples = first_batch(m),
@@ -571,6 +576,15 @@ fn sentence_case(text: &str) -> String {
 }
 
 /// What the test of a noisy model's first batch found and what followed.
+/// What a noisy likelihood's estimate does not say: its MCSE counts the weights' spread, not
+/// how each member's weight was itself drawn, and its MAP is a lucky run.
+fn noisy_caveat(m: &crate::model::ModelPosteriorReport) -> String {
+    format!(
+        " With a noisy likelihood the MCSE is computed from the weights as drawn: where the {model}'s run-to-run spread is large against the data's std it can understate the spread of a std (about 1.5 times on a test problem whose spread is twice the data's std), and the {model} posterior's MAP is the member whose run landed best, not a maximum of the likelihood averaged over the noise.",
+        model = m.model_source
+    )
+}
+
 fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
     let (model, surrogate) = (&m.model_source, &m.surrogate_source);
     let not_made = m

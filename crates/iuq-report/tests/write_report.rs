@@ -302,6 +302,10 @@ fn a_noisy_models_refused_correction_is_said_without_a_contradiction() {
         .replace("&#39;", "'");
     assert!(text.contains("(a permutation test of the weights over the members: p = 0.002). The cell model's runs asked for a correction of the GP surrogate, but the moment-matched correction's posterior keeps 2 % of its population inside the range of viscosityRatio over the batch it was fitted on (at least 50 % needed): the one step stands."), "{text}");
     assert!(!text.contains("no correction."), "{text}");
+    assert!(
+        text.contains("With a noisy likelihood the MCSE is computed from the weights as drawn"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -363,6 +367,7 @@ fn a_reproducible_models_correction_says_which_fit_and_what_was_refused() {
         .unwrap()
         .replace("&#39;", "'");
     assert!(text.contains("so the GP surrogate was corrected towards the moments of the batch's importance weights (a Gaussian log-ratio, stds widened 1.2 times) (first tried and refused: the least-squares fit of r: its posterior keeps 0 % of its population inside the range of kLink"), "{text}");
+    assert!(!text.contains("With a noisy likelihood"), "{text}");
 
     let m = report.model_posterior.as_mut().unwrap();
     m.corrections = 0;
