@@ -153,6 +153,45 @@ def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
         assert members.std[k] == pytest.approx(m["std"][name], rel=1e-9)
 
 
+def _expression_cooling(tmp_path, model_posterior_section):
+    """The cooling study per time with its program replaced by the same curve in-process."""
+    folder = copy_cooling(tmp_path, "cooling")
+    text = (folder / "cooling-per-time.toml").read_text()
+    program = ('kind = "command"\ncommand = ["./cooling_model.py"]\nabscissa = "t"\noutputs = ["T"]\n'
+               'output = { file = "result.json", format = "json" }')
+    assert program in text
+    expression = 'kind = "expression"\nabscissa = "t"\noutputs = { T = "20 + (T0 - 20) * exp(-k * t)" }'
+    study_file = folder / "expression.toml"
+    study_file.write_text(text.replace(program, expression) + "\n[model_posterior]\n" + model_posterior_section)
+    return study_file
+
+
+def test_a_bad_model_posterior_key_is_a_value_error_naming_file_and_key(tmp_path):
+    """`Study.run(model_posterior=True)` refuses a bad `[model_posterior]` key before any run,
+    as the CLI's exit 2 does: the message names the file and the whole key."""
+    study_file = _expression_cooling(tmp_path, "samples = 100\nsampels = 3\n")
+    study = iuq.Study.load(study_file)
+    with pytest.raises(ValueError, match=r"expression\.toml.*model_posterior\.sampels"):
+        study.run(tmp_path / "out", model_posterior=True)
+    study_file = _expression_cooling(tmp_path / "b", "samples = 3\n")
+    with pytest.raises(ValueError, match=r"model_posterior\.samples"):
+        iuq.Study.load(study_file).run(tmp_path / "out-b", model_posterior=True)
+    # Nothing was run or written: the keys are checked before the surrogate's first run.
+    assert not (tmp_path / "out").exists() and not (tmp_path / "out-b").exists()
+
+
+def test_plain_basis_on_the_model_from_python_gives_a_second_posterior_and_no_weights(tmp_path):
+    """`method = "basis"` keeps plain BASIS on the model: a posterior of source "model" beside
+    the surrogate's, and neither the reweighted summary nor its members."""
+    study_file = _expression_cooling(tmp_path, 'method = "basis"\n[model_sampler]\nsamples = 300\nseed = 2\n')
+    result = iuq.Study.load(study_file).run(tmp_path / "py", model_posterior=True)
+    assert result.model_posterior is None
+    assert result.model_posterior_samples is None
+    sources = [p["source"] for p in result.posterior]
+    assert sources[1:] == ["model"], sources
+    assert (tmp_path / "py" / "basis-model" / "summary.json").is_file()
+
+
 STUDY_FOR_INTERRUPT = '''
 name = "interrupted"
 [parameters]
