@@ -288,6 +288,16 @@ fn a_surrogate_one_stage_cannot_carry_is_bridged_to_the_exact_posterior() {
             assert!(cv <= target + 1e-6 && k + 1 == stages.len(), "{stage}");
         }
         assert_eq!(stage["model_evaluations"], 200, "{stage}");
+        // The step is the CV rule's, halved (here never) until k̂ holds.
+        let (step, cv_step) = (
+            stage["step"].as_f64().unwrap(),
+            stage["cv_step"].as_f64().unwrap(),
+        );
+        let halvings = (cv_step / step).log2();
+        assert!(
+            halvings >= -1e-12 && (halvings - halvings.round()).abs() < 1e-9,
+            "{stage}"
+        );
         if k == 0 {
             assert!(stage["screen_acceptance"].is_null(), "{stage}");
         } else {
