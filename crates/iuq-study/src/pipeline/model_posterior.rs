@@ -236,23 +236,29 @@ impl ModelPosteriorOutcome {
             "replicate_runs": self.replicate_runs,
             "replicate_failures": self.replicate_failures,
             "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
-            "stages": p.stages.iter().map(|s| json!({
-                "stage": s.stage,
-                "beta": s.beta,
-                "step": s.step,
-                "cv_step": s.cv_step,
-                "cv": s.cv,
-                "pareto_k": finite(s.pareto_k),
-                "effective_sample_size": s.effective_sample_size,
-                "model_evaluations": s.model_evaluations,
-                "failures": s.failures,
-                "screen_acceptance": s.screen_acceptance,
-                "confirm_acceptance": s.confirm_acceptance,
-                "spread_ratio": s.spread_ratio,
-            })).collect::<Vec<_>>(),
+            "stages": p.stages.iter().map(stage_json).collect::<Vec<_>>(),
             "seconds": self.seconds,
         })
     }
+}
+
+/// One stage of the model posterior as `--json` and `summary.json` carry it.
+fn stage_json(s: &ModelPosteriorStage) -> Value {
+    let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+    json!({
+        "stage": s.stage,
+        "beta": s.beta,
+        "step": s.step,
+        "cv_step": s.cv_step,
+        "cv": s.cv,
+        "pareto_k": finite(s.pareto_k),
+        "effective_sample_size": s.effective_sample_size,
+        "model_evaluations": s.model_evaluations,
+        "failures": s.failures,
+        "screen_acceptance": s.screen_acceptance,
+        "confirm_acceptance": s.confirm_acceptance,
+        "spread_ratio": s.spread_ratio,
+    })
 }
 
 /// The model's posterior from the surrogate's `gp_posterior` (`settings`), through the campaign
