@@ -1202,4 +1202,24 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
         // Nothing was run or written: the key is checked before the surrogate's first run.
         assert!(!dir.join("out").exists(), "{lines}");
     }
+    // The surrogate's population the members are drawn from must be large enough too.
+    let study = expression_study(&dir, "samples = 30");
+    let text = std::fs::read_to_string(&study)
+        .unwrap()
+        .replace("[sampler]\nsamples = 4000", "[sampler]\nsamples = 20");
+    std::fs::write(&study, text).unwrap();
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        dir.join("out").to_str().unwrap(),
+        "--model-posterior",
+    ]);
+    let stderr = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("study.toml") && stderr.contains("sampler.samples"),
+        "{stderr}"
+    );
+    assert!(!dir.join("out").exists());
 }

@@ -537,6 +537,25 @@ fn run_stages(
         .model_posterior
         .then(|| model_posterior::parse_model_posterior(study))
         .transpose()?;
+    if matches!(
+        model_posterior_method,
+        Some(model_posterior::ModelPosteriorMethod::Reweight(_))
+    ) && sampler_settings.samples < iuq_basis::model_posterior::MIN_SAMPLES
+    {
+        // The members are drawn from the surrogate's population: refuse before any run.
+        let file = study.path.display().to_string();
+        return Err(
+            iuq_campaign::StudySection::optional(study.sampler.as_ref(), "sampler", &file)
+                .error(
+                    "samples",
+                    format!(
+                        "must be at least {} with --model-posterior: the model posterior's members are drawn from the surrogate's population",
+                        iuq_basis::model_posterior::MIN_SAMPLES
+                    ),
+                )
+                .into(),
+        );
+    }
     let model_sampler_settings =
         if model_posterior_method == Some(model_posterior::ModelPosteriorMethod::Basis) {
             Some(parse_model_sampler(study, &SamplerOverrides::default())?)
@@ -870,10 +889,13 @@ fn run_stages(
     let reweighted = match &model_posterior_method {
         Some(model_posterior::ModelPosteriorMethod::Reweight(settings)) => {
             let stage = Instant::now();
+            let members = settings
+                .method
+                .samples
+                .min(gp_posterior.run.state.samples.len());
             events.message(format!(
-                "the model's posterior from the surrogate's: {} samples, {} runs at first (results already stored are reused)",
-                settings.method.samples,
-                settings.method.samples * group_count
+                "the model's posterior from the surrogate's: {members} samples, {} runs at first (results already stored are reused)",
+                members * group_count
             ));
             let outcome = model_posterior::reweight_to_model(
                 study,
