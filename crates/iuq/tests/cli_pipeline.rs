@@ -825,6 +825,29 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
 }
 
 #[test]
+fn the_shipped_healthy_study_replays_the_cell_models_certified_posterior() {
+    let summary = assert_shipped_model_posterior("rbc-healthy-hemocell", "healthy cells");
+    let m = &summary["model_posterior"];
+    // The figures of README.md and PROVENANCE.md: a noisy likelihood at 9.04 Pa weighed in one
+    // pseudo-marginal step over both batches (400 members: the surrogate posterior's and the
+    // defensive normal's), 4,428 runs (400 evaluations at 8 stresses, the probe's 32 and 1,196
+    // replicates); k̂ 0.401, ESS 142.
+    assert_eq!(m["pseudo_marginal"], true, "{m}");
+    assert_eq!(m["both_batches"], true, "{m}");
+    assert_eq!(m["corrections"][0]["defensive_normal"], true, "{m}");
+    assert_eq!(m["samples"], 400, "{m}");
+    assert_eq!(m["model_evaluations"], 400, "{m}");
+    assert_eq!(m["replicate_runs"], 1196, "{m}");
+    assert_eq!(m["model_runs"], 4428, "{m}");
+    assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
+    assert_eq!(format!("{:.3}", m["pareto_k"].as_f64().unwrap()), "0.401");
+    assert_eq!(
+        format!("{:.0}", m["effective_sample_size"].as_f64().unwrap()),
+        "142"
+    );
+}
+
+#[test]
 fn the_shipped_tbhp_study_replays_the_cell_models_certified_posterior() {
     let summary = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
     let m = &summary["model_posterior"];
