@@ -126,15 +126,7 @@ def test_study_basis_equals_iuq_basis(cli, tmp_path):
 
 def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
     """`Study.run(model_posterior=True)` gives the model posterior the CLI gives, certified."""
-    folder = copy_cooling(tmp_path, "cooling")
-    text = (folder / "cooling-per-time.toml").read_text()
-    program = ('kind = "command"\ncommand = ["./cooling_model.py"]\nabscissa = "t"\noutputs = ["T"]\n'
-               'output = { file = "result.json", format = "json" }')
-    assert program in text
-    expression = 'kind = "expression"\nabscissa = "t"\noutputs = { T = "20 + (T0 - 20) * exp(-k * t)" }'
-    study_file = folder / "expression.toml"
-    study_file.write_text(text.replace(program, expression)
-                          + "\n[model_posterior]\nsamples = 100\nseed = 2\n")
+    study_file = _expression_cooling(tmp_path, "samples = 100\nseed = 2\n")
     study = iuq.Study.load(study_file)
     result = study.run(tmp_path / "py", model_posterior=True)
     m = result.model_posterior

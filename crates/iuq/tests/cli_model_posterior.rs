@@ -1160,6 +1160,27 @@ fn a_model_program_that_cannot_start_is_bad_input_and_costs_no_run() {
     assert_eq!(v["model_posterior"]["samples"], 30, "{v}");
 }
 
+/// `iuq pipeline STUDY --model-posterior` exits 2 naming the study file and `key`, before it
+/// runs or writes anything (`what` names the case in a failure).
+fn assert_refused(study: &Path, what: &str, key: &str) {
+    let out = study.parent().unwrap().join("out");
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--model-posterior",
+    ]);
+    let stderr = stderr_of(&output);
+    assert_eq!(output.status.code(), Some(2), "{what}: {stderr}");
+    assert!(
+        stderr.contains("study.toml") && stderr.contains(key),
+        "{what}: {stderr}"
+    );
+    // Nothing was run or written: the key is checked before the surrogate's first run.
+    assert!(!out.exists(), "{what}");
+}
+
 #[test]
 fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
     let dir = cooling("bad-keys");
@@ -1185,22 +1206,7 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
             "model_posterior.samples",
         ),
     ] {
-        let study = expression_study(&dir, lines);
-        let output = iuq(&[
-            "pipeline",
-            study.to_str().unwrap(),
-            "--out",
-            dir.join("out").to_str().unwrap(),
-            "--model-posterior",
-        ]);
-        let stderr = stderr_of(&output);
-        assert_eq!(output.status.code(), Some(2), "{lines}: {stderr}");
-        assert!(
-            stderr.contains("study.toml") && stderr.contains(key),
-            "{lines}: {stderr}"
-        );
-        // Nothing was run or written: the key is checked before the surrogate's first run.
-        assert!(!dir.join("out").exists(), "{lines}");
+        assert_refused(&expression_study(&dir, lines), lines, key);
     }
     // The surrogate's population the members are drawn from must be large enough too.
     let study = expression_study(&dir, "samples = 30");
@@ -1208,18 +1214,5 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
         .unwrap()
         .replace("[sampler]\nsamples = 4000", "[sampler]\nsamples = 20");
     std::fs::write(&study, text).unwrap();
-    let output = iuq(&[
-        "pipeline",
-        study.to_str().unwrap(),
-        "--out",
-        dir.join("out").to_str().unwrap(),
-        "--model-posterior",
-    ]);
-    let stderr = stderr_of(&output);
-    assert_eq!(output.status.code(), Some(2), "{stderr}");
-    assert!(
-        stderr.contains("study.toml") && stderr.contains("sampler.samples"),
-        "{stderr}"
-    );
-    assert!(!dir.join("out").exists());
+    assert_refused(&study, "[sampler] samples = 20", "sampler.samples");
 }

@@ -408,12 +408,7 @@ pub fn synthetic_report(
                     CellPortrait {
                         x,
                         elongation_index: (el, 0.002),
-                        trace: (0..60)
-                            .map(|i| {
-                                let strain = i as f64 * 0.16;
-                                (strain, el * (1.0 - (-strain).exp()))
-                            })
-                            .collect(),
+                        trace: elongation_trace(el),
                         window: (7.5, 9.375),
                         outline: ring(a, b),
                         ellipse: [0.0, 0.0, a, b, 0.1],
@@ -430,18 +425,23 @@ pub fn synthetic_report(
                         ElongationTrace {
                             x,
                             elongation_index: (el, 0.002),
-                            trace: (0..60)
-                                .map(|i| {
-                                    let strain = i as f64 * 0.16;
-                                    (strain, el * (1.0 - (-strain).exp()))
-                                })
-                                .collect(),
+                            trace: elongation_trace(el),
                         }
                     })
                     .collect(),
             }),
         }),
     }
+}
+
+/// A toy run's elongation index against strain, rising to `el`.
+fn elongation_trace(el: f64) -> Vec<(f64, f64)> {
+    (0..60)
+        .map(|i| {
+            let strain = i as f64 * 0.16;
+            (strain, el * (1.0 - (-strain).exp()))
+        })
+        .collect()
 }
 
 /// The toy model's probability of failure: likely where kLink is small and kBend large.
