@@ -44,6 +44,7 @@
 
 pub mod ancestral_variance;
 pub mod annealing;
+pub mod carried_population;
 pub mod batch_mixture;
 pub mod checkpoint;
 pub mod curve_model;

@@ -335,7 +335,7 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
     }
 
     /// Evaluate a batch, turning failures and non-finite values into −∞ with a counted reason.
-    fn evaluate(
+    pub(crate) fn evaluate(
         &self,
         stage: usize,
         points: &[Vec<f64>],

@@ -49,13 +49,14 @@ use iuq_adaptive::{
     select_batch_for_moments, select_batch_for_moments_by_sensitivity,
     surrogate_log_likelihood_std,
 };
-use iuq_basis::MAX_MIXING_LEVEL;
+use iuq_basis::carried_population::{Carried, carry};
+use iuq_basis::{Basis, BasisState, MAX_MIXING_LEVEL};
 
 use super::Events;
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::{Acquisition, AdaptiveSettings, MoreSamples};
+use super::settings::{Acquisition, AdaptiveSettings, MoreSamples, PosteriorSampling};
 use super::surrogate::{Emulation, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
@@ -223,6 +224,13 @@ pub struct AdaptiveRound {
     pub converged: bool,
     /// Wall-clock seconds of the round.
     pub seconds: f64,
+    /// Replicates whose population was carried from the round before (`sampling =
+    /// "sequential"`); the others annealed from the prior.
+    pub carried_replicates: usize,
+    /// Surrogate evaluations of the round's samplers, all replicates together: the round's
+    /// sampling cost in model-free operations (0 for a round read back from a store that did
+    /// not count them).
+    pub surrogate_evaluations: usize,
 }
 
 /// What the adaptive engine did.
@@ -517,6 +525,14 @@ struct RoundMeasurement {
     /// The check of the sampler (absent in rounds recorded before it was made).
     #[serde(default)]
     sampler_agreement: Option<SamplerAgreement>,
+    /// Replicates whose population was carried from the round before (0 in rounds recorded
+    /// before `sampling = "sequential"`).
+    #[serde(default)]
+    carried_replicates: usize,
+    /// Surrogate evaluations of the round's samplers, all replicates together (0 in rounds
+    /// recorded before it was counted).
+    #[serde(default)]
+    surrogate_evaluations: usize,
 }
 
 impl RoundMeasurement {
@@ -591,6 +607,7 @@ fn round_fingerprint(
     base_seed: u64,
     sampling: &RoundSampling,
     groups: &[GroupRuns],
+    carried_from: Option<&str>,
 ) -> String {
     use std::fmt::Write;
     let table = |t: &Option<toml::Table>| {
@@ -626,6 +643,16 @@ fn round_fingerprint(
     }
     if let Emulation::ReducedBasis { settings, scale } = emulation {
         let _ = writeln!(text, "reduced basis {settings:?} scale {scale:?}");
+    }
+    // A sequential round's posterior depends on the population it carries, that is on the
+    // round it comes from (whose fingerprint chains every earlier one); a round sampled from the
+    // prior leaves the text as it was before sequential rounds.
+    if settings.sampling == PosteriorSampling::Sequential {
+        let _ = writeln!(
+            text,
+            "sequential from {}",
+            carried_from.unwrap_or("the prior")
+        );
     }
     for (g, group) in groups.iter().enumerate() {
         let _ = writeln!(
@@ -674,6 +701,7 @@ fn measure_round(
     dir: &Path,
     events: &Events,
     describe: &dyn Fn(usize) -> String,
+    carried: &mut [Option<BasisState>],
 ) -> Result<(RoundMeasurement, RoundScoring)> {
     let d = study.space.dimension();
     let modelling_error = data.modelling_error.is_some();
@@ -695,6 +723,7 @@ fn measure_round(
     };
     let mut parameters = Vec::new();
     let mut replicate_moments = Vec::with_capacity(settings.replicates);
+    let (mut carried_replicates, mut surrogate_evaluations) = (0usize, 0usize);
     // With two replicates or more, every second one mixes a level harder: the check of the
     // sampler (`iuq_adaptive::sampler_agreement`).
     let checked = settings.replicates >= 2;
@@ -711,6 +740,32 @@ fn measure_round(
             },
         )?
         .with_stronger_mixing(sampling.mixing_level + harder);
+        // A population carried from the round before, reweighted to this surrogate (None: the
+        // first round, `sampling = "from-prior"`, or an ESS that collapsed).
+        let start = match carried.get(replicate).and_then(Option::as_ref) {
+            Some(previous) => {
+                let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
+                    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+                match carry(&basis, previous)
+                    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?
+                {
+                    Carried::Ready(state) => {
+                        carried_replicates += 1;
+                        Some(state)
+                    }
+                    Carried::Collapsed { ess_fraction } => {
+                        surrogate_evaluations += previous.samples.len();
+                        events.message(format!(
+                            "adaptive round {round}: replicate {}: the previous population's ESS fell to {:.1} % under this surrogate; annealing from the prior",
+                            replicate + 1,
+                            100.0 * ess_fraction
+                        ));
+                        None
+                    }
+                }
+            }
+            None => None,
+        };
         let sampled = events.sample(
             "adaptive round",
             study,
@@ -718,9 +773,14 @@ fn measure_round(
             sampler,
             &dir.join(format!("round-{round}"))
                 .join(format!("replicate-{}", replicate + 1)),
-            None,
+            start,
         )?;
         let state = sampled.run.state;
+        // A carried state counts its reweighting's evaluations as well as its moves'.
+        surrogate_evaluations += state.evaluations;
+        if let Some(slot) = carried.get_mut(replicate) {
+            *slot = Some(state.clone());
+        }
         parameters = state.parameter_names.clone();
         pooled.samples.extend(state.samples);
         pooled.log_likelihood.extend(state.log_likelihood);
@@ -918,6 +978,8 @@ fn measure_round(
         log_evidence: state.log_evidence,
         boundary_wanted: !boundary.is_empty(),
         sampler_agreement: sampler_check,
+        carried_replicates,
+        surrogate_evaluations,
     };
     Ok((
         measurement,
@@ -988,6 +1050,11 @@ pub(super) fn refine(
         mixing_level: rounds.last().map_or(0, |r| r.mixing_level),
     };
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
+    // Each replicate's population, carried from round to round (`sampling = "sequential"`),
+    // and the fingerprint of the round it comes from.
+    let sequential = settings.sampling == PosteriorSampling::Sequential;
+    let mut carried: Vec<Option<BasisState>> = vec![None; settings.replicates];
+    let mut carried_from: Option<String> = None;
     let mut converged = false;
     for round in first_round..=settings.max_rounds {
         events.check_interrupt()?;
@@ -1008,7 +1075,9 @@ pub(super) fn refine(
             base_seed,
             &sampling,
             groups,
+            carried_from.as_deref(),
         );
+        let population_key = format!("{label}/population");
         let cached = runs
             .derived_result(&key, &fingerprint)?
             .and_then(|text| serde_json::from_str::<RoundMeasurement>(&text).ok());
@@ -1036,6 +1105,13 @@ pub(super) fn refine(
                     "adaptive round {round}: the recorded assessment vanished"
                 )));
             };
+            if sequential {
+                carried = runs
+                    .derived_result(&population_key, &fingerprint)?
+                    .and_then(|text| serde_json::from_str::<Vec<Option<BasisState>>>(&text).ok())
+                    .filter(|states| states.len() == settings.replicates)
+                    .unwrap_or_else(|| vec![None; settings.replicates]);
+            }
             (m, None)
         } else {
             let (m, scoring) = measure_round(
@@ -1052,7 +1128,16 @@ pub(super) fn refine(
                 &dir,
                 events,
                 describe,
+                if sequential { &mut carried } else { &mut [] },
             )?;
+            if sequential {
+                let text = serde_json::to_string(&carried).map_err(|e| {
+                    StudyError::Failure(format!(
+                        "adaptive round {round}: cannot record the population: {e}"
+                    ))
+                })?;
+                runs.record_derived_result(&population_key, &fingerprint, &text)?;
+            }
             if let Some(old) = cached.as_ref().filter(|old| **old != m) {
                 events.message(format!(
                     "adaptive round {round}: the recomputed assessment differs from the one recorded in the store (surrogate error {} vs {}, log evidence {} vs {}); the new one is recorded",
@@ -1065,6 +1150,9 @@ pub(super) fn refine(
             runs.record_derived_result(&key, &fingerprint, &text)?;
             (m, Some(scoring))
         };
+        if sequential {
+            carried_from = carried.iter().any(Option::is_some).then(|| fingerprint.clone());
+        }
         parameters = measured.parameters.clone();
         let moments = measured.moments();
         let u = measured.log_likelihood_std;
@@ -1094,6 +1182,8 @@ pub(super) fn refine(
             candidates: sampling.candidates,
             converged: assessment.converged && !measured.sampler_disagrees(),
             seconds: 0.0,
+            carried_replicates: measured.carried_replicates,
+            surrogate_evaluations: measured.surrogate_evaluations,
         };
         let extrapolation = measured.extrapolation_share;
         let disagrees = measured.sampler_disagrees();

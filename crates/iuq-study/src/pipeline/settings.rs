@@ -199,6 +199,21 @@ pub struct AdaptiveSettings {
     pub acquisition: Acquisition,
     /// When a round's replicates sample more (`more_samples`, default `"when-noisy"`).
     pub more_samples: MoreSamples,
+    /// How a round samples its posterior (`sampling`, default `"sequential"`).
+    pub sampling: PosteriorSampling,
+}
+
+/// How each round of the adaptive engine samples its surrogate posterior.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PosteriorSampling {
+    /// `"sequential"`: each replicate carries its population from the round before, reweighted
+    /// to the new surrogate, resampled and moved (`iuq_basis::carried_population`); it anneals
+    /// from the prior only in the first round and where the reweighting's ESS collapses.
+    Sequential,
+    /// `"from-prior"`: every round anneals each replicate from the prior (the engine before
+    /// 2026-12; the shipped red-cell studies name it, so that their rounds replay as recorded).
+    FromPrior,
 }
 
 /// When the next round's replicates sample twice as many (up to `max_samples`).
@@ -246,6 +261,10 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         more_samples: match s.choice("more_samples", &["when-noisy", "when-resolving"])? {
             Some("when-resolving") => MoreSamples::WhenResolving,
             _ => MoreSamples::WhenNoisy,
+        },
+        sampling: match s.choice("sampling", &["sequential", "from-prior"])? {
+            Some("from-prior") => PosteriorSampling::FromPrior,
+            _ => PosteriorSampling::Sequential,
         },
     };
     s.finish()?;
