@@ -71,8 +71,8 @@ def basis(
     model: Optional[Callable[[np.ndarray], Any]] = None,
     data: Any = None,
     data_std: Any = None,
-    modelling_error: Optional[Tuple[float, float]] = (0.001, 0.1),
-    computational_error: str = "relative",
+    modelling_error: Optional[Tuple[float, float]] = None,
+    computational_error: str = "absolute",
     measurement_error: bool = True,
     on_error: str = "raise",
 ) -> BasisResult:
@@ -83,9 +83,12 @@ def basis(
     string evaluated in Rust (a study's ``[likelihood] log_density``) — or the data form:
     ``model`` (a callable (N, d) → (N, m), or a pair ``(values, std)`` of such arrays with the
     model's computational std) compared with ``data`` (m values) through the prediction-error
-    likelihood, with measurement stds ``data_std``, a modelling error σ_m ~ U(``modelling_error``)
-    sampled with θ (``None``: left out) and the ``computational_error`` term (``"none"``,
-    ``"relative"``, …; ``docs/methods.md`` §4).
+    likelihood, with measurement stds ``data_std`` and, by default, nothing else: exactly
+    N(data | model(θ), diag(data_std²)), plus std² where the model returns ``(values, std)``
+    (``computational_error="absolute"``; ``"relative"``, ``"absolute-times-data"`` and
+    ``"none"`` are the other conventions, ``docs/methods.md`` §4). ``modelling_error=(lo, hi)``
+    adds σ_m²·data² to each variance with σ_m ~ U(lo, hi) sampled with θ; without ``data_std``
+    it is needed.
 
     ``bounds`` gives the priors π: ``[(lo, hi), ...]`` (uniform; an item may also be a prior as
     in a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
@@ -116,6 +119,11 @@ def basis(
         if modelling_error is not None:
             lo, hi = (real("modelling_error", v) for v in modelling_error)
             modelling_error = (lo, hi)
+        elif std is None or not measurement_error:
+            raise ValueError(
+                "data_std: give the measurement stds, or a modelling_error=(lo, hi) prior (σ_m "
+                "relative to the data): without either the likelihood has no spread"
+            )
         data_args = {
             "model": model,
             "values": [float(v) for v in values],

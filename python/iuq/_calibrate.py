@@ -251,8 +251,8 @@ def calibrate(
     batch: int = 2,
     max_runs: int = 300,
     tolerance: float = 0.1,
-    modelling_error: Optional[Tuple[float, float]] = (0.001, 0.1),
-    computational_error: str = "relative",
+    modelling_error: Optional[Tuple[float, float]] = None,
+    computational_error: str = "absolute",
     posterior_check: int = 0,
     model_posterior: Union[bool, Dict[str, Any]] = False,
     samples: int = 10000,
@@ -275,8 +275,16 @@ def calibrate(
     :func:`iuq.basis` takes them (``{name: (lo, hi) or {"normal": [m, s]}}``, a list of pairs,
     or SALib's ``problem``). ``y`` (m,) are the observations, ``y_std`` their measurement stds
     (optional), ``x`` their abscissae (default 0, 1, …). The likelihood is the prediction-error
-    likelihood of ``docs/methods.md`` §4, with a modelling error σ_m ~ U(``modelling_error``)
-    sampled with θ (``None``: left out) and the ``computational_error`` convention.
+    likelihood of ``docs/methods.md`` §4. By default it is exactly the Gaussian
+    N(y | model(θ), diag(y_std²)), the surrogate adding its own predictive variance v(θ) while it
+    stands in for the model: Σ_jj = y_std_j² + v_j(θ) (``computational_error="absolute"``; a
+    function that returns ``(values, std)`` adds std² likewise). ``modelling_error=(lo, hi)``
+    adds a modelling error relative to the data, Σ_jj += σ_m²·y_j², with σ_m ~ U(lo, hi) sampled
+    with θ (the red-cell study's (0.001, 0.1): 0.1 % to 10 % of each datum); without ``y_std``
+    a modelling error is needed, for the likelihood to have a spread at all.
+    ``computational_error`` is how a computational std s_j enters: ``"absolute"`` s_j²,
+    ``"relative"`` (s_j·y_j/q_j)² (the published study's), ``"absolute-times-data"``
+    (s_j·y_j)², ``"none"``.
 
     The engine (``docs/adaptive-engine.md``): an initial maximin LHS of ``initial_runs``
     (default max(6, d + 2)) runs, then rounds of up to ``batch`` runs placed where they most
@@ -339,6 +347,11 @@ def calibrate(
         if not (0 < lo < hi):
             raise ValueError(f"modelling_error: expected 0 < lo < hi, got ({lo}, {hi})")
         modelling_error = (lo, hi)
+    elif std is None:
+        raise ValueError(
+            "y_std: give the measurement stds, or a modelling_error=(lo, hi) prior (σ_m relative "
+            "to the data): without either the likelihood has no spread"
+        )
     for reserved in ("x", "sigma_m"):
         if reserved in names:
             raise ValueError(f"parameters: `{reserved}` is a name iuq uses; rename the parameter")

@@ -110,7 +110,8 @@ def test_the_data_form_equals_the_cli_bit_for_bit(cli, tmp_path):
     out = tmp_path / "basis"
     summary = cli("basis", study, "--samples", 400, "--seed", 6, "--out", out)
     columns, table = read_csv(out / "samples.csv")
-    assert columns[:3] == ["a", "b", "sigma_m"]
+    # Both default to the data's stds alone (no sigma_m).
+    assert columns[:3] == ["a", "b", "ll"]
     times = np.array(t)
 
     def line(theta):
@@ -118,8 +119,8 @@ def test_the_data_form_equals_the_cli_bit_for_bit(cli, tmp_path):
 
     ours = iuq.basis(model=line, data=y, data_std=err, bounds={"a": (0, 2), "b": (0, 1)},
                      samples=400, seed=6)
-    assert ours.names == ["a", "b", "sigma_m"]
-    assert np.array_equal(ours.samples, table[:, :3])
+    assert ours.names == ["a", "b"]
+    assert np.array_equal(ours.samples, table[:, :2])
     assert ours.log_evidence == summary["log_evidence"]
 
 
@@ -130,7 +131,8 @@ def test_the_data_form_samples_the_modelling_error():
     def model(theta):
         return theta[:, :1] * t[None, :], np.full((theta.shape[0], t.size), 0.01)
 
-    result = iuq.basis(model=model, data=y, bounds=[(0, 4)], samples=500, seed=0)
+    result = iuq.basis(model=model, data=y, bounds=[(0, 4)], modelling_error=(0.001, 0.1),
+                       computational_error="relative", samples=500, seed=0)
     assert result.names == ["x1", "sigma_m"]
     assert result.mean[0] == pytest.approx(2.0, abs=0.1)
 

@@ -90,6 +90,23 @@ def test_a_python_model_is_calibrated_to_its_exact_posterior(calibrated):
             assert after["samples"] == before["samples"], result.rounds
 
 
+def test_with_data_stds_only_the_defaults_give_the_exact_posterior():
+    # No modelling error unless asked, the surrogate's variance added as it is: the posterior of
+    # N(y | model, y_std²), the grid's, within the tolerances of the module's header.
+    y = observations()
+    result = iuq.calibrate(decay, PRIORS, y, np.full(X.size, NOISE), x=X, seed=5, progress=False)
+    mean, std = exact_moments(y)
+    assert result.names == ["a", "k"]
+    assert result.converged, result.stop_reason
+    assert np.all(np.abs(result.mean - mean) < 0.1 * std), (result.mean, mean, std)
+    assert np.all(np.abs(result.std / std - 1) < 0.1), (result.std, std)
+
+
+def test_without_data_stds_a_modelling_error_is_required():
+    with pytest.raises(ValueError, match="^y_std: give the measurement stds, or a modelling_error"):
+        iuq.calibrate(decay, PRIORS, observations(), x=X, progress=False)
+
+
 def test_called_again_on_its_store_it_reuses_every_run_and_reports_progress(calibrated):
     from iuq._calibrate import _describe
 

@@ -44,8 +44,8 @@
 
 pub mod ancestral_variance;
 pub mod annealing;
-pub mod carried_population;
 pub mod batch_mixture;
+pub mod carried_population;
 pub mod checkpoint;
 pub mod curve_model;
 pub mod defensive_normal;

@@ -27,7 +27,8 @@ use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 /// The name of the modelling-error parameter appended to the model's parameters.
 pub const MODELLING_ERROR_NAME: &str = "sigma_m";
 
-/// The default prior of the modelling error σ_m: U(0.001, 0.1) (the study's).
+/// The prior of the modelling error σ_m in the red-cell study and in [`ErrorModel::default`]:
+/// U(0.001, 0.1). A study file has no modelling error unless it names a prior.
 pub const DEFAULT_MODELLING_ERROR_PRIOR: Prior = Prior::Uniform(0.001, 0.1);
 
 /// ln(2π).
@@ -39,13 +40,15 @@ const LN_2PI: f64 = 1.837_877_066_409_345_5;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ComputationalError {
-    /// The paper's form (default): the computational error is relative, σ_c,j = s_j/|q_j|, and
-    /// enters as σ_c,j²·ŷ_j² = (s_j·ŷ_j/q_j)². Undefined (a failure) where q_j = 0 and s_j > 0.
-    #[default]
+    /// The paper's form (the red-cell study's): the computational error is relative,
+    /// σ_c,j = s_j/|q_j|, and enters as σ_c,j²·ŷ_j² = (s_j·ŷ_j/q_j)². Undefined (a failure) where
+    /// q_j = 0 and s_j > 0.
     Relative,
     /// The study's original code: the absolute std multiplied by the datum, s_j²·ŷ_j².
     AbsoluteTimesData,
-    /// The absolute std as a variance of its own, s_j² (the dimensionally plain form).
+    /// The absolute std as a variance of its own, s_j² (the dimensionally plain form, and the
+    /// default of a study: a surrogate's predictive variance adds to the data's as it is).
+    #[default]
     Absolute,
     /// Ignore the model's computational std.
     None,
@@ -195,6 +198,9 @@ impl ErrorModel {
     }
 }
 
+/// The red-cell study's error model (Wu et al. 2017): measurement error, the relative computational
+/// error and σ_m ~ U(0.001, 0.1). A study file's default is plainer: no modelling error and the
+/// absolute computational error (`iuq-study`'s `[likelihood]` reader).
 impl Default for ErrorModel {
     fn default() -> Self {
         Self {

@@ -7,11 +7,20 @@
 //! log_density = "-(100*(y - x^2)^2 + (x - 1)^2)"
 //! # ... or data and the prediction-error model:
 //! data = { file = "data/ekta.csv", x = "stress_pa", y = "el_healthy", y_err = "el_healthy_err", x_range = [0.64, 9.04] }
-//! modelling_error = { uniform = [0.001, 0.1] }   # default; `false` leaves σ_m out
+//! modelling_error = { uniform = [0.001, 0.1] }   # optional: σ_m, relative to the data
 //! measurement_error = true                        # use y_err (default true)
-//! computational_error = "relative"                # | "absolute-times-data" | "absolute" | "none"
+//! computational_error = "absolute"                # default; | "relative" | "absolute-times-data" | "none"
 //! prediction = "a + b*x"                          # optional, see below
 //! ```
+//!
+//! **Defaults.** With `data = { file, x, y, y_err }` alone the likelihood is exactly
+//! N(y | model(θ), diag(y_err²)): no modelling error unless a `modelling_error` prior is given
+//! (σ_m, sampled with θ, adds σ_m²·y_j² to each variance), and a computational std s_j of the
+//! model (a surrogate's predictive std while it stands in for the model) adds s_j²
+//! (`"absolute"`). The red-cell study's likelihood names its keys: `modelling_error =
+//! { uniform = [0.001, 0.1] }` and `computational_error = "relative"`. Without `y_err` (or with
+//! `measurement_error = false`) a `modelling_error` prior is required: the likelihood would have
+//! no spread.
 //!
 //! The data file is a CSV with a header; its path is relative to the study file's directory.
 //! Rows whose `x` lies outside `x_range` (inclusive) are dropped; the remaining rows, in file
@@ -28,7 +37,7 @@
 
 use std::path::{Path, PathBuf};
 
-use iuq_basis::{ComputationalError, DEFAULT_MODELLING_ERROR_PRIOR, Observations};
+use iuq_basis::{ComputationalError, Observations};
 use iuq_core::Prior;
 
 use iuq_campaign::StudySection;
@@ -36,6 +45,10 @@ use iuq_campaign::StudySection;
 use crate::error::{BadInput, Result, input_error};
 use crate::study::Study;
 use crate::table_io::read_numeric_csv;
+
+/// The bounds of the modelling-error prior the messages suggest (the red-cell study's,
+/// U(0.001, 0.1): 0.1 % to 10 % of each datum).
+const MODELLING_ERROR_EXAMPLE: (f64, f64) = (0.001, 0.1);
 
 /// The keys of a data-driven `[likelihood]` besides `data`.
 const DATA_LIKELIHOOD_KEYS: [&str; 4] = [
@@ -183,9 +196,18 @@ fn parse_data(
         .bad_input(|| format!("{file}: key `likelihood.data` ({})", path.display()))?;
 
     let modelling_error = match s.value("modelling_error") {
-        None => Some(DEFAULT_MODELLING_ERROR_PRIOR),
-        Some(toml::Value::Boolean(false)) => None,
-        Some(toml::Value::Boolean(true)) => Some(DEFAULT_MODELLING_ERROR_PRIOR),
+        None | Some(toml::Value::Boolean(false)) => None,
+        Some(toml::Value::Boolean(true)) => {
+            return Err(s
+                .error(
+                    "modelling_error",
+                    format!(
+                        "name the prior of sigma_m (relative to the data), e.g. {{ uniform = [{}, {}] }} (the red-cell study's), or false",
+                        MODELLING_ERROR_EXAMPLE.0, MODELLING_ERROR_EXAMPLE.1
+                    ),
+                )
+                .into());
+        }
         Some(value) => {
             let prior: Prior = value.clone().try_into().bad_input(|| {
                 format!(
@@ -207,9 +229,25 @@ fn parse_data(
         }
     };
     let measurement_error = s.boolean("measurement_error")?.unwrap_or(true);
+    if modelling_error.is_none() && !(measurement_error && observations.measurement_std.is_some()) {
+        let missing = if observations.measurement_std.is_none() {
+            "the data give no measurement stds (`data.y_err`)"
+        } else {
+            "`measurement_error = false` leaves the measurement stds out"
+        };
+        return Err(s
+            .error(
+                "modelling_error",
+                format!(
+                    "missing: {missing} and no modelling error is given, so the likelihood has no spread; give `data.y_err`, or a prior of sigma_m relative to the data such as {{ uniform = [{}, {}] }}",
+                    MODELLING_ERROR_EXAMPLE.0, MODELLING_ERROR_EXAMPLE.1
+                ),
+            )
+            .into());
+    }
     let names = ComputationalError::ALL.map(|c| c.name());
     let computational_error = match s.choice("computational_error", &names)? {
-        None => ComputationalError::default(),
+        None => ComputationalError::Absolute,
         Some(name) => ComputationalError::from_name(name).ok_or_else(|| {
             s.error(
                 "computational_error",

@@ -689,16 +689,179 @@ fn a_minimal_study_needs_parameters_likelihood_model_and_a_design() {
     .unwrap();
     let out = dir.join("minimal-report");
     let v = pipeline(&path, &out);
-    // Defaults: σ_m sampled (U(0.001, 0.1)), no test runs, BASIS with 1000 samples, Sobol'
-    // on the surrogate with N = 1024, the local executor and `minimal.campaign`.
+    // Defaults: the likelihood exactly N(y | model, y_err²) (no modelling error, the
+    // surrogate's predictive variance added as it is), no test runs, BASIS with 10,000 samples,
+    // Sobol' on the surrogate with N = 1024, the local executor and `minimal.campaign`.
     assert_eq!(
         v["posterior"][0]["parameters"].as_array().unwrap().len(),
-        3,
-        "k, T0 and sigma_m"
+        2,
+        "k and T0, no sigma_m: {v}"
     );
     assert!(v["runs"].as_u64().unwrap() <= 60);
     assert!(out.join("report.html").is_file());
     assert!(dir.join("minimal.campaign/campaign.sqlite").is_file());
+}
+
+/// The cooling curve as an expression model of the whole curve (one run gives all 8 data
+/// points), with the data's stds alone and `sampler` as its `[sampler]` section.
+fn curve_study(sampler: &str) -> String {
+    let outputs: Vec<String> = [0.5, 1.0, 2.0, 3.0, 4.0, 6.0, 8.0, 10.0]
+        .iter()
+        .enumerate()
+        .map(|(j, t)| format!("T{j} = \"20 + (T0 - 20) * exp(-k * {t})\""))
+        .collect();
+    format!(
+        "name = \"curve\"\n[parameters]\nk = {{ uniform = [0.05, 0.8] }}\nT0 = {{ uniform = [60, 100] }}\n[likelihood]\ndata = {{ file = \"cooling.csv\", x = \"t_min\", y = \"temperature_c\", y_err = \"temperature_err_c\" }}\n[model]\nkind = \"expression\"\noutputs = {{ {} }}\n[surrogate]\ndesign = {{ kind = \"lhs\", n = 6 }}\nadaptive = {{ max_runs = 60 }}\n{sampler}",
+        outputs.join(", ")
+    )
+}
+
+/// With the data's stds alone and every other setting at its default, the pipeline converges
+/// to the exact posterior of `cooling-exact.toml` (whose likelihood is N(y | curve, y_err²)),
+/// within the tolerances of the module's header; and its rounds after the first carry their
+/// populations at a bounded cost in surrogate evaluations.
+#[test]
+fn the_defaults_give_the_exact_posterior_at_a_bounded_cost_per_round() {
+    let dir = cooling("defaults");
+    let path = dir.join("curve.toml");
+    std::fs::write(&path, curve_study("")).unwrap();
+    let out = dir.join("curve-report");
+    let v = pipeline(&path, &out);
+    assert_eq!(v["converged"], true, "{v}");
+    assert_eq!(
+        v["posterior"][0]["parameters"].as_array().unwrap().len(),
+        2,
+        "{v}"
+    );
+    let (_, exact) = exact_posterior(&dir);
+    assert_close_to_exact(&v, &exact);
+    // A round that carries its replicates' populations (the surrogate changed little) has a
+    // bounded cost in surrogate evaluations: Σ_r (N_previous + N·(1 + b_r)) over the R
+    // replicates, N_previous ≤ N their members and b_r the burn-in, at most `max_burn_in` = 50
+    // of the default adaptive mixing, doubled at each mixing level and at the harder-mixing
+    // replicates: at most R·N·(2 + 50·2^(level + 1)), 816,000 at level 0 with R·N = 8,000 —
+    // where a round annealed from the prior pays about that for each of its stages.
+    let rounds = v["adaptive"]["rounds"].as_array().unwrap();
+    let carried: Vec<&serde_json::Value> = rounds
+        .iter()
+        .filter(|r| r["carried_replicates"].as_u64().unwrap() == 4)
+        .collect();
+    assert!(
+        !carried.is_empty(),
+        "no round carried its populations: {rounds:?}"
+    );
+    for round in &carried {
+        let evaluations = round["surrogate_evaluations"].as_u64().unwrap();
+        let pooled = round["samples"].as_u64().unwrap();
+        let level = round["mixing_level"].as_u64().unwrap() as u32;
+        assert!(
+            evaluations <= pooled * (2 + 50 * 2u64.pow(level + 1)),
+            "round {}: {evaluations} surrogate evaluations",
+            round["round"]
+        );
+    }
+    let first = rounds[0]["surrogate_evaluations"].as_u64().unwrap();
+    let cheapest = carried
+        .iter()
+        .map(|r| r["surrogate_evaluations"].as_u64().unwrap())
+        .min()
+        .unwrap();
+    assert!(
+        3 * cheapest < first,
+        "a carried round ({cheapest} evaluations) must cost far less than one from the prior ({first})"
+    );
+}
+
+/// A final posterior sample too small to carry the converged rounds' posterior (20 samples: its
+/// means scatter by about 1/√(20/3) ≈ 0.4 posterior stds, four times the tolerance) is not called
+/// converged, and the reason says what to raise.
+#[test]
+fn an_under_sampled_final_posterior_is_not_called_converged() {
+    let dir = cooling("under-sampled");
+    let path = dir.join("under.toml");
+    std::fs::write(&path, curve_study("[sampler]\nsamples = 20\nseed = 3\n")).unwrap();
+    let out = dir.join("under-report");
+    let v = pipeline(&path, &out);
+    assert_eq!(v["converged"], false, "{v}");
+    let reason = v["adaptive"]["stop_reason"].as_str().unwrap();
+    assert!(
+        reason.contains("final posterior sample (20 samples)"),
+        "{reason}"
+    );
+    assert!(reason.contains("raise `[sampler] samples`"), "{reason}");
+    // The rounds themselves converged: the last one says so.
+    let rounds = v["adaptive"]["rounds"].as_array().unwrap();
+    assert_eq!(rounds.last().unwrap()["converged"], true, "{v}");
+}
+
+/// A data likelihood with no spread — no `y_err` and no modelling error, or the measurement
+/// error switched off — exits 2 naming the key, as does `modelling_error = true` (which names
+/// no prior).
+#[test]
+fn a_likelihood_without_spread_exits_2_naming_the_key() {
+    let dir = cooling("no-spread");
+    let base = "name = \"nospread\"\n[parameters]\nk = { uniform = [0.05, 0.8] }\nT0 = { uniform = [60, 100] }\n[likelihood]\nDATA\n[model]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t)\" }\n[surrogate]\ndesign = { kind = \"lhs\", n = 6 }\nadaptive = { max_runs = 60 }\n";
+    let with_err = "data = { file = \"cooling.csv\", x = \"t_min\", y = \"temperature_c\", y_err = \"temperature_err_c\" }";
+    let without_err = "data = { file = \"cooling.csv\", x = \"t_min\", y = \"temperature_c\" }";
+    for (name, likelihood, reason) in [
+        ("no-y-err", without_err.to_string(), "no measurement stds"),
+        (
+            "measurement-off",
+            format!("{with_err}\nmeasurement_error = false"),
+            "leaves the measurement stds out",
+        ),
+        (
+            "true",
+            format!("{with_err}\nmodelling_error = true"),
+            "name the prior of sigma_m",
+        ),
+    ] {
+        let path = dir.join(format!("{name}.toml"));
+        std::fs::write(&path, base.replace("DATA", &likelihood)).unwrap();
+        let output = iuq(&[
+            "pipeline",
+            path.to_str().unwrap(),
+            "--out",
+            dir.join(name).to_str().unwrap(),
+        ]);
+        assert_eq!(output.status.code(), Some(2), "{name}: {output:?}");
+        let message = stderr_of(&output);
+        assert!(
+            message.contains(&format!("{name}.toml")),
+            "{name}: {message}"
+        );
+        assert!(
+            message.contains("likelihood.modelling_error"),
+            "{name}: {message}"
+        );
+        assert!(message.contains(reason), "{name}: {message}");
+        assert!(!dir.join(name).join("report.html").exists(), "{name}");
+    }
+    // With a modelling-error prior and no y_err the study is accepted (σ_m is sampled).
+    let path = dir.join("with-prior.toml");
+    std::fs::write(
+        &path,
+        base.replace(
+            "DATA",
+            &format!("{without_err}\nmodelling_error = {{ uniform = [0.001, 0.1] }}"),
+        )
+        .replace("max_runs = 60", "max_runs = 8"),
+    )
+    .unwrap();
+    let output = iuq(&[
+        "pipeline",
+        path.to_str().unwrap(),
+        "--out",
+        dir.join("with-prior").to_str().unwrap(),
+        "--json",
+    ]);
+    assert!(output.status.success(), "{output:?}");
+    let v = json_of(&output);
+    assert_eq!(
+        v["posterior"][0]["parameters"].as_array().unwrap().len(),
+        3,
+        "{v}"
+    );
 }
 
 #[test]

@@ -35,6 +35,8 @@ T0 = {{ uniform = [60, 100] }}
 [likelihood]
 data = {{ file = "cooling.csv", x = "t_min", y = "temperature_c", y_err = "temperature_err_c" }}
 modelling_error = false
+# The surrogate's variance as the paper has it (these tests' seeded cases were set up with it).
+computational_error = "relative"
 [model]
 kind = "expression"
 abscissa = "t"

@@ -272,6 +272,41 @@ pub struct RetrainedCheck {
 }
 
 impl AdaptiveOutcome {
+    /// Judge the final posterior sample (`mean`, `std`, of the same surrogate as the last round)
+    /// against the last round's pooled posterior: where a mean or std differs by more than
+    /// `tolerance` posterior stds beyond twice the round's Monte Carlo error, the sample is too
+    /// small or too correlated to carry the converged posterior, and the outcome is no longer
+    /// converged, with a reason that says what to raise. Returns the largest difference (in
+    /// posterior stds, beyond the noise), or `None` without a converged round to compare with.
+    pub fn judge_final_sample(&mut self, mean: &[f64], std: &[f64], samples: usize) -> Option<f64> {
+        let round = self.rounds.last().filter(|_| self.converged)?;
+        let mut largest: (f64, usize) = (0.0, 0);
+        for k in 0..round.mean.len().min(mean.len()).min(std.len()) {
+            let sd = round.std[k];
+            if !(sd > 0.0) {
+                continue;
+            }
+            let mean_gap = (mean[k] - round.mean[k]).abs() - 2.0 * round.mean_error[k];
+            let std_gap = (std[k] - round.std[k]).abs() - 2.0 * round.std_error[k];
+            let gap = mean_gap.max(std_gap).max(0.0) / sd;
+            if gap > largest.0 {
+                largest = (gap, k);
+            }
+        }
+        if largest.0 >= self.tolerance {
+            self.converged = false;
+            self.stop_reason = format!(
+                "the rounds converged, but the final posterior sample ({samples} samples) differs from the last round's posterior by {:.3} posterior stds on {} beyond the round's Monte Carlo error (tolerance {}): it is too small to carry the converged posterior; raise `[sampler] samples`",
+                largest.0,
+                self.parameters
+                    .get(largest.1)
+                    .map_or("a parameter", String::as_str),
+                self.tolerance
+            );
+        }
+        Some(largest.0)
+    }
+
     /// The last round.
     pub fn last_round(&self) -> usize {
         self.rounds.last().map_or(0, |r| r.round)
@@ -1151,7 +1186,10 @@ pub(super) fn refine(
             (m, Some(scoring))
         };
         if sequential {
-            carried_from = carried.iter().any(Option::is_some).then(|| fingerprint.clone());
+            carried_from = carried
+                .iter()
+                .any(Option::is_some)
+                .then(|| fingerprint.clone());
         }
         parameters = measured.parameters.clone();
         let moments = measured.moments();

@@ -414,6 +414,10 @@ impl Events {
     }
 }
 
+/// The final surrogate posterior's population where `[sampler]` gives no `samples` (that of
+/// `iuq.calibrate`'s default).
+pub const PIPELINE_FINAL_SAMPLES: usize = 10_000;
+
 /// The study's data (the pipeline calibrates a model on data).
 fn study_data(study: &Study) -> Result<DataLikelihood> {
     let file = study.path.display();
@@ -532,7 +536,21 @@ fn run_stages(
     let started = Instant::now();
     let data = study_data(study)?;
     let settings = parse_pipeline_settings(study)?;
-    let sampler_settings = parse_sampler(study, &SamplerOverrides::default())?;
+    // The final posterior samples the surrogate, which costs no model run: by default as many
+    // members as `iuq.calibrate` draws, enough for its moments to hold the adaptive engine's
+    // tolerance (`AdaptiveOutcome::judge_final_sample`).
+    let final_samples = study
+        .sampler
+        .as_ref()
+        .is_none_or(|t| !t.contains_key("samples"))
+        .then_some(PIPELINE_FINAL_SAMPLES);
+    let sampler_settings = parse_sampler(
+        study,
+        &SamplerOverrides {
+            samples: final_samples,
+            ..Default::default()
+        },
+    )?;
     let model_posterior_method = options
         .model_posterior
         .then(|| model_posterior::parse_model_posterior(study))
@@ -699,6 +717,18 @@ fn run_stages(
             None,
         )?;
         add_seconds(&mut stage_seconds, "BASIS on the GP bank", stage);
+        // "Converged" holds only if the final sample carries the rounds' posterior.
+        if let Some(outcome) = adaptive.as_mut() {
+            let was = outcome.converged;
+            outcome.judge_final_sample(
+                &gp_posterior.summary.mean,
+                &gp_posterior.summary.std,
+                gp_posterior.run.state.samples.len(),
+            );
+            if was && !outcome.converged {
+                events.message(format!("adaptive: not converged: {}", outcome.stop_reason));
+            }
+        }
         let Some(check) = &settings.posterior_check else {
             break (surrogate, gp_posterior, None);
         };
