@@ -163,8 +163,10 @@ def test_with_on_error_fail_the_points_that_raise_are_rejected():
         (dict(proposal_scale=float("nan")), "^proposal_scale: must be finite"),
         (dict(bounds=None), "^bounds: give the parameter ranges"),
         (dict(log_likelihood="x1 +"), "^log_likelihood: "),
-        (dict(log_likelihood=None, model=lambda x: x, data=[1.0, 2.0],
+        (dict(log_likelihood=None, model=lambda x: x, data=[1.0, 2.0], data_std=[0.1, 0.1],
               computational_error="odd"), "^computational_error: `odd`"),
+        (dict(log_likelihood=None, model=lambda x: x, data=[1.0, 2.0]),
+         "^data_std: give the measurement stds, or a modelling_error"),
         (dict(burn=2**64 - 1), "^burn: must be at most 1048576"),
     ],
 )

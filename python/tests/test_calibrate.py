@@ -494,10 +494,10 @@ def test_bad_input_is_a_value_error_naming_the_argument(tmp_path, kwargs, match)
 
 def test_a_callable_study_is_refused_by_the_command_line(cli, tmp_path):
     iuq_bin = os.environ.get("IUQ_BIN") or str(Path(__file__).resolve().parents[2] / "target" / "debug" / "iuq")
-    (tmp_path / "data.csv").write_text("x,y\n0,1\n1,2\n")
+    (tmp_path / "data.csv").write_text("x,y,e\n0,1,0.1\n1,2,0.1\n")
     (tmp_path / "s.toml").write_text(
         'name = "s"\n[parameters]\na = { uniform = [0, 1] }\n[likelihood]\n'
-        'data = { file = "data.csv", x = "x", y = "y" }\n[model]\nkind = "callable"\n'
+        'data = { file = "data.csv", x = "x", y = "y", y_err = "e" }\n[model]\nkind = "callable"\n'
         '[surrogate]\ndesign = { kind = "lhs", n = 4 }\n'
     )
     done = subprocess.run([iuq_bin, "pipeline", str(tmp_path / "s.toml")], capture_output=True, text=True)

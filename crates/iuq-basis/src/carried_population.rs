@@ -38,7 +38,7 @@
 //! let next = BasisSettings { samples: 2000, seed: 2, ..Default::default() }.check().unwrap();
 //! let basis = Basis::new(&space, &new, next).unwrap();
 //! let Carried::Ready(state) = carry(&basis, &run.state).unwrap() else { panic!() };
-//! let moved = basis.advance(state).unwrap();
+//! let moved = basis.advance(*state).unwrap();
 //! let mean = moved.samples.iter().map(|s| s[0]).sum::<f64>() / 2000.0;
 //! assert!((mean - 0.2).abs() < 0.15);
 //! ```
@@ -65,7 +65,7 @@ const CARRY_STREAM: u64 = u64::MAX - 1;
 pub enum Carried {
     /// The members reweighted to the new likelihood and resampled to the run's N: an unfinished
     /// state at p = 1 whose next [`Basis::advance`] (the final pass) moves them.
-    Ready(BasisState),
+    Ready(Box<BasisState>),
     /// The weights' ESS/N fell below 1/(1 + `cv_target`²): the new posterior lies where the
     /// population does not reach; anneal from the prior instead.
     Collapsed {
@@ -182,7 +182,7 @@ pub fn carry<L: LogLikelihood + ?Sized>(
         unique_fraction: counts.iter().filter(|&&c| c > 0).count() as f64 / n as f64,
         wall_seconds: start.elapsed().as_secs_f64(),
     });
-    Ok(Carried::Ready(state))
+    Ok(Carried::Ready(Box::new(state)))
 }
 
 #[cfg(test)]
@@ -240,7 +240,7 @@ mod tests {
             panic!("the ESS of a 0.3-std move cannot collapse");
         };
         assert_eq!(state.samples.len(), 2000);
-        let moved = basis.advance(state).unwrap();
+        let moved = basis.advance(*state).unwrap();
         assert!(moved.is_finished());
         for k in 0..d {
             let values: Vec<f64> = moved.samples.iter().map(|s| s[k]).collect();
@@ -305,7 +305,7 @@ mod tests {
                     let Carried::Ready(state) = carry(&basis, &run.state).unwrap() else {
                         panic!("collapsed");
                     };
-                    basis.advance(state).unwrap()
+                    basis.advance(*state).unwrap()
                 })
         };
         let (one, two) = (moved(1), moved(2));

@@ -283,7 +283,7 @@ impl AdaptiveOutcome {
         let mut largest: (f64, usize) = (0.0, 0);
         for k in 0..round.mean.len().min(mean.len()).min(std.len()) {
             let sd = round.std[k];
-            if !(sd > 0.0) {
+            if sd.is_nan() || sd <= 0.0 {
                 continue;
             }
             let mean_gap = (mean[k] - round.mean[k]).abs() - 2.0 * round.mean_error[k];
@@ -786,7 +786,7 @@ fn measure_round(
                 {
                     Carried::Ready(state) => {
                         carried_replicates += 1;
-                        Some(state)
+                        Some(*state)
                     }
                     Carried::Collapsed { ess_fraction } => {
                         surrogate_evaluations += previous.samples.len();
