@@ -11,7 +11,8 @@ exactly N(y | f(θ), y_std²), which every method is given):
 
 - twoexp: A·e^(−k1 t) + B·e^(−k2 t) at 20 times, 4 parameters with log-normal priors; the
   posterior is about 10⁻⁶ of the prior's volume;
-- banana: outputs (a, b + a²) with two repeated observations each, a curved 2-parameter posterior;
+- banana: outputs (a, b + a²) observed twice each, a with std 1 and b + a² with std 0.1: a curved
+  2-parameter posterior;
 - logistic: logistic growth at 12 times, 2 parameters; the model raises for r > 1.2 (part of the
   prior next to the posterior, r ≈ 0.8);
 - oscillator200: A·e^(−γt)·cos(ωt + φ) at 200 times, 4 parameters;
@@ -34,6 +35,7 @@ import argparse
 import json
 import math
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -75,8 +77,11 @@ def _banana():
         a, b = th[:, 0], th[:, 1]
         return np.stack([a, b + a * a, a, b + a * a], axis=1)
 
-    y, s = _data(f, [0.5, -0.2], 0.15, 5)
-    return dict(names=["a", "b"], priors={"a": (-3.0, 3.0), "b": (-6.0, 3.0)}, f=f,
+    # a is known to ±0.7, b + a² to ±0.07: b ≈ y₂ − a², a banana over a's range.
+    rng = np.random.default_rng(5)
+    s = np.array([1.0, 0.1, 1.0, 0.1])
+    y = f(np.array([[0.5, -0.2]]))[0] + rng.normal(0.0, s)
+    return dict(names=["a", "b"], priors={"a": (-4.0, 4.0), "b": (-10.0, 4.0)}, f=f,
                 x=np.arange(4.0), y=y, y_std=s, formula=["a", "b + a*a", "a", "b + a*a"])
 
 
@@ -269,7 +274,7 @@ def run_cli(problem, binary, workdir, seed=1):
         f.write("\n".join(lines) + "\n")
     started = time.time()
     done = subprocess.run([binary, "pipeline", study, "--out", os.path.join(workdir, "out"), "--json"],
-                          capture_output=True, text=True)
+                          capture_output=True, text=True, timeout=900)
     wall = time.time() - started
     if done.returncode != 0:
         return dict(error=done.stderr.strip().splitlines()[-1:])
@@ -348,14 +353,21 @@ def main():
     parser.add_argument("--methods", default="iuq,cli,pyvbmc,gpry")
     parser.add_argument("--iuq-bin", default="target/release/iuq")
     parser.add_argument("--out", default=None, help="work directory of the CLI runs (default: a temporary one)")
-    parser.add_argument("--json", default=None, help="also write the table as JSON here")
+    parser.add_argument("--json", default=None, help="also write the table as JSON here (after every row)")
+    parser.add_argument("--max-seconds", type=int, default=900, help="a method's time limit per problem")
     args = parser.parse_args()
+
+    def too_long(*_):
+        raise TimeoutError(f"over {args.max_seconds} s")
+
+    signal.signal(signal.SIGALRM, too_long)
     work = args.out or tempfile.mkdtemp(prefix="iuq-bench-")
     rows = []
     for name in args.problems.split(","):
         problem = PROBLEMS[name]()
         ref = reference(problem)
         for method in args.methods.split(","):
+            signal.alarm(args.max_seconds)
             try:
                 if method == "iuq":
                     r = run_iuq(problem)
@@ -367,12 +379,17 @@ def main():
                     r = run_gpry(problem)
             except Exception as e:  # noqa: BLE001
                 r = dict(error=f"{type(e).__name__}: {str(e)[:80]}")
+            finally:
+                signal.alarm(0)
             if r is None:
                 continue
             row = dict(problem=name, method=method, **{k: v for k, v in r.items() if k != "samples"})
             if "samples" in r:
                 row.update(score(r["samples"], ref))
             rows.append(row)
+            if args.json:
+                with open(args.json, "w") as f:
+                    json.dump(rows, f, indent=1, default=float)
             rounds = row.get("rounds") or []
             print(f"{name:14s} {method:7s} calls {row.get('calls', '-')!s:>5}  wall {row.get('wall', float('nan')):7.1f} s  "
                   f"rounds {len(rounds):2d} (median {np.median(rounds) if rounds else float('nan'):5.2f} s, max "
@@ -380,9 +397,6 @@ def main():
                   f"mean err {row.get('mean_error', float('nan')):.3f} sd  std ratio "
                   f"{row.get('std_ratio', (float('nan'),) * 2)[0]:.3f}–{row.get('std_ratio', (float('nan'),) * 2)[1]:.3f}"
                   + (f"  ERROR {row['error']}" if "error" in row else ""), flush=True)
-    if args.json:
-        with open(args.json, "w") as f:
-            json.dump(rows, f, indent=1, default=float)
 
 
 if __name__ == "__main__":

@@ -95,10 +95,14 @@ fn write_study(dir: &Path, sampler: &str) -> (std::path::PathBuf, Vec<f64>, Vec<
             )
         })
         .collect();
+    // The surrogate's variance enters as the paper has it (relative): these seeded cases were
+    // set up with it. Under the absolute default the default sampler's first round reads a
+    // disagreement of 0.105 posterior stds against the tolerance 0.1 — noise of two replicates
+    // against two, a false alarm that only raises the mixing level.
     let study = format!(
         "name = \"linear-six\"\n\n[parameters]\n{priors}\n[likelihood]\n\
          data = {{ file = \"data.csv\", x = \"t\", y = \"y\", y_err = \"y_err\" }}\n\
-         modelling_error = false\n\n[model]\nkind = \"expression\"\nabscissa = \"t\"\n\
+         modelling_error = false\ncomputational_error = \"relative\"\n\n[model]\nkind = \"expression\"\nabscissa = \"t\"\n\
          outputs = {{ y = \"a + b*t + c*t^2 + d*sin(t) + e*cos(t) + f*exp(-t)\" }}\n\n\
          [surrogate]\ndesign = {{ kind = \"lhs\", n = 10, seed = 1 }}\n\
          adaptive = {{ batch = 2, max_runs = 600, tolerance = 0.1, samples = 1000, replicates = 4 }}\n\n\

@@ -53,6 +53,8 @@ b = { uniform = [-1, 2] }
 const LIKELIHOOD: &str = r#"
 [likelihood]
 data = { file = "data/line.csv", x = "stress", y = "el", y_err = "el_err", x_range = [2, 4] }
+# A modelling error sampled with the parameters: the served posterior model takes it as an input.
+modelling_error = { uniform = [0.001, 0.1] }
 [sampler]
 samples = 300
 seed = 3

@@ -719,6 +719,247 @@ struct RoundScoring {
     boundary: Vec<(usize, usize)>,
 }
 
+/// What a round's samplers need besides the surrogate's posterior.
+struct RoundContext<'a> {
+    study: &'a Study,
+    settings: &'a AdaptiveSettings,
+    base_seed: u64,
+    round: usize,
+    sampling: &'a RoundSampling,
+    dir: &'a Path,
+    events: &'a Events,
+}
+
+/// A round's posterior from its replicates: pooled, with the check of the sampler.
+struct ReplicateSampling {
+    pooled: PooledPosterior,
+    parameters: Vec<String>,
+    sampler_check: Option<SamplerAgreement>,
+    /// Replicates whose population was carried from the round before.
+    carried_replicates: usize,
+    /// Surrogate evaluations of all replicates' samplers.
+    surrogate_evaluations: usize,
+}
+
+/// Sample the surrogate `posterior` with the round's replicates, each from its population
+/// carried from the round before where `carried` holds one and the reweighting's ESS holds
+/// (`iuq_basis::carried_population`), else from the prior; `carried` receives each replicate's
+/// new population. Every second replicate mixes a level harder: the check of the sampler.
+fn sample_replicates(
+    ctx: &RoundContext<'_>,
+    posterior: &crate::posterior::StudyPosterior,
+    carried: &mut [Option<BasisState>],
+) -> Result<ReplicateSampling> {
+    let mut pooled = PooledPosterior {
+        samples: Vec::new(),
+        log_likelihood: Vec::new(),
+        log_prior: Vec::new(),
+        log_evidence: 0.0,
+        moments: PosteriorMoments::exact(Vec::new(), Vec::new()),
+    };
+    let mut parameters = Vec::new();
+    let mut replicate_moments = Vec::with_capacity(ctx.settings.replicates);
+    let (mut carried_replicates, mut surrogate_evaluations) = (0usize, 0usize);
+    // With two replicates or more, every second one mixes a level harder: the check of the
+    // sampler (`iuq_adaptive::sampler_agreement`).
+    let checked = ctx.settings.replicates >= 2;
+    for replicate in 0..ctx.settings.replicates {
+        let harder = u32::from(checked && replicate % 2 == 1);
+        let sampler = parse_sampler(
+            ctx.study,
+            &SamplerOverrides {
+                samples: Some(ctx.sampling.samples),
+                seed: Some(
+                    ctx.base_seed
+                        .wrapping_add((ctx.round * ctx.settings.replicates + replicate) as u64),
+                ),
+                ..Default::default()
+            },
+        )?
+        .with_stronger_mixing(ctx.sampling.mixing_level + harder);
+        // A population carried from the round before, reweighted to this surrogate (None: the
+        // first round, `sampling = "from-prior"`, or an ESS that collapsed).
+        let start = match carried.get(replicate).and_then(Option::as_ref) {
+            Some(previous) => {
+                let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
+                    .map_err(|e| {
+                        StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                    })?;
+                match carry(&basis, previous).map_err(|e| {
+                    StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                })? {
+                    Carried::Ready(state) => {
+                        carried_replicates += 1;
+                        Some(*state)
+                    }
+                    Carried::Collapsed { ess_fraction } => {
+                        surrogate_evaluations += previous.samples.len();
+                        ctx.events.message(format!(
+                            "adaptive round {}: replicate {}: the previous population's ESS fell to {:.1} % under this surrogate; annealing from the prior",
+                            ctx.round,
+                            replicate + 1,
+                            100.0 * ess_fraction
+                        ));
+                        None
+                    }
+                }
+            }
+            None => None,
+        };
+        let sampled = ctx.events.sample(
+            "adaptive round",
+            ctx.study,
+            posterior,
+            sampler,
+            &ctx.dir
+                .join(format!("round-{}", ctx.round))
+                .join(format!("replicate-{}", replicate + 1)),
+            start,
+        )?;
+        let state = sampled.run.state;
+        // A carried state counts its reweighting's evaluations as well as its moves'.
+        surrogate_evaluations += state.evaluations;
+        if let Some(slot) = carried.get_mut(replicate) {
+            *slot = Some(state.clone());
+        }
+        parameters = state.parameter_names.clone();
+        pooled.samples.extend(state.samples);
+        pooled.log_likelihood.extend(state.log_likelihood);
+        pooled.log_prior.extend(state.log_prior);
+        pooled.log_evidence += state.log_evidence / ctx.settings.replicates as f64;
+        replicate_moments.push((sampled.summary.mean, sampled.summary.std));
+    }
+    pooled.moments = PosteriorMoments::pooled(&replicate_moments)
+        .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?;
+    let sampler_check = if checked {
+        let group = |parity: usize| -> Vec<(Vec<f64>, Vec<f64>)> {
+            replicate_moments
+                .iter()
+                .enumerate()
+                .filter(|(r, _)| r % 2 == parity)
+                .map(|(_, m)| m.clone())
+                .collect()
+        };
+        let (as_set, harder) = (group(0), group(1));
+        Some(
+            sampler_agreement(
+                &as_set,
+                &harder,
+                &pooled.moments.std,
+                ctx.settings.tolerance,
+            )
+            .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?,
+        )
+    } else {
+        None
+    };
+    Ok(ReplicateSampling {
+        pooled,
+        parameters,
+        sampler_check,
+        carried_replicates,
+        surrogate_evaluations,
+    })
+}
+
+/// The surrogate at the candidates: each output's prediction and, per candidate and output, the
+/// likelihood's variance with the GP's latent variance and without it.
+#[derive(Clone, Copy)]
+struct CandidatePredictions<'a> {
+    predictions: &'a [iuq_gp::Prediction],
+    likelihood_variance: &'a [Vec<f64>],
+    sampled_variance: &'a [Vec<f64>],
+}
+
+/// ε and ε_g per run group: the typical change of the posterior moments, in posterior stds,
+/// over [`SURROGATE_ERROR_DRAWS`] joint draws of the GPs' error at the candidates `c`
+/// (`iuq_adaptive::moment_error`; through the components where the emulator is a reduced basis).
+fn surrogate_errors(
+    emulator: &super::emulator::Emulator,
+    at: &CandidatePredictions<'_>,
+    data: &DataLikelihood,
+    c: &Candidates,
+    group_outputs: &[std::ops::Range<usize>],
+    seed: u64,
+) -> Result<(iuq_adaptive::MomentError, Vec<f64>)> {
+    let CandidatePredictions {
+        predictions,
+        likelihood_variance,
+        sampled_variance,
+    } = *at;
+    let outputs = predictions.len();
+    // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
+    let mut residuals = Vec::with_capacity(outputs);
+    let mut variances = Vec::with_capacity(outputs);
+    let mut sampled_variances = Vec::with_capacity(outputs);
+    // Per output, its GP's covariance over the candidates; a reduced basis's outputs carry none
+    // (their errors are drawn through the components').
+    let mut covariances = Vec::with_capacity(outputs);
+    let per_output = emulator.per_output_gps();
+    for (j, p) in predictions.iter().enumerate() {
+        let y = data.observations.values[j];
+        residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
+        variances.push(
+            likelihood_variance
+                .iter()
+                .map(|v| v[j])
+                .collect::<Vec<f64>>(),
+        );
+        sampled_variances.push(sampled_variance.iter().map(|v| v[j]).collect::<Vec<f64>>());
+        covariances.push(match per_output {
+            Some(gps) => gps[j].posterior_covariance(&c.theta, &c.theta)?,
+            None => Vec::new(),
+        });
+    }
+    let terms: Vec<MomentTerm<'_>> = (0..outputs)
+        .map(|j| MomentTerm {
+            residual: &residuals[j],
+            variance: &variances[j],
+            sampled_variance: &sampled_variances[j],
+            covariance: &covariances[j],
+        })
+        .collect();
+    let (surrogate_error, group_errors) = match emulator.reduced_basis() {
+        None => sampled_moment_errors_by_group(
+            &c.full,
+            &c.copies,
+            &terms,
+            group_outputs,
+            SURROGATE_ERROR_DRAWS,
+            seed,
+        ),
+        Some(basis) => {
+            let component_covariances = basis
+                .component_gps()
+                .iter()
+                .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
+                .collect::<iuq_gp::Result<Vec<_>>>()?;
+            let loadings: Vec<Vec<f64>> = (0..outputs)
+                .map(|j| {
+                    (0..basis.components())
+                        .map(|k| basis.loading(j, k))
+                        .collect()
+                })
+                .collect();
+            sampled_moment_errors_by_group_from_components(
+                &c.full,
+                &c.copies,
+                &terms,
+                ComponentErrors {
+                    covariances: &component_covariances,
+                    loadings: &loadings,
+                },
+                group_outputs,
+                SURROGATE_ERROR_DRAWS,
+                seed,
+            )
+        }
+    }
+    .map_err(|e| StudyError::Failure(e.to_string()))?;
+    let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
+    Ok((surrogate_error, group_surrogate_error))
+}
+
 /// Fit the surrogate of `groups`, sample its posterior with the replicates, and measure the
 /// round: moments, u, ε, extrapolation, the failure boundaries.
 #[allow(clippy::too_many_arguments)]
@@ -749,99 +990,22 @@ fn measure_round(
         describe,
     )?;
     let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
-    let mut pooled = PooledPosterior {
-        samples: Vec::new(),
-        log_likelihood: Vec::new(),
-        log_prior: Vec::new(),
-        log_evidence: 0.0,
-        moments: PosteriorMoments::exact(Vec::new(), Vec::new()),
+    let context = RoundContext {
+        study,
+        settings,
+        base_seed,
+        round,
+        sampling,
+        dir,
+        events,
     };
-    let mut parameters = Vec::new();
-    let mut replicate_moments = Vec::with_capacity(settings.replicates);
-    let (mut carried_replicates, mut surrogate_evaluations) = (0usize, 0usize);
-    // With two replicates or more, every second one mixes a level harder: the check of the
-    // sampler (`iuq_adaptive::sampler_agreement`).
-    let checked = settings.replicates >= 2;
-    for replicate in 0..settings.replicates {
-        let harder = u32::from(checked && replicate % 2 == 1);
-        let sampler = parse_sampler(
-            study,
-            &SamplerOverrides {
-                samples: Some(sampling.samples),
-                seed: Some(
-                    base_seed.wrapping_add((round * settings.replicates + replicate) as u64),
-                ),
-                ..Default::default()
-            },
-        )?
-        .with_stronger_mixing(sampling.mixing_level + harder);
-        // A population carried from the round before, reweighted to this surrogate (None: the
-        // first round, `sampling = "from-prior"`, or an ESS that collapsed).
-        let start = match carried.get(replicate).and_then(Option::as_ref) {
-            Some(previous) => {
-                let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
-                    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-                match carry(&basis, previous)
-                    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?
-                {
-                    Carried::Ready(state) => {
-                        carried_replicates += 1;
-                        Some(*state)
-                    }
-                    Carried::Collapsed { ess_fraction } => {
-                        surrogate_evaluations += previous.samples.len();
-                        events.message(format!(
-                            "adaptive round {round}: replicate {}: the previous population's ESS fell to {:.1} % under this surrogate; annealing from the prior",
-                            replicate + 1,
-                            100.0 * ess_fraction
-                        ));
-                        None
-                    }
-                }
-            }
-            None => None,
-        };
-        let sampled = events.sample(
-            "adaptive round",
-            study,
-            &posterior,
-            sampler,
-            &dir.join(format!("round-{round}"))
-                .join(format!("replicate-{}", replicate + 1)),
-            start,
-        )?;
-        let state = sampled.run.state;
-        // A carried state counts its reweighting's evaluations as well as its moves'.
-        surrogate_evaluations += state.evaluations;
-        if let Some(slot) = carried.get_mut(replicate) {
-            *slot = Some(state.clone());
-        }
-        parameters = state.parameter_names.clone();
-        pooled.samples.extend(state.samples);
-        pooled.log_likelihood.extend(state.log_likelihood);
-        pooled.log_prior.extend(state.log_prior);
-        pooled.log_evidence += state.log_evidence / settings.replicates as f64;
-        replicate_moments.push((sampled.summary.mean, sampled.summary.std));
-    }
-    pooled.moments = PosteriorMoments::pooled(&replicate_moments)
-        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-    let sampler_check = if checked {
-        let group = |parity: usize| -> Vec<(Vec<f64>, Vec<f64>)> {
-            replicate_moments
-                .iter()
-                .enumerate()
-                .filter(|(r, _)| r % 2 == parity)
-                .map(|(_, m)| m.clone())
-                .collect()
-        };
-        let (as_set, harder) = (group(0), group(1));
-        Some(
-            sampler_agreement(&as_set, &harder, &pooled.moments.std, settings.tolerance)
-                .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?,
-        )
-    } else {
-        None
-    };
+    let ReplicateSampling {
+        pooled,
+        parameters,
+        sampler_check,
+        carried_replicates,
+        surrogate_evaluations,
+    } = sample_replicates(&context, &posterior, carried)?;
     let moments = pooled.moments.clone();
     let state = &pooled;
     // The measurement (u, ε) is made on `candidates` distinct samples; a round that looks wider
@@ -881,80 +1045,26 @@ fn measure_round(
         .collect();
     // The posterior mean of the spread: each candidate weighted by the samples it stands for.
     let u = surrogate_log_likelihood_std(&spread, &c.copies);
-    // ε: how far the GPs' error could move the posterior moments, over joint draws of it.
-    let mut residuals = Vec::with_capacity(outputs);
-    let mut variances = Vec::with_capacity(outputs);
-    let mut sampled_variances = Vec::with_capacity(outputs);
-    // Per output, its GP's covariance over the candidates; a reduced basis's outputs carry none
-    // (their errors are drawn through the components').
-    let mut covariances = Vec::with_capacity(outputs);
-    let per_output = emulator.per_output_gps();
-    for (j, p) in predictions.iter().enumerate() {
-        let y = data.observations.values[j];
-        residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
-        variances.push(
-            likelihood_variance
-                .iter()
-                .map(|v| v[j])
-                .collect::<Vec<f64>>(),
-        );
-        sampled_variances.push(sampled_variance.iter().map(|v| v[j]).collect::<Vec<f64>>());
-        covariances.push(match per_output {
-            Some(gps) => gps[j].posterior_covariance(&c.theta, &c.theta)?,
-            None => Vec::new(),
-        });
-    }
-    let terms: Vec<MomentTerm<'_>> = (0..outputs)
-        .map(|j| MomentTerm {
-            residual: &residuals[j],
-            variance: &variances[j],
-            sampled_variance: &sampled_variances[j],
-            covariance: &covariances[j],
-        })
-        .collect();
     // ε, and ε_g: the same measure with only group g's likelihood terms (its share of the runs).
     let group_outputs: Vec<std::ops::Range<usize>> =
         (0..groups.len()).map(|g| runs.group_outputs(g)).collect();
-    let (surrogate_error, group_errors) = match emulator.reduced_basis() {
-        None => sampled_moment_errors_by_group(
-            &c.full,
-            &c.copies,
-            &terms,
-            &group_outputs,
-            SURROGATE_ERROR_DRAWS,
-            base_seed.wrapping_add(round as u64),
-        ),
-        Some(basis) => {
-            let component_covariances = basis
-                .component_gps()
-                .iter()
-                .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
-                .collect::<iuq_gp::Result<Vec<_>>>()?;
-            let loadings: Vec<Vec<f64>> = (0..outputs)
-                .map(|j| {
-                    (0..basis.components())
-                        .map(|k| basis.loading(j, k))
-                        .collect()
-                })
-                .collect();
-            sampled_moment_errors_by_group_from_components(
-                &c.full,
-                &c.copies,
-                &terms,
-                ComponentErrors {
-                    covariances: &component_covariances,
-                    loadings: &loadings,
-                },
-                &group_outputs,
-                SURROGATE_ERROR_DRAWS,
-                base_seed.wrapping_add(round as u64),
-            )
-        }
-    }
-    .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
-    let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
-    drop(terms);
-    drop(covariances);
+    let at_candidates = CandidatePredictions {
+        predictions: &predictions,
+        likelihood_variance: &likelihood_variance,
+        sampled_variance: &sampled_variance,
+    };
+    let (surrogate_error, group_surrogate_error) = surrogate_errors(
+        emulator,
+        &at_candidates,
+        data,
+        &c,
+        &group_outputs,
+        base_seed.wrapping_add(round as u64),
+    )
+    .map_err(|e| match e {
+        StudyError::Failure(m) => StudyError::Failure(format!("adaptive round {round}: {m}")),
+        other => other,
+    })?;
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
     let mut extrapolation: f64 = 0.0;
     for gp in emulator.fitted_gps() {
