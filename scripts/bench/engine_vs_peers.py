@@ -65,7 +65,7 @@ def _twoexp():
         return th[:, :1] * np.exp(-th[:, 1:2] * t) + th[:, 2:3] * np.exp(-th[:, 3:4] * t)
 
     y, s = _data(f, [2.0, 1.0, 1.0, 0.15], 0.01, 3)
-    formula = [f"A*exp(-k1*{v!r}) + B*exp(-k2*{v!r})" for v in t]
+    formula = [f"A*exp(-k1*{float(v)!r}) + B*exp(-k2*{float(v)!r})" for v in t]
     return dict(names=["A", "k1", "B", "k2"],
                 priors={"A": {"log_normal": [0.5, 0.5]}, "k1": {"log_normal": [0.0, 0.5]},
                         "B": {"log_normal": [0.0, 0.5]}, "k2": {"log_normal": [-2.0, 0.5]}},
@@ -108,7 +108,7 @@ def _oscillator200():
         return A * np.exp(-g * t) * np.cos(w * t + p)
 
     y, s = _data(f, [1.2, 0.2, 2.0, 0.3], 0.1, 11)
-    formula = [f"A*exp(-g*{v!r})*cos(w*{v!r} + p)" for v in t]
+    formula = [f"A*exp(-g*{float(v)!r})*cos(w*{float(v)!r} + p)" for v in t]
     return dict(names=["A", "g", "w", "p"],
                 priors={"A": (0.5, 2.0), "g": (0.05, 0.5), "w": (1.0, 3.0), "p": (-1.0, 1.0)},
                 f=f, x=t, y=y, y_std=s, formula=formula)
@@ -123,7 +123,7 @@ def _linear8():
 
     y, s = _data(f, list(rng.normal(0.0, 1.0, 8)), 0.5, 17)
     names = [f"c{k}" for k in range(8)]
-    formula = [" + ".join(f"({X[j, k]!r})*c{k}" for k in range(8)) for j in range(12)]
+    formula = [" + ".join(f"({float(X[j, k])!r})*c{k}" for k in range(8)) for j in range(12)]
     # Exact posterior: prior N(0, I), likelihood N(y | Xθ, s²I).
     precision = np.eye(8) + X.T @ X / 0.25
     cov = np.linalg.inv(precision)
@@ -140,7 +140,7 @@ def _decay():
 
     y, s = _data(f, [2.0, 0.3], 0.05, 19)
     return dict(names=["a", "k"], priors={"a": (0.5, 4.0), "k": (0.05, 0.8)}, f=f, x=t, y=y,
-                y_std=s, formula=[f"a*exp(-k*{v!r})" for v in t])
+                y_std=s, formula=[f"a*exp(-k*{float(v)!r})" for v in t])
 
 
 PROBLEMS = {"twoexp": _twoexp, "banana": _banana, "logistic": _logistic,
