@@ -8,7 +8,7 @@
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
 //! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.05,
 //!              samples = 2000, replicates = 4, max_samples = 32000, max_rounds = 30,
-//!              candidates = 1000 }
+//!              candidates = 1000, sampling = "sequential" }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
 //! # a whole-curve model emulated on its leading principal components (absent: a GP per point)
