@@ -1194,6 +1194,14 @@ pub(super) fn refine(
         candidates: rounds.last().map_or(settings.candidates, |r| r.candidates),
         mixing_level: rounds.last().map_or(0, |r| r.mixing_level),
     };
+    let choice = RunChoice {
+        data,
+        settings,
+        runs,
+        groups: groups.len(),
+        min_score,
+        min_moment_score,
+    };
     let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
     // Each replicate's population, carried from round to round (`sampling = "sequential"`),
     // and the fingerprint of the round it comes from.
@@ -1365,98 +1373,16 @@ pub(super) fn refine(
                     "adaptive round {round}: no surrogate to choose runs from"
                 )));
             };
-            let RoundScoring {
-                surrogate,
-                candidates: c,
-                likelihood_variance,
-                boundary,
-            } = scoring;
-            let boundary: &[(usize, usize)] = if boundary_due { boundary } else { &[] };
-            let views = surrogate.emulator.output_views();
-            let remaining = settings.max_runs - made;
-            // Each group's share of the round's runs follows its share of ε².
-            let group_batch = if measured.group_surrogate_error.len() == groups.len() {
-                group_batches(settings.batch, &measured.group_surrogate_error)
-            } else {
-                vec![settings.batch; groups.len()]
-            };
-            // (score, group, order within the group's batch, candidate index)
-            let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();
-            for g in 0..groups.len() {
-                let outputs = runs.group_outputs(g);
-                let terms: Vec<LikelihoodTerm<'_>> = outputs
-                    .map(|j| LikelihoodTerm {
-                        gp: &views[j],
-                        datum: data.observations.values[j],
-                        total_variance: likelihood_variance.iter().map(|v| v[j]).collect(),
-                    })
-                    .collect();
-                let p_answer: Vec<f64> = surrogate
-                    .group_failure_probability(g, &c.theta)?
-                    .into_iter()
-                    .map(|p| 1.0 - p)
-                    .collect();
-                let selection = match settings.acquisition {
-                    Acquisition::Density => select_batch(
-                        &terms,
-                        &c.theta,
-                        &likelihood_weights(&c.log_density, &p_answer),
-                        group_batch[g].min(remaining),
-                        min_score,
-                    )?,
-                    Acquisition::Moments => match surrogate.emulator.reduced_basis() {
-                        None => select_batch_for_moments(
-                            &terms,
-                            &c.theta,
-                            &c.full,
-                            &c.copies,
-                            &p_answer,
-                            group_batch[g].min(remaining),
-                            min_moment_score,
-                        )?,
-                        // The first-order error through the components: δℓ = Σ_k a_k δc_k.
-                        Some(basis) => select_batch_for_moments_by_sensitivity(
-                            &component_sensitivities(
-                                basis,
-                                &terms,
-                                runs.group_outputs(g),
-                                &c.theta,
-                            )?,
-                            &c.theta,
-                            &c.full,
-                            &c.copies,
-                            &p_answer,
-                            group_batch[g].min(remaining),
-                            min_moment_score,
-                        )?,
-                    },
-                };
-                for (order, (&i, &score)) in
-                    selection.indices.iter().zip(&selection.scores).enumerate()
-                {
-                    picks.push((score, g, order, i));
-                }
-            }
-            // Within the budget, the boundary runs and then the best picks first (a group's
-            // later picks already count its earlier ones).
-            for (order, &(g, i)) in boundary.iter().enumerate() {
-                if !picks.iter().any(|p| p.1 == g && p.3 == i) {
-                    picks.push((f64::INFINITY, g, usize::MAX - boundary.len() + order, i));
-                }
-            }
-            picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
-            // At most `batch` per group: its boundary runs first, then its best acquisitions
-            // (at most its share of the runs, as selected above).
-            let mut per_group = vec![0usize; groups.len()];
-            picks.retain(|p| {
-                per_group[p.1] += 1;
-                per_group[p.1] <= settings.batch
-            });
-            picks.truncate(remaining);
-            picks.sort_by(|a, b| a.1.cmp(&b.1).then(a.2.cmp(&b.2)));
-            for (_, g, _, i) in &picks {
-                requests.push((*g, c.theta[*i].clone()));
-                record.new_runs_per_group[*g] += 1;
+            let chosen = choose_runs(
+                &choice,
+                scoring,
+                &measured.group_surrogate_error,
+                boundary_due,
+                settings.max_runs - made,
+            )?;
+            for (g, theta) in chosen {
+                record.new_runs_per_group[g] += 1;
+                requests.push((g, theta));
             }
             no_candidate = requests.is_empty();
         }
@@ -1567,6 +1493,126 @@ pub(super) fn refine(
         mixing_level: sampling.mixing_level,
         run_rows: new_rows,
     })
+}
+
+/// What choosing a round's runs needs besides the round's scoring: the same every round.
+#[derive(Clone, Copy)]
+struct RunChoice<'a> {
+    data: &'a DataLikelihood,
+    settings: &'a AdaptiveSettings,
+    runs: &'a ModelRuns,
+    /// Run groups.
+    groups: usize,
+    /// The least density score worth a run (per group).
+    min_score: f64,
+    /// The least moment score worth a run (per group).
+    min_moment_score: f64,
+}
+
+/// A round's new runs (run group, θ), in group order and, within a group, in the order they were
+/// picked: per group up to its share of `batch` by ε_g² (`iuq_adaptive::allocation`), its
+/// boundary runs first when `boundary_due`, then the greedy batch of the study's acquisition; at
+/// most `batch` per group and `remaining` in all, the best scores first.
+fn choose_runs(
+    choice: &RunChoice<'_>,
+    scoring: &RoundScoring,
+    group_surrogate_error: &[f64],
+    boundary_due: bool,
+    remaining: usize,
+) -> Result<Vec<(usize, Vec<f64>)>> {
+    let RoundScoring {
+        surrogate,
+        candidates: c,
+        likelihood_variance,
+        boundary,
+    } = scoring;
+    let boundary: &[(usize, usize)] = if boundary_due { boundary } else { &[] };
+    let RunChoice {
+        data,
+        settings,
+        runs,
+        groups,
+        min_score,
+        min_moment_score,
+    } = *choice;
+    let views = surrogate.emulator.output_views();
+    // Each group's share of the round's runs follows its share of ε².
+    let group_batch = if group_surrogate_error.len() == groups {
+        group_batches(settings.batch, group_surrogate_error)
+    } else {
+        vec![settings.batch; groups]
+    };
+    // (score, group, order within the group's batch, candidate index)
+    let mut picks: Vec<(f64, usize, usize, usize)> = Vec::new();
+    for g in 0..groups {
+        let outputs = runs.group_outputs(g);
+        let terms: Vec<LikelihoodTerm<'_>> = outputs
+            .map(|j| LikelihoodTerm {
+                gp: &views[j],
+                datum: data.observations.values[j],
+                total_variance: likelihood_variance.iter().map(|v| v[j]).collect(),
+            })
+            .collect();
+        let p_answer: Vec<f64> = surrogate
+            .group_failure_probability(g, &c.theta)?
+            .into_iter()
+            .map(|p| 1.0 - p)
+            .collect();
+        let selection = match settings.acquisition {
+            Acquisition::Density => select_batch(
+                &terms,
+                &c.theta,
+                &likelihood_weights(&c.log_density, &p_answer),
+                group_batch[g].min(remaining),
+                min_score,
+            )?,
+            Acquisition::Moments => match surrogate.emulator.reduced_basis() {
+                None => select_batch_for_moments(
+                    &terms,
+                    &c.theta,
+                    &c.full,
+                    &c.copies,
+                    &p_answer,
+                    group_batch[g].min(remaining),
+                    min_moment_score,
+                )?,
+                // The first-order error through the components: δℓ = Σ_k a_k δc_k.
+                Some(basis) => select_batch_for_moments_by_sensitivity(
+                    &component_sensitivities(basis, &terms, runs.group_outputs(g), &c.theta)?,
+                    &c.theta,
+                    &c.full,
+                    &c.copies,
+                    &p_answer,
+                    group_batch[g].min(remaining),
+                    min_moment_score,
+                )?,
+            },
+        };
+        for (order, (&i, &score)) in selection.indices.iter().zip(&selection.scores).enumerate() {
+            picks.push((score, g, order, i));
+        }
+    }
+    // Within the budget, the boundary runs and then the best picks first (a group's
+    // later picks already count its earlier ones).
+    for (order, &(g, i)) in boundary.iter().enumerate() {
+        if !picks.iter().any(|p| p.1 == g && p.3 == i) {
+            picks.push((f64::INFINITY, g, usize::MAX - boundary.len() + order, i));
+        }
+    }
+    picks.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    // At most `batch` per group: its boundary runs first, then its best acquisitions
+    // (at most its share of the runs, as selected above).
+    let mut per_group = vec![0usize; groups];
+    picks.retain(|p| {
+        per_group[p.1] += 1;
+        per_group[p.1] <= settings.batch
+    });
+    picks.truncate(remaining);
+    picks.sort_by(|a, b| a.1.cmp(&b.1).then(a.2.cmp(&b.2)));
+    Ok(picks
+        .into_iter()
+        .map(|(_, g, _, i)| (g, c.theta[i].clone()))
+        .collect())
 }
 
 /// The sensitivities of the log-likelihood to each component of a reduced basis at the
