@@ -2,7 +2,7 @@
 """The adaptive engine against PyVBMC 1.5 and GPry 4.1, side by side, on problems with exact or
 long-run reference posteriors (a benchmark, not a test: it prints our figures beside theirs).
 
-    pip install ./python pyvbmc==1.5.* gpry==4.1.* emcee scikit-learn
+    pip install ./python -r scripts/bench/requirements-engine.txt
     python3 scripts/bench/engine_vs_peers.py [--problems twoexp,banana,...] [--methods iuq,cli,pyvbmc,gpry]
     python3 scripts/bench/engine_vs_peers.py --iuq-bin target/release/iuq --out bench-out
 
