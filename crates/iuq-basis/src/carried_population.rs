@@ -48,7 +48,7 @@ use std::time::Instant;
 
 use iuq_core::random::{stages::SAMPLER_BASE, stream};
 
-use crate::annealing::max_finite;
+use crate::annealing::{incremental_weights, max_finite};
 use crate::diagnostics::StageDiagnostics;
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
@@ -108,16 +108,7 @@ pub fn carry<L: LogLikelihood + ?Sized>(
     let Some(max_ratio) = max_finite(&log_ratio) else {
         return Ok(Carried::Collapsed { ess_fraction: 0.0 });
     };
-    let raw: Vec<f64> = log_ratio
-        .iter()
-        .map(|r| {
-            if r.is_finite() {
-                (r - max_ratio).exp()
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let raw = incremental_weights(&log_ratio, 1.0, max_ratio);
     let total: f64 = raw.iter().sum();
     let weights: Vec<f64> = raw.iter().map(|w| w / total).collect();
     let members = weights.len() as f64;

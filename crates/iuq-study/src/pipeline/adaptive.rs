@@ -276,10 +276,12 @@ impl AdaptiveOutcome {
     /// against the last round's pooled posterior: where a mean or std differs by more than
     /// `tolerance` posterior stds beyond twice the round's Monte Carlo error, the sample is too
     /// small or too correlated to carry the converged posterior, and the outcome is no longer
-    /// converged, with a reason that says what to raise. Returns the largest difference (in
-    /// posterior stds, beyond the noise), or `None` without a converged round to compare with.
-    pub fn judge_final_sample(&mut self, mean: &[f64], std: &[f64], samples: usize) -> Option<f64> {
-        let round = self.rounds.last().filter(|_| self.converged)?;
+    /// converged, with a reason that says what to raise. Nothing changes without a converged
+    /// round to compare with.
+    pub fn judge_final_sample(&mut self, mean: &[f64], std: &[f64], samples: usize) {
+        let Some(round) = self.rounds.last().filter(|_| self.converged) else {
+            return;
+        };
         let mut largest: (f64, usize) = (0.0, 0);
         for k in 0..round.mean.len().min(mean.len()).min(std.len()) {
             let sd = round.std[k];
@@ -304,7 +306,6 @@ impl AdaptiveOutcome {
                 self.tolerance
             );
         }
-        Some(largest.0)
     }
 
     /// The last round.
