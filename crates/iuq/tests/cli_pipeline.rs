@@ -719,12 +719,12 @@ fn the_healthy_study_made_from_scratch_replays_to_its_324_runs() {
     );
 }
 
-/// The README's Table 2 for `study` (`"healthy cells"` or `"TBHP cells"`): for each row, the
-/// parameter's name in the study and the six numbers as printed (GP MAP, mean, std, then the
-/// cell model's).
+/// Table 2 of the case study (`docs/case-study.md`, which the README links) for `study`
+/// (`"healthy cells"` or `"TBHP cells"`): for each row, the parameter's name in the study and the
+/// six numbers as printed (GP MAP, mean, std, then the cell model's).
 fn readme_table2(study: &str) -> Vec<(String, Vec<String>)> {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let readme = std::fs::read_to_string(root.join("README.md")).unwrap();
+    let readme = std::fs::read_to_string(root.join("docs/case-study.md")).unwrap();
     let header = format!("| {study} |");
     let mut lines = readme
         .lines()
@@ -744,7 +744,7 @@ fn readme_table2(study: &str) -> Vec<(String, Vec<String>)> {
         };
         rows.push((name.to_string(), cells[1..].to_vec()));
     }
-    assert_eq!(rows.len(), 4, "the README's table for {study}");
+    assert_eq!(rows.len(), 4, "the case study's table for {study}");
     rows
 }
 
