@@ -16,14 +16,45 @@ __all__ = ["basis", "BasisResult"]
 
 @dataclass(frozen=True)
 class BasisResult:
-    """The final BASIS population and its summaries.
+    """The final BASIS population and its summaries, as :func:`iuq.basis` returns it.
 
-    ``samples`` (N, d) are equally weighted posterior samples (columns ``names``; with the
-    data form the last is the modelling error ``sigma_m``). ``log_evidence`` is ln Z.
-    ``stages`` holds each stage's diagnostics (stage 0 = prior draws): exponent p, step, CV,
-    ESS fraction, acceptance rate, ln Z so far, evaluations, failures, …; ``n_stages`` counts
-    the stages after the prior stage (the CLI's ``stages``). ``quantiles[k, q]`` is quantile
-    ``probabilities[q]`` of parameter k.
+    Attributes
+    ----------
+    names : list of str
+        The parameters, in the order of the columns of :attr:`samples` (with the data form and
+        a ``modelling_error``, the last is the modelling error ``sigma_m``).
+    samples : numpy.ndarray, shape (N, d)
+        Equally weighted posterior samples.
+    log_likelihood, log_prior : numpy.ndarray, shape (N,)
+        ln f(D | θ) and ln π(θ) of each sample.
+    log_evidence : float
+        ln Z, the log-evidence.
+    mean, std, map : numpy.ndarray, shape (d,)
+        Mean, standard deviation (ddof 0) and the sample with the largest ln f + ln π.
+    map_log_likelihood, map_log_prior : float
+        ln f and ln π at the MAP.
+    probabilities : numpy.ndarray
+        The probabilities of :attr:`quantiles` (0.025, 0.05, 0.25, 0.5, 0.75, 0.95, 0.975).
+    quantiles : numpy.ndarray, shape (d, len(probabilities))
+        ``quantiles[k, q]`` is quantile ``probabilities[q]`` of parameter k.
+    stages : list of dict
+        Each stage's diagnostics (stage 0 = the prior draws): exponent p, step, CV, ESS
+        fraction, acceptance rate, ln Z so far, evaluations, failures, ….
+    n_stages : int
+        The stages after the prior stage (the CLI's ``stages``).
+    evaluations : int
+        Likelihood evaluations in all.
+    converged, stop_reason, stop_message, exponent
+        Whether p reached 1, why the sampler stopped, and the last exponent p.
+    failures, failure_reasons, out_of_support
+        Failed evaluations, their count per reason, and proposals outside the prior's support.
+
+    Examples
+    --------
+    >>> import iuq
+    >>> result = iuq.basis("-0.5*((x1 - 1)/0.1)^2", [(-3, 3)], samples=500, seed=0)
+    >>> result.samples.shape, result.quantiles.shape
+    ((500, 1), (1, 7))
     """
 
     names: List[str]
@@ -50,7 +81,20 @@ class BasisResult:
     out_of_support: int = 0
 
     def summary(self) -> Dict[str, Dict[str, float]]:
-        """``{name: {"map", "mean", "std"}}`` per parameter."""
+        """MAP, mean and standard deviation per parameter.
+
+        Returns
+        -------
+        dict
+            ``{name: {"map": float, "mean": float, "std": float}}``, in parameter order.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> result = iuq.basis("-0.5*((x1 - 1)/0.1)^2", [(-3, 3)], samples=500, seed=0)
+        >>> sorted(result.summary()["x1"])
+        ['map', 'mean', 'std']
+        """
         return {
             name: {"map": float(self.map[k]), "mean": float(self.mean[k]), "std": float(self.std[k])}
             for k, name in enumerate(self.names)
@@ -76,30 +120,103 @@ def basis(
     measurement_error: bool = True,
     on_error: str = "raise",
 ) -> BasisResult:
-    """Sample the posterior π(θ)·f(D | θ) with BASIS (Wu et al. 2017).
+    """Sample the posterior π(θ)·f(D | θ) with BASIS (``iuq basis``; Wu et al. 2018).
 
-    Either ``log_likelihood`` — a Python callable taking an (N, d) array of parameter vectors
-    and returning ln f(D | θ) of each row, shape (N,), called once per stage; or a formula
-    string evaluated in Rust (a study's ``[likelihood] log_density``) — or the data form:
-    ``model`` (a callable (N, d) → (N, m), or a pair ``(values, std)`` of such arrays with the
-    model's computational std) compared with ``data`` (m values) through the prediction-error
-    likelihood, with measurement stds ``data_std`` and, by default, nothing else: exactly
-    N(data | model(θ), diag(data_std²)), plus std² where the model returns ``(values, std)``
-    (``computational_error="absolute"``; ``"relative"``, ``"absolute-times-data"`` and
-    ``"none"`` are the other conventions, ``docs/methods.md`` §4). ``modelling_error=(lo, hi)``
-    adds σ_m²·data² to each variance with σ_m ~ U(lo, hi) sampled with θ; without ``data_std``
-    it is needed.
+    Bayesian annealed sequential importance sampling moves a population from the prior to the
+    posterior through tempered distributions and estimates the evidence on the way (the
+    methods' chapter on BASIS). The likelihood is given in one of three forms:
 
-    ``bounds`` gives the priors π: ``[(lo, hi), ...]`` (uniform; an item may also be a prior as
-    in a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
-    ``problem`` dict.
-    ``samples`` N, ``burn``, ``max_chain``, ``seed``, ``cv_target``, ``proposal_scale`` and
-    ``max_stages`` are the ``[sampler]`` settings: with neither ``burn`` nor ``proposal_scale``
-    given the chains move until they decorrelate at an adapted scale (``burn = "auto"``,
-    ``docs/methods.md`` §5), with either given they take ``burn`` steps (default 0) at scale
-    ``proposal_scale`` (default 0.2). Non-finite log-likelihoods are rejections;
-    ``on_error="fail"`` makes exceptions of the callable rejections too (counted with their
-    reason), ``"raise"`` re-raises them. For a given seed the result equals ``iuq basis``.
+    - ``log_likelihood`` a Python callable taking an (N, d) array of parameter vectors and
+      returning ln f(D | θ) of each row, shape (N,), called once per batch;
+    - ``log_likelihood`` a formula string evaluated in Rust (a study's
+      ``[likelihood] log_density``);
+    - the data form: ``model`` compared with ``data`` through the prediction-error likelihood.
+
+    For a given seed the result equals ``iuq basis`` on the same study.
+
+    Parameters
+    ----------
+    log_likelihood : callable or str, optional
+        The log-likelihood: ``f(theta) -> (N,)`` or a formula of the parameter names. Not with
+        ``model``.
+    bounds : sequence, dict or SALib problem
+        The priors π: ``[(lo, hi), ...]`` (uniform ``x1`` … ``xd``; an item may also be a prior
+        as in a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
+        ``problem`` dict.
+    samples : int, default 1000
+        Population size N.
+    burn : int, optional
+        Fixed burn-in steps of every chain. With neither ``burn`` nor ``proposal_scale`` the
+        chains move until they decorrelate, at an adapted scale (``burn = "auto"``); with either,
+        ``burn`` steps (default 0) at ``proposal_scale`` (default 0.2), as the published BASIS.
+    max_chain : int, default 1
+        Longest chain l_max.
+    seed : int, default 0
+        Seed of the random streams.
+    cv_target : float, default 1.0
+        Coefficient of variation of the weights that sets each annealing step.
+    proposal_scale : float, optional
+        Scale β of the random-walk proposal (see ``burn``).
+    max_stages : int, default 100
+        Stages at most.
+    model : callable, optional
+        The data form's model: ``f(theta) -> (N, m)`` outputs, or a pair ``(values, std)`` of
+        such arrays with the model's computational std.
+    data : array_like, shape (m,), optional
+        The data form's observations, output j compared with datum j.
+    data_std : array_like, shape (m,), optional
+        The measurement standard deviations: the likelihood is then exactly
+        N(data | model(θ), diag(data_std²)), plus std² where the model returns ``(values, std)``.
+    modelling_error : (float, float), optional
+        ``(lo, hi)``: adds σ_m²·data² to each variance, σ_m ~ U(lo, hi) sampled with θ as the
+        last parameter ``sigma_m``. Needed without ``data_std``.
+    computational_error : {"absolute", "relative", "absolute-times-data", "none"}, default "absolute"
+        How the model's std enters the variance (the methods' chapter on the likelihood).
+    measurement_error : bool, default True
+        ``False`` leaves ``data_std`` out of the variance.
+    on_error : {"raise", "fail"}, default "raise"
+        ``"raise"`` re-raises an exception of a callable; ``"fail"`` makes it a rejection,
+        counted with its reason. Non-finite log-likelihoods are always rejections.
+
+    Returns
+    -------
+    BasisResult
+        The samples, ln Z, MAP, mean, std, quantiles and the stages' diagnostics.
+
+    Raises
+    ------
+    ValueError
+        If an argument is out of range (the message starts with its name), or the data form
+        has neither ``data_std`` nor ``modelling_error``.
+    TypeError
+        If ``log_likelihood`` is neither a callable nor a string and there is no ``model``.
+    RuntimeError
+        If the sampler cannot go on (e.g. no prior draw has a finite log-likelihood).
+    Exception
+        Whatever a callable raises, with ``on_error="raise"``.
+
+    See Also
+    --------
+    iuq.calibrate : the adaptive engine, for a model too expensive to call this often.
+
+    Examples
+    --------
+    A Python log-likelihood on a uniform prior:
+
+    >>> import numpy as np
+    >>> import iuq
+    >>> result = iuq.basis(lambda t: -0.5 * ((t[:, 0] - 1) / 0.1) ** 2, [(-3, 3)],
+    ...                    samples=1000, seed=0)
+    >>> result.mean.round(2), result.std.round(2)
+    (array([1.]), array([0.1]))
+
+    A model against data with their stds (the prediction-error likelihood):
+
+    >>> t = np.linspace(0.2, 1.0, 5)
+    >>> result = iuq.basis(model=lambda theta: theta[:, :1] * t, data=2.0 * t,
+    ...                    data_std=np.full(5, 0.05), bounds={"a": (0, 5)}, samples=500, seed=1)
+    >>> result.names, result.mean.round(2)
+    (['a'], array([2.]))
     """
     names, priors = parameter_priors(bounds)
     if on_error not in ("raise", "fail"):

@@ -32,19 +32,65 @@ DATA_FILE = "data.csv"
 class CalibrationResult:
     """What :func:`calibrate` found.
 
-    ``samples`` (N, p) are equally weighted posterior samples of the surrogate posterior
-    (columns ``names``: the parameters, then ``sigma_m`` when the modelling error is sampled),
-    with ``log_likelihood``; ``mean``, ``std``, ``map`` and the 5 %/95 % quantiles per column.
-    ``rounds`` are the adaptive engine's rounds (runs, posterior moments, shift, surrogate error,
-    …, as ``iuq pipeline --json`` gives them), ``converged`` and ``stop_reason`` its decision;
-    ``runs`` every model evaluation in the store (parameters, outputs, status, reason);
-    ``model_runs`` and ``failed_runs`` count them, ``surrogate_runs`` those the engine made for
-    the surrogate (initial design and rounds; the rest are the posterior check's and the model
-    posterior's). ``data`` holds the abscissae ``x``, the
-    observations ``y`` and their stds ``y_std``. ``model_posterior`` is the model's own
-    posterior (with ``model_posterior=True``): its summary, and in ``model_posterior_samples``
-    its weighted members as arrays (:class:`iuq.ModelPosteriorSamples`). ``out`` is the pipeline's output directory
-    (report, tables, figures; ``None`` when it was temporary), ``store`` the campaign store.
+    Attributes
+    ----------
+    names : list of str
+        The columns of :attr:`samples`: the parameters, then ``sigma_m`` when the modelling
+        error is sampled.
+    parameters : list of str
+        The parameters.
+    samples : numpy.ndarray, shape (N, p)
+        Equally weighted samples of the surrogate posterior.
+    log_likelihood : numpy.ndarray, shape (N,)
+        The log-likelihood at each sample.
+    mean, std, map, q05, q95 : numpy.ndarray, shape (p,)
+        Mean, standard deviation, MAP and the 5 % and 95 % quantiles per column.
+    converged : bool
+        Whether the adaptive engine's stopping rule held.
+    stop_reason : str
+        Why the engine stopped.
+    rounds : list of dict
+        The adaptive engine's rounds (runs, posterior moments, shift, surrogate error, …, as
+        ``iuq pipeline --json`` gives them).
+    model_runs, failed_runs : int
+        Model evaluations in the store, and those that failed.
+    surrogate_runs : int
+        The evaluations the engine made for the surrogate (initial design and rounds; the rest
+        are the posterior check's and the model posterior's).
+    runs : list of dict
+        Every model evaluation in the store: parameters, ``outputs``, ``status``, ``reason``.
+    data : dict
+        The abscissae ``x``, the observations ``y`` and their stds ``y_std``.
+    model_posterior : dict or None
+        With ``model_posterior=True``: the model's own posterior's summary (k̂, ESS, MCSE,
+        whether it is certified, …).
+    model_posterior_samples : ModelPosteriorSamples or None
+        Its weighted members as arrays.
+    sensitivity : dict or None
+        Sobol' indices on the surrogate (with ``sensitivity`` > 0).
+    out : pathlib.Path or None
+        The pipeline's output directory (report, tables, figures); ``None`` when it was
+        temporary.
+    store : pathlib.Path or None
+        The campaign store; ``None`` when it was temporary.
+    seconds : float
+        Wall time.
+    posterior_predictive : numpy.ndarray or None
+        Where the surrogate is a GP per data point: the surrogate's mean at each sample plus
+        the likelihood's Gaussian noise, shape (N, m).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import iuq
+    >>> t = np.linspace(0.5, 4.0, 5)
+    >>> result = iuq.calibrate(lambda theta: np.exp(-theta[:, :1] * t), {"k": (0.05, 0.8)},
+    ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
+    ...                        sensitivity=0, seed=1, progress=False)
+    >>> result
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00855)
+    >>> result.samples.shape, result.converged
+    ((1000, 1), True)
     """
 
     names: List[str]
@@ -74,7 +120,24 @@ class CalibrationResult:
     model_posterior_samples: Optional[ModelPosteriorSamples] = field(default=None, repr=False)
 
     def summary(self) -> Dict[str, Dict[str, float]]:
-        """``{name: {"map", "mean", "std", "q05", "q95"}}`` per column."""
+        """MAP, mean, std and the 5 % and 95 % quantiles per column.
+
+        Returns
+        -------
+        dict
+            ``{name: {"map", "mean", "std", "q05", "q95"}}`` of floats, in column order.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> import iuq
+        >>> t = np.linspace(0.5, 4.0, 5)
+        >>> result = iuq.calibrate(lambda theta: np.exp(-theta[:, :1] * t), {"k": (0.05, 0.8)},
+        ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
+        ...                        sensitivity=0, seed=1, progress=False)
+        >>> sorted(result.summary()["k"])
+        ['map', 'mean', 'q05', 'q95', 'std']
+        """
         return {
             n: {
                 "map": float(self.map[k]),
@@ -87,20 +150,75 @@ class CalibrationResult:
         }
 
     def to_pandas(self):
-        """The posterior samples as a ``pandas.DataFrame`` (pandas must be installed)."""
+        """The posterior samples as a ``pandas.DataFrame`` (needs pandas).
+
+        Returns
+        -------
+        pandas.DataFrame
+            One row per sample, one column per name of :attr:`names`.
+
+        Raises
+        ------
+        ImportError
+            If pandas is not installed (``pip install "./python[arviz]"``).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> import iuq
+        >>> t = np.linspace(0.5, 4.0, 5)
+        >>> result = iuq.calibrate(lambda theta: np.exp(-theta[:, :1] * t), {"k": (0.05, 0.8)},
+        ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
+        ...                        sensitivity=0, seed=1, progress=False)
+        >>> result.to_pandas().shape
+        (1000, 1)
+        """
         import pandas as pd
 
         return pd.DataFrame(self.samples, columns=self.names)
 
     def to_arviz(self, source: str = "surrogate", draws: Optional[int] = None, seed: int = 0):
-        """The calibration as ArviZ ``InferenceData``: the posterior (one chain of the N
-        equally weighted samples), ``sample_stats`` (``lp``, the log-likelihood), the
-        ``observed_data`` ``y`` (dimension ``point``, coordinate ``x``) and, where the surrogate
-        is a GP per data point, the ``posterior_predictive`` ``y``: the surrogate's mean at each
-        posterior sample plus the likelihood's Gaussian noise (measurement and modelling error).
-        ``source="model"``: the model's own posterior instead
-        (:meth:`iuq.ModelPosteriorSamples.to_arviz`: ``draws`` resampled by ``seed``, with
-        ``observed_data``), which needs ``calibrate(..., model_posterior=True)``.
+        """The calibration as ArviZ ``InferenceData`` (needs arviz).
+
+        With ``source="surrogate"``: the posterior (one chain of the N equally weighted samples),
+        ``sample_stats`` (``lp``, the log-likelihood), the ``observed_data`` ``y`` (dimension
+        ``point``, coordinate ``x``) and, where the surrogate is a GP per data point, the
+        ``posterior_predictive`` ``y``: the surrogate's mean at each posterior sample plus the
+        likelihood's Gaussian noise (measurement and modelling error).
+
+        Parameters
+        ----------
+        source : {"surrogate", "model"}, default "surrogate"
+            ``"model"``: the model's own posterior instead
+            (:meth:`iuq.ModelPosteriorSamples.to_arviz`, with ``observed_data``), which needs
+            ``calibrate(..., model_posterior=True)``.
+        draws : int, optional
+            With ``source="model"``: the number of resampled draws (default: the members').
+        seed : int, default 0
+            With ``source="model"``: the seed of the resampling.
+
+        Returns
+        -------
+        arviz.InferenceData
+
+        Raises
+        ------
+        ValueError
+            If ``source`` is unknown, or ``"model"`` without a model posterior.
+        ImportError
+            If ArviZ is not installed.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> import iuq
+        >>> t = np.linspace(0.5, 4.0, 5)
+        >>> result = iuq.calibrate(lambda theta: np.exp(-theta[:, :1] * t), {"k": (0.05, 0.8)},
+        ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
+        ...                        sensitivity=0, seed=1, progress=False)
+        >>> idata = result.to_arviz()
+        >>> sorted(idata.groups())
+        ['observed_data', 'posterior', 'posterior_predictive', 'sample_stats']
         """
         import arviz as az
 
@@ -267,53 +385,124 @@ def calibrate(
 ) -> CalibrationResult:
     """Calibrate the Python function ``model`` on data with iuq's adaptive engine.
 
-    ``model`` takes an (n, d) array of parameter vectors (columns in the order of
-    ``parameters``) and returns an (n, m) array, one value per data point (or a pair
-    ``(values, std)`` of such arrays, ``std`` the model's own computational std); with
-    ``per_point=True`` it is called as ``model(theta, x)`` with θ (n, d) and the abscissae
-    ``x`` (n,) and returns (n,): one run per (θ, x). ``parameters`` gives the priors as
-    :func:`iuq.basis` takes them (``{name: (lo, hi) or {"normal": [m, s]}}``, a list of pairs,
-    or SALib's ``problem``). ``y`` (m,) are the observations, ``y_std`` their measurement stds
-    (optional), ``x`` their abscissae (default 0, 1, …). The likelihood is the prediction-error
-    likelihood of ``docs/methods.md`` §4. By default it is exactly the Gaussian
-    N(y | model(θ), diag(y_std²)), the surrogate adding its own predictive variance v(θ) while it
-    stands in for the model: Σ_jj = y_std_j² + v_j(θ) (``computational_error="absolute"``; a
-    function that returns ``(values, std)`` adds std² likewise). ``modelling_error=(lo, hi)``
-    adds a modelling error relative to the data, Σ_jj += σ_m²·y_j², with σ_m ~ U(lo, hi) sampled
-    with θ (the red-cell study's (0.001, 0.1): 0.1 % to 10 % of each datum); without ``y_std``
-    a modelling error is needed, for the likelihood to have a spread at all.
-    ``computational_error`` is how a computational std s_j enters: ``"absolute"`` s_j²,
-    ``"relative"`` (s_j·y_j/q_j)² (the published study's), ``"absolute-times-data"``
-    (s_j·y_j)², ``"none"``.
+    The engine (the book's adaptive-engine chapter): an initial maximin Latin hypercube of
+    ``initial_runs`` runs, then rounds of up to ``batch`` runs placed where they most reduce
+    the surrogate's error on the posterior, until every posterior mean and std is stable to
+    ``tolerance`` posterior stds and the surrogate's error could move none of them by more, or
+    ``max_runs``. One GP per data point stands in for the model; BASIS samples the posterior.
 
-    The engine (``docs/adaptive-engine.md``): an initial maximin LHS of ``initial_runs``
-    (default max(6, d + 2)) runs, then rounds of up to ``batch`` runs placed where they most
-    reduce the surrogate's error on the posterior, until every posterior mean and std is stable
-    to ``tolerance`` posterior stds and the surrogate's error could move none of them by more,
-    or ``max_runs``. Runs where the function raises or returns non-finite values are failed runs
-    (``on_error="fail"``, their reason stored) that a classifier keeps the posterior away from;
-    ``on_error="raise"`` stops and raises the exception. ``posterior_check`` runs the model at
-    the posterior's MAP and that many samples; ``model_posterior`` also gives the model's own
-    posterior, certified from the surrogate's (``samples`` runs, 300 by default, where one
-    importance stage holds; a batch more where the first shows the surrogate off, and up to
-    ``samples`` more for each bridging stage, at most ``max_stages``); a dict instead of ``True``
-    gives its ``[model_posterior]`` keys (``docs/study-file.md``; its ``seed`` is ``seed``
-    unless the dict gives one), e.g. ``{"samples": 400,
-    "replicates": 4}`` for a stochastic or chaotic function (found by the method's probe and
-    weighed pseudo-marginally: its irregular outputs then measured by 4 calls each; a bad key or
-    value is a ``ValueError`` naming ``model_posterior.<key>``). ``samples`` is the final
-    BASIS population, ``sensitivity`` the Sobol' base points (0: none), ``seed`` seeds everything.
+    The likelihood is the prediction-error likelihood (the methods' chapter on it). By default
+    it is exactly the Gaussian N(y | model(θ), diag(y_std²)), the surrogate adding its own
+    predictive variance v(θ) while it stands in for the model: Σ_jj = y_std_j² + v_j(θ).
 
-    With ``store`` (a directory), every evaluation is stored as it completes in
-    ``store/calibration.campaign/campaign.sqlite``; calling again with the same store reuses them
-    and continues where the last call stopped (after a crash, a kill or a ``KeyboardInterrupt``).
-    A Ctrl-C raises ``KeyboardInterrupt`` within a second, also while the engine computes (its
-    work then stops in the background at its next check, and the next call waits for that).
-    ``report`` is where the report and every table and figure go (default ``store/report``, or a
-    temporary directory). Up to ``batch_size`` runs waiting at once are evaluated in one call of
-    ``model``. ``description`` names the model in the store (default: its name and a digest of
-    its source). ``progress``: ``True`` a progress bar (tqdm, where installed) or lines on
-    stderr, ``False`` quiet, or a callable receiving each line.
+    With ``store`` every evaluation is stored as it completes in
+    ``store/calibration.campaign/campaign.sqlite``; calling again with the same store reuses
+    them and continues where the last call stopped (after a crash, a kill or a
+    ``KeyboardInterrupt``). A Ctrl-C raises ``KeyboardInterrupt`` within a second, also while
+    the engine computes (its work then stops in the background at its next check, and the next
+    call waits for that).
+
+    Parameters
+    ----------
+    model : callable
+        ``model(theta)`` with ``theta`` an (n, d) array of parameter vectors (columns in the
+        order of ``parameters``) returns an (n, m) array, one value per data point, or a pair
+        ``(values, std)`` of such arrays, ``std`` the model's own computational std. With
+        ``per_point=True`` it is called as ``model(theta, x)`` with θ (n, d) and the abscissae
+        ``x`` (n,) and returns (n,).
+    parameters : dict, sequence or SALib problem
+        The priors, as :func:`iuq.basis` takes them: ``{name: (lo, hi) or {"normal": [m, s]}}``,
+        a list of pairs, or SALib's ``problem``.
+    y : array_like, shape (m,)
+        The observations.
+    y_std : array_like, shape (m,), optional
+        Their measurement standard deviations (each > 0).
+    x : array_like, shape (m,), optional
+        Their abscissae (default 0, 1, …).
+    per_point : bool, default False
+        One run per (θ, x) instead of one per θ.
+    initial_runs : int, optional
+        Runs of the initial design (default max(6, d + 2)).
+    batch : int, default 2
+        Runs per adaptive round at most.
+    max_runs : int, default 300
+        Runs at most.
+    tolerance : float, default 0.1
+        The stopping rule's tolerance, in posterior stds.
+    modelling_error : (float, float), optional
+        ``(lo, hi)``: a modelling error relative to the data, Σ_jj += σ_m²·y_j², σ_m ~ U(lo, hi)
+        sampled with θ (the red-cell study's (0.001, 0.1): 0.1 % to 10 % of each datum).
+        Without ``y_std`` it is needed, for the likelihood to have a spread at all.
+    computational_error : {"absolute", "relative", "absolute-times-data", "none"}, default "absolute"
+        How a computational std s_j enters: s_j², (s_j·y_j/q_j)² (the published study's),
+        (s_j·y_j)², or not at all.
+    posterior_check : int, default 0
+        Run the model at the posterior's MAP and at this many posterior samples.
+    model_posterior : bool or dict, default False
+        Also give the model's own posterior, certified from the surrogate's (300 runs by
+        default where one importance stage holds; a batch more where the first shows the
+        surrogate off, and up to that many more for each bridging stage). A dict gives its
+        ``[model_posterior]`` keys (the book's study-file reference; its ``seed`` is ``seed``
+        unless the dict gives one), e.g. ``{"samples": 400, "replicates": 4}`` for a stochastic
+        or chaotic function.
+    samples : int, default 10000
+        The final BASIS population.
+    sensitivity : int, default 256
+        Sobol' base points on the surrogate (0: none).
+    seed : int, default 0
+        Seeds everything.
+    store : str or os.PathLike, optional
+        A directory for the campaign store (default: a temporary one, removed afterwards).
+    report : str or os.PathLike, optional
+        Where the report and every table and figure go (default ``store/report``, or a
+        temporary directory).
+    on_error : {"fail", "raise"}, default "fail"
+        ``"fail"``: runs where the function raises or returns non-finite values are failed runs,
+        their reason stored, which a classifier keeps the posterior away from; ``"raise"``:
+        stop and raise the exception.
+    batch_size : int, default 16
+        Runs waiting at once that are evaluated in one call of ``model``.
+    description : str, optional
+        Names the model in the store (default: its name and a digest of its source, so that an
+        edited function's runs are not reused).
+    progress : bool or callable, default True
+        ``True``: a progress bar (tqdm, where installed) or lines on stderr; ``False``: quiet;
+        a callable receives each line.
+
+    Returns
+    -------
+    CalibrationResult
+        Posterior samples and summaries, the rounds, every run, and ``.to_arviz()``.
+
+    Raises
+    ------
+    TypeError
+        If ``model`` is not callable.
+    ValueError
+        If an argument is out of range (the message starts with its name), e.g. a ``y_std``
+        that is not positive, neither ``y_std`` nor ``modelling_error``, or a bad
+        ``model_posterior`` key (named ``model_posterior.<key>``).
+    KeyboardInterrupt
+        On Ctrl-C; the runs made so far stay in ``store``.
+    Exception
+        Whatever ``model`` raises, with ``on_error="raise"``.
+
+    See Also
+    --------
+    iuq.Study.run : the same engine on a study file (a program as the model).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> import iuq
+    >>> t = np.linspace(0.5, 4.0, 5)
+    >>> result = iuq.calibrate(lambda theta: np.exp(-theta[:, :1] * t), {"k": (0.05, 0.8)},
+    ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
+    ...                        sensitivity=0, seed=1, progress=False)
+    >>> result
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00855)
+    >>> bool(abs(result.mean[0] - 0.3) < 3 * result.std[0])
+    True
     """
     if not callable(model):
         raise TypeError("model: expected a callable taking an (n, d) array")

@@ -17,9 +17,40 @@ __all__ = ["sobol", "SobolResult"]
 class SobolResult:
     """First-order (``S1``) and total (``ST``) Sobol' indices with confidence half-widths.
 
-    With one output the arrays have shape (d,); with m outputs (m, d), rows in the order of
-    ``outputs``. ``S1_interval``/``ST_interval`` add a last axis [lower, upper] =
-    index ∓ half-width at the ``confidence`` level.
+    As :func:`iuq.sobol` returns them. With one output the arrays have shape (d,); with m
+    outputs (m, d), rows in the order of :attr:`outputs`.
+
+    Attributes
+    ----------
+    names : list of str
+        The inputs.
+    outputs : list of str
+        The outputs.
+    S1, ST : numpy.ndarray
+        First-order and total indices.
+    S1_conf, ST_conf : numpy.ndarray
+        Their confidence half-widths at the level :attr:`confidence`.
+    variance : numpy.ndarray, shape (m,)
+        The variance of each output over the design.
+    evaluations, failed_evaluations : int
+        Model evaluations, and those that failed.
+    dropped_groups : int
+        Base points dropped because one of their rows failed.
+    failure_handling : str
+        How failures were treated.
+    failure_reasons : dict
+        Failed evaluations per reason.
+    base_points : int
+        Base points N of the Saltelli design.
+    confidence : float
+        Confidence level of the half-widths.
+
+    Examples
+    --------
+    >>> import iuq
+    >>> s = iuq.sobol({"f": "x1 + 2*x2", "g": "x1*x2"}, [(0, 1)] * 2, n=256)
+    >>> s.outputs, s.S1.shape
+    (['f', 'g'], (2, 2))
     """
 
     names: List[str]
@@ -39,16 +70,28 @@ class SobolResult:
 
     @property
     def S1_interval(self) -> np.ndarray:
-        """[lower, upper] of each S1 (last axis)."""
+        """[lower, upper] of each S1 (a last axis of length 2): index ∓ half-width."""
         return np.stack([self.S1 - self.S1_conf, self.S1 + self.S1_conf], axis=-1)
 
     @property
     def ST_interval(self) -> np.ndarray:
-        """[lower, upper] of each ST (last axis)."""
+        """[lower, upper] of each ST (a last axis of length 2): index ∓ half-width."""
         return np.stack([self.ST - self.ST_conf, self.ST + self.ST_conf], axis=-1)
 
     def to_dict(self) -> Dict[str, Any]:
-        """The indices in SALib's layout (``S1``, ``S1_conf``, ``ST``, ``ST_conf``)."""
+        """The indices in SALib's layout.
+
+        Returns
+        -------
+        dict
+            ``{"S1", "S1_conf", "ST", "ST_conf"}``, each an array as in this result.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> sorted(iuq.sobol("x1 + x2", [(0, 1)] * 2, n=64).to_dict())
+        ['S1', 'S1_conf', 'ST', 'ST_conf']
+        """
         return {"S1": self.S1, "S1_conf": self.S1_conf, "ST": self.ST, "ST_conf": self.ST_conf}
 
 
@@ -69,21 +112,71 @@ def sobol(
 ) -> SobolResult:
     """Sobol' indices of ``model`` with independent inputs distributed as ``bounds`` says.
 
-    ``model`` is a Python callable taking an (N, d) array and returning (N,) or (N, m) —
-    called once per Saltelli design of ``n`` base points (N = n(d + 2) rows) — or a formula
-    (``"sin(x1) + 7*sin(x2)^2"``) or a dict of formulas ``{output: formula}`` evaluated in Rust
-    (a study's ``kind = "expression"``). ``bounds``: ``[(lo, hi), ...]`` (uniform inputs
-    ``x1`` … ``xd``; an item may also be a prior as in a study file, ``{"normal": [0, 1]}``),
-    ``{name: (lo, hi) or prior}``, or SALib's ``problem`` dict (``dists`` unif, norm, lognorm,
-    truncnorm). The unit-cube design is mapped through each prior's quantile function.
+    The model is run on a Saltelli design of ``n`` base points (N = n(d + 2) rows), mapped
+    from the unit cube through each prior's quantile function; first-order indices by
+    Saltelli's (2010) estimator, total indices by Jansen's (the methods' chapter on Sobol'
+    indices). The result for a given ``seed`` equals ``iuq sobol`` on the same study.
 
-    Estimators: Saltelli (2010) first order and Jansen total order on a scrambled Sobol'
-    design; intervals from ``resamples`` bootstrap resamples, or from ``replicates``
-    independent scramblings. ``outputs`` (a count or names) saves the one extra model call at
-    the centre of the box that otherwise finds the number of outputs. ``on_error="fail"``
-    turns exceptions of the model into failed points (the batch is evaluated again point by
-    point; failed points' groups are dropped and counted); ``"raise"`` re-raises them.
-    The result for a given ``seed`` equals ``iuq sobol`` on the same study.
+    Parameters
+    ----------
+    model : callable, str or dict
+        A Python callable taking an (N, d) array and returning (N,) or (N, m), called once per
+        design; or a formula (``"sin(x1) + 7*sin(x2)^2"``), or a dict of formulas
+        ``{output: formula}``, evaluated in Rust (a study's ``kind = "expression"``).
+    bounds : sequence, dict or SALib problem
+        ``[(lo, hi), ...]`` (uniform inputs ``x1`` … ``xd``; an item may also be a prior as in
+        a study file, ``{"normal": [0, 1]}``), ``{name: (lo, hi) or prior}``, or SALib's
+        ``problem`` dict (``dists`` unif, norm, lognorm, truncnorm).
+    n : int, default 1024
+        Base points N (a power of two keeps the design balanced).
+    seed : int, default 0
+        Seed of the design's scrambling and of the bootstrap.
+    outputs : int or sequence of str, optional
+        The number or names of a callable's outputs; saves the one extra call at the centre of
+        the box that otherwise finds the number of outputs.
+    resamples : int, default 100
+        Bootstrap resamples of the base points for the intervals.
+    replicates : int, optional
+        Instead of the bootstrap: intervals from this many independent scramblings of the design
+        (the honest interval for quasi-random designs).
+    confidence : float, default 0.95
+        Confidence level of the intervals.
+    on_error : {"raise", "fail"}, default "raise"
+        ``"fail"`` turns exceptions of the model into failed points (the batch is evaluated
+        again point by point; failed points' groups are dropped and counted); ``"raise"``
+        re-raises them.
+
+    Returns
+    -------
+    SobolResult
+        ``S1``, ``ST`` and their half-widths, per output.
+
+    Raises
+    ------
+    ValueError
+        If an argument is out of range (the message starts with its name) or a dict of formulas
+        is empty.
+    TypeError
+        If ``model`` is neither a callable nor formulas.
+    Exception
+        Whatever the model raises, with ``on_error="raise"``.
+
+    Examples
+    --------
+    A Python model (``outputs=1`` skips the call that counts the outputs):
+
+    >>> import numpy as np
+    >>> import iuq
+    >>> s = iuq.sobol(lambda x: x[:, 0] + 2 * x[:, 1], [(0, 1)] * 2, n=512, seed=0, outputs=1)
+    >>> s.S1.round(1), s.ST.round(1)
+    (array([0.2, 0.8]), array([0.2, 0.8]))
+
+    The Ishigami function as a formula, evaluated in Rust:
+
+    >>> s = iuq.sobol("sin(x1) + 7*sin(x2)^2 + 0.1*x3^4*sin(x1)", [(-np.pi, np.pi)] * 3,
+    ...               n=1024, seed=0)
+    >>> s.S1[:2].round(2), s.ST.round(2)
+    (array([0.31, 0.44]), array([0.54, 0.44, 0.24]))
     """
     names, priors = parameter_priors(bounds)
     n = count("n", n, 2)

@@ -28,16 +28,42 @@ PathLike = Union[str, "os.PathLike[str]"]
 class PipelineResult:
     """The outcome of :meth:`Study.run`: the fields of ``iuq pipeline --json``.
 
-    ``report`` is the report page (``None`` with ``runs_only``); ``runs``/``failed`` count the
-    model runs over the initial, test and adaptive designs; ``adaptive`` holds the adaptive
-    engine's rounds and stopping decision (``None`` without ``[surrogate] adaptive``); ``q2``
-    the test-set Q2 of each surrogate; ``posterior`` the posterior tables (as in
-    ``pipeline.json``); ``posterior_check`` the model at the posterior per data point;
-    ``model_posterior`` (with ``model_posterior=True``) the model's own posterior from the
-    surrogate's: ``mean``, ``std``, ``mcse_mean``, ``mcse_std``, ``map`` by parameter,
-    ``pareto_k`` with its threshold, ``effective_sample_size``, ``certified``, the ``stages`` and
-    the ``model_runs`` it asked for; ``model_posterior_samples`` its weighted members as arrays
-    (:class:`iuq.ModelPosteriorSamples`, with ``to_arviz()``).
+    Attributes
+    ----------
+    study : str
+        The study's name.
+    out : pathlib.Path
+        The output directory.
+    report : pathlib.Path or None
+        The report page (``None`` with ``runs_only``).
+    runs, failed : int
+        Model runs over the initial, test and adaptive designs, and those that failed.
+    converged : bool
+        The adaptive engine's decision (``True`` without the engine).
+    rounds : int
+        Adaptive rounds.
+    adaptive : dict or None
+        The adaptive engine's rounds and stopping decision (``None`` without
+        ``[surrogate] adaptive``).
+    q2 : numpy.ndarray
+        The test-set Q2 of each surrogate.
+    posterior : list of dict
+        The posterior tables, per source (as in ``pipeline.json``).
+    posterior_check : dict or None
+        The model at the posterior, per data point.
+    model_posterior : dict or None
+        With ``model_posterior=True``: the model's own posterior from the surrogate's —
+        ``mean``, ``std``, ``mcse_mean``, ``mcse_std``, ``map`` by parameter, ``pareto_k`` with
+        its threshold, ``effective_sample_size``, ``certified``, the ``stages`` and the
+        ``model_runs`` it asked for.
+    model_posterior_samples : ModelPosteriorSamples or None
+        Its weighted members as arrays, with ``to_arviz()``.
+    stage_seconds : dict
+        Wall time of each stage.
+    seconds : float
+        Wall time in all.
+    raw : dict
+        The whole ``--json`` object.
     """
 
     study: str
@@ -60,7 +86,32 @@ class PipelineResult:
 
 @dataclass(frozen=True)
 class CampaignStatus:
-    """Where a study's campaign of model runs stands (``iuq status --json``)."""
+    """Where a study's campaign of model runs stands (``iuq status --json``).
+
+    Attributes
+    ----------
+    study : str
+        The study's name.
+    store : pathlib.Path
+        The campaign store.
+    counts : dict
+        Runs per status (``pending``, ``queued``, ``running``, ``succeeded``, ``failed``,
+        ``cancelled``).
+    total : int
+        Runs in all.
+    attempts : dict
+        Attempts per outcome.
+    failures : list of dict
+        The failed runs with their reasons.
+    journal_mode : str or None
+        The store's SQLite journal mode.
+    designs : list of dict
+        Every design recorded in the store (each batch the pipeline asked for), oldest first:
+        ``id``, ``label``, ``size``, ``created_at``, ``counts`` of its runs per status, and what
+        its runs cost since it was recorded: ``run_seconds`` (their attempts' summed duration),
+        ``first_started_at`` and ``last_finished_at`` (Unix seconds; ``None`` before one
+        finished).
+    """
 
     study: str
     store: Path
@@ -81,12 +132,44 @@ def _print_progress(line: str) -> None:
 
 
 class Study:
-    """A study file, loaded and checked (``Study.load(path)``).
+    r"""A study file, loaded and checked (the book's study-file reference).
 
     Its pipeline (:meth:`run`) makes or reuses the model runs through the study's campaign
     (``<study>.campaign/campaign.sqlite``), fits the surrogates, runs the adaptive engine when
     configured, computes Sobol' indices, samples the posterior with BASIS and writes the report
     — exactly ``iuq pipeline``. :meth:`status` and :meth:`export` read the campaign.
+
+    Create one with :meth:`load`; the constructor is not public.
+
+    Examples
+    --------
+    >>> import os, tempfile
+    >>> import iuq
+    >>> folder = tempfile.mkdtemp()
+    >>> with open(os.path.join(folder, "data.csv"), "w") as f:
+    ...     _ = f.write("x,y,y_err\n0.5,1.9,0.1\n1.0,3.1,0.1\n1.5,4.0,0.1\n2.0,5.1,0.1\n")
+    >>> with open(os.path.join(folder, "line.toml"), "w") as f:
+    ...     _ = f.write('''name = "line"
+    ... [parameters]
+    ... a = { uniform = [0, 5] }
+    ... b = { uniform = [0, 5] }
+    ... [likelihood]
+    ... data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }
+    ... [model]
+    ... kind = "expression"
+    ... abscissa = "x"
+    ... outputs = { y = "a + b*x" }
+    ... [surrogate]
+    ... design = { kind = "lhs", n = 10, seed = 1 }
+    ... [sampler]
+    ... samples = 2000
+    ... seed = 1
+    ... [sensitivity]
+    ... n = 256
+    ... ''')
+    >>> study = iuq.Study.load(os.path.join(folder, "line.toml"))
+    >>> study.name, study.parameters
+    ('line', ['a', 'b'])
     """
 
     __slots__ = ("_native",)
@@ -98,7 +181,30 @@ class Study:
 
     @classmethod
     def load(cls, path: PathLike) -> "Study":
-        """Read and check a study file; bad input is a ``ValueError`` naming the file and key."""
+        """Read and check a study file.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The study file (TOML). Relative paths inside it are taken from its folder.
+
+        Returns
+        -------
+        Study
+
+        Raises
+        ------
+        ValueError
+            If the file cannot be read or is not a valid study; the message names the file, the
+            key and the reason.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> study = iuq.Study.load("examples/rbc-healthy-hemocell.toml")   # from the repository root
+        >>> study.name, study.parameters
+        ('rbc-healthy-hemocell', ['kLink', 'kBend', 'viscosityRatio'])
+        """
         return cls(_native.Study.load(os.fspath(path)))
 
     @property
@@ -118,7 +224,7 @@ class Study:
 
     @property
     def ranges(self) -> List[tuple]:
-        """Each parameter's range (prior support, or plotting range of an unbounded prior)."""
+        """Each parameter's range (the prior's support, or the plotting range of an unbounded prior)."""
         return self._native.ranges
 
     def run(
@@ -132,17 +238,77 @@ class Study:
         recompute_rounds: bool = False,
         progress: Union[bool, Callable[[str], Any]] = False,
     ) -> PipelineResult:
-        """Run the calibration pipeline into ``out`` (default ``<study stem>-report``).
+        r"""Run the calibration pipeline into ``out`` (``iuq pipeline``).
 
-        ``max_parallel`` model runs at once (default: the executor's setting, else the cores);
-        ``model_posterior`` also gives the model's own posterior (``[model_posterior]``: from
-        the surrogate's by certified importance stages, or ``method = "basis"``); ``fresh`` moves the campaign aside
-        and recomputes every run; ``runs_only`` stops after the training and test runs;
-        ``recompute_rounds`` recomputes each adaptive round's measurement instead of reading
-        back the one the campaign store recorded for the same runs and settings.
-        ``progress=True`` prints the pipeline's news on stderr as the CLI does; a callable
-        receives each line (an exception it raises stops the reporting and is raised when the
-        pipeline returns). The GIL is released while the pipeline works.
+        The GIL is released while the pipeline works.
+
+        Parameters
+        ----------
+        out : str or os.PathLike, optional
+            The output directory (default ``<study stem>-report`` in the current directory).
+        max_parallel : int, optional
+            Model runs at once (default: the executor's setting, else the cores).
+        model_posterior : bool, default False
+            Also give the model's own posterior (``[model_posterior]``: from the surrogate's by
+            certified importance stages, or ``method = "basis"``).
+        fresh : bool, default False
+            Move the campaign aside and recompute every run.
+        runs_only : bool, default False
+            Stop after the training and test runs.
+        recompute_rounds : bool, default False
+            Recompute each adaptive round's measurement instead of reading back the one the
+            campaign store recorded for the same runs and settings.
+        progress : bool or callable, default False
+            ``True`` prints the pipeline's news on stderr as the CLI does; a callable receives each
+            line (an exception it raises stops the reporting and is raised when the pipeline
+            returns).
+
+        Returns
+        -------
+        PipelineResult
+            The fields of ``iuq pipeline --json``.
+
+        Raises
+        ------
+        ValueError
+            If the study's input is bad (the message names the file, key and reason).
+        TypeError
+            If ``progress`` is neither a bool nor a callable.
+        RuntimeError
+            If the work fails.
+
+        Examples
+        --------
+        >>> import os, tempfile
+        >>> import iuq
+        >>> folder = tempfile.mkdtemp()
+        >>> with open(os.path.join(folder, "data.csv"), "w") as f:
+        ...     _ = f.write("x,y,y_err\n0.5,1.9,0.1\n1.0,3.1,0.1\n1.5,4.0,0.1\n2.0,5.1,0.1\n")
+        >>> with open(os.path.join(folder, "line.toml"), "w") as f:
+        ...     _ = f.write('''name = "line"
+        ... [parameters]
+        ... a = { uniform = [0, 5] }
+        ... b = { uniform = [0, 5] }
+        ... [likelihood]
+        ... data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }
+        ... [model]
+        ... kind = "expression"
+        ... abscissa = "x"
+        ... outputs = { y = "a + b*x" }
+        ... [surrogate]
+        ... design = { kind = "lhs", n = 10, seed = 1 }
+        ... [sampler]
+        ... samples = 2000
+        ... seed = 1
+        ... [sensitivity]
+        ... n = 256
+        ... ''')
+        >>> study = iuq.Study.load(os.path.join(folder, "line.toml"))
+        >>> result = study.run(os.path.join(folder, "line-report"))
+        >>> result.runs, result.failed, result.converged
+        (72, 0, True)
+        >>> result.report.name
+        'report.html'
         """
         if out is None:
             out = Path(f"{self.path.stem}-report")
@@ -197,11 +363,41 @@ class Study:
         resamples: Optional[int] = None,
         confidence: Optional[float] = None,
     ) -> SobolResult:
-        """Sobol' indices of the study's model over its priors (``iuq sobol STUDY``).
+        r"""Sobol' indices of the study's model over its priors (``iuq sobol STUDY``).
 
-        Unset options come from the study's ``[sensitivity]`` section, else the CLI's defaults
-        (n = 1024, seed 0, 100 bootstrap resamples, confidence 0.95). The model is the study's
-        (``expression``, ``rbc-shear`` or ``umbridge``); the result equals ``iuq sobol``'s.
+        The model is the study's (``expression``, ``rbc-shear`` or ``umbridge``); the result equals
+        ``iuq sobol``'s. Unset options come from the study's ``[sensitivity]`` section, else the
+        command line's defaults.
+
+        Parameters
+        ----------
+        n : int, optional
+            Base points (default 1024).
+        seed : int, optional
+            Seed (default 0).
+        replicates : int, optional
+            Intervals from independent scramblings instead of the bootstrap.
+        resamples : int, optional
+            Bootstrap resamples (default 100).
+        confidence : float, optional
+            Confidence level (default 0.95).
+
+        Returns
+        -------
+        SobolResult
+
+        Raises
+        ------
+        ValueError
+            If an option is out of range or the study's model cannot be run in process.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> study = iuq.Study.load("examples/ishigami.toml")   # from the repository root
+        >>> s = study.sobol(n=1024)
+        >>> s.S1[:2].round(2), s.ST.round(2)
+        (array([0.3 , 0.46]), array([0.54, 0.43, 0.23]))
         """
         raw = self._native.sobol(
             None if n is None else count("n", n, 2),
@@ -221,11 +417,42 @@ class Study:
         max_chain: Optional[int] = None,
         seed: Optional[int] = None,
     ) -> BasisResult:
-        """BASIS posterior of the study's ``[likelihood]`` (``iuq basis STUDY --out OUT``).
+        r"""BASIS posterior of the study's ``[likelihood]`` (``iuq basis STUDY --out OUT``).
 
         Unset settings come from the study's ``[sampler]`` section; every result file
         (``samples.csv``, ``summary.json``, ``stages.json``, checkpoints, marginals) is written into
-        ``out`` (default ``<study name>-basis``). The result equals ``iuq basis``'s.
+        ``out``. The result equals ``iuq basis``'s.
+
+        Parameters
+        ----------
+        out : str or os.PathLike, optional
+            The output directory (default ``<study name>-basis``).
+        samples : int, optional
+            Population size.
+        burn : int, optional
+            Fixed burn-in steps of every chain.
+        max_chain : int, optional
+            Longest chain.
+        seed : int, optional
+            Seed.
+
+        Returns
+        -------
+        BasisResult
+
+        Raises
+        ------
+        ValueError
+            If a setting is out of range or the study has no usable likelihood.
+
+        Examples
+        --------
+        >>> import os, tempfile
+        >>> import iuq
+        >>> study = iuq.Study.load("examples/cooling/cooling-exact.toml")   # from the repository root
+        >>> posterior = study.basis(os.path.join(tempfile.mkdtemp(), "exact"), samples=1000)
+        >>> posterior.names, posterior.mean.round(2)
+        (['k', 'T0'], array([ 0.31, 88.84]))
         """
         if out is None:
             out = Path(f"{self.name}-basis")
@@ -239,7 +466,26 @@ class Study:
         return _basis_result(raw)
 
     def status(self) -> CampaignStatus:
-        """Runs per status, attempts per outcome and the failures with their reasons."""
+        """Runs per status, attempts per outcome and the failures with their reasons (``iuq status``).
+
+        Returns
+        -------
+        CampaignStatus
+
+        Raises
+        ------
+        ValueError
+            If the study's model runs in process (``expression``, ``umbridge``, ``callable``): their
+            runs are made and read by the pipeline alone.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> study = iuq.Study.load("examples/rbc-healthy-hemocell.toml")   # from the repository root
+        >>> status = study.status()
+        >>> status.total == sum(status.counts.values()), status.counts["failed"]
+        (True, 0)
+        """
         raw = json.loads(self._native.status())
         return CampaignStatus(
             study=raw["study"],
@@ -257,9 +503,30 @@ class Study:
     ) -> Union[List[Dict[str, Any]], int]:
         """Every run of the campaign — parameters, outputs, status, reason (``iuq export``).
 
-        Without ``out``: the rows as a list of dicts. With ``out``: the table written to that
-        file as CSV or JSON (``format``, default from the extension, else CSV); returns the
-        number of rows.
+        Parameters
+        ----------
+        out : str or os.PathLike, optional
+            Write the table to this file instead of returning it.
+        format : {"csv", "json"}, optional
+            The file's format (default from the extension, else CSV).
+
+        Returns
+        -------
+        list of dict or int
+            Without ``out``: the rows. With ``out``: the number of rows written.
+
+        Raises
+        ------
+        ValueError
+            If ``format`` is unknown or the study's model runs in process.
+
+        Examples
+        --------
+        >>> import iuq
+        >>> study = iuq.Study.load("examples/rbc-healthy-hemocell.toml")   # from the repository root
+        >>> rows = study.export()
+        >>> {"kLink", "kBend", "viscosityRatio", "el"} <= set(rows[0])
+        True
         """
         if format is not None and format not in ("csv", "json"):
             raise ValueError(f"format: `{format}` is not one of csv, json")
