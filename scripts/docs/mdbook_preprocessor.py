@@ -6,6 +6,8 @@ Two rewrites of every chapter's Markdown, outside code blocks and code spans:
 - **Math.** `$…$` (inline) and `$$…$$` (display, on lines of their own) hold LaTeX, as GitHub
   renders them in the Markdown sources; here they become MathML (latex2mathml), which browsers
   render without a script or a network connection.
+  A page holding the comment `<!-- math: off -->` (the generated CLI reference) keeps its
+  dollar signs as they are.
 - **Links to repository files outside `docs/`** (`[text](../crates/…)`, `[text](../data/…)`):
   the book holds only `docs/`, so such a link would point nowhere in the built site. It becomes
   a link into the repository when `repository-url` is set in book.toml (e.g. a forge's
@@ -34,21 +36,22 @@ def mathml(tex: str, display: bool) -> str:
     return html.replace("\n", "")
 
 
-def rewrite_text(text: str, chapter_dir: str, repo_url: str) -> str:
+def rewrite_text(text: str, chapter_dir: str, repo_url: str, math: bool = True) -> str:
     """Math and outside links in a run of Markdown text that holds no fenced block."""
+    text = rewrite_links(text, chapter_dir, repo_url)
+    if not math:
+        return text
     out = []
     pos = 0
     for span in CODE_SPAN.finditer(text):
-        out.append(rewrite_plain(text[pos:span.start()], chapter_dir, repo_url))
+        out.append(INLINE.sub(lambda m: mathml(m.group(1), False), text[pos:span.start()]))
         out.append(span.group(0))
         pos = span.end()
-    out.append(rewrite_plain(text[pos:], chapter_dir, repo_url))
+    out.append(INLINE.sub(lambda m: mathml(m.group(1), False), text[pos:]))
     return "".join(out)
 
 
-def rewrite_plain(text: str, chapter_dir: str, repo_url: str) -> str:
-    text = INLINE.sub(lambda m: mathml(m.group(1), False), text)
-
+def rewrite_links(text: str, chapter_dir: str, repo_url: str) -> str:
     def link(m: "re.Match[str]") -> str:
         bang, label, target = m.groups()
         if bang or re.match(r"^[a-z][a-z0-9+.-]*:|^#|^/", target):
@@ -60,18 +63,19 @@ def rewrite_plain(text: str, chapter_dir: str, repo_url: str) -> str:
         if repo_url:
             return f"[{label}]({repo_url.rstrip('/')}/{resolved}{'#' + anchor if anchor else ''})"
         code = f"`{resolved}`"
-        return code if label.strip("`") == resolved or label == code else f"{label} ({code})"
+        return code if label.strip("`") == resolved else f"{label} ({code})"
 
     return LINK.sub(link, text)
 
 
 def rewrite(content: str, chapter_dir: str, repo_url: str) -> str:
+    math = "<!-- math: off -->" not in content
     lines = content.split("\n")
     out, plain, fence = [], [], None
 
     def flush():
         if plain:
-            out.append(rewrite_text("\n".join(plain), chapter_dir, repo_url))
+            out.append(rewrite_text("\n".join(plain), chapter_dir, repo_url, math))
             plain.clear()
 
     i = 0
@@ -86,11 +90,11 @@ def rewrite(content: str, chapter_dir: str, repo_url: str) -> str:
             out.append(line)
             if line.strip().startswith(fence) and line.strip().strip(fence[0]) == "":
                 fence = None
-        elif DISPLAY.match(line):
+        elif math and DISPLAY.match(line):
             flush()
             indent = line[: len(line) - len(line.lstrip())]
             out.append(indent + mathml(DISPLAY.match(line).group(1), True))
-        elif line.strip() == "$$":
+        elif math and line.strip() == "$$":
             # A display formula over several lines: up to the closing `$$`.
             flush()
             j = i + 1
