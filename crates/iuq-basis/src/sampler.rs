@@ -183,14 +183,9 @@ impl BasisState {
     }
 }
 
-/// Whether to go on after a stage.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Control {
-    /// Continue with the next stage.
-    Continue,
-    /// Stop now; the run ends with [`StopReason::Interrupted`] (unless it had finished anyway).
-    Stop,
-}
+/// Whether to go on after a stage: iuq's one control answer ([`iuq_core::observer`]); `Stop`
+/// ends the run with [`StopReason::Interrupted`] (unless it had finished anyway).
+pub use iuq_core::Control;
 
 /// Called with the state after every stage (stage 0 included) — to report progress, write a
 /// checkpoint, or stop the run (in the manner of argmin's observers).

@@ -16,11 +16,13 @@ pub mod exponential;
 pub mod expression;
 pub mod kde;
 pub mod normal;
+pub mod observer;
 pub mod parameter_space;
 pub mod prior;
 pub mod weighted_statistics;
 
 pub use expression::{Expression, ExpressionModel};
 pub use kde::GaussianKde;
+pub use observer::{Control, Observer};
 pub use parameter_space::{Parameter, ParameterSpace};
 pub use prior::Prior;
