@@ -1,7 +1,8 @@
 //! Sequential design for calibration: where to run an expensive model next so that a
 //! surrogate-based posterior converges with few runs, and when to stop.
 //!
-//! One round of the adaptive engine (the orchestration lives in `iuq-study`): fit the surrogates
+//! One round of the adaptive engine ([`engine`]: its state and step; the study layer in
+//! `iuq-study` drives it, owning the model runs, the campaign and the files): fit the surrogates
 //! (one GP per data point, and where runs fail a [`iuq_gp::FailureClassifier`]), sample the
 //! posterior on them, then
 //!
@@ -22,7 +23,9 @@
 //! | [`allocation`] | how many runs each run group gets in a round, by its part of ε |
 //! | [`batch`] | greedy batch selection with kriging-believer variance updates |
 //! | [`moment_acquisition`] | the batch that most shrinks the first-order error of the posterior moments |
+//! | [`engine`] | the loop's state and step: judge a round, decide the next (argmin's shape) |
 //! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
+//! | [`posterior_distance`] | the sliced Wasserstein distance between two rounds' posteriors, beyond noise |
 //! | [`moment_error`] | the error ε of the posterior moments under the GPs' error |
 //! | [`sampler_agreement`] | whether the posterior depends on how it was sampled (replicates with stronger mixing) |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
@@ -36,10 +39,12 @@ pub mod acquisition;
 pub mod allocation;
 pub mod batch;
 pub mod convergence;
+pub mod engine;
 pub mod error;
 pub mod extrapolation;
 pub mod moment_acquisition;
 pub mod moment_error;
+pub mod posterior_distance;
 pub mod sampler_agreement;
 
 pub use acquisition::{likelihood_weights, log_likelihood_variance};
@@ -48,6 +53,10 @@ pub use batch::{LikelihoodTerm, Selection, select_batch};
 pub use convergence::{
     ConvergenceCriterion, NOISE_MULTIPLE, PosteriorMoments, RoundAssessment,
     surrogate_log_likelihood_std,
+};
+pub use engine::{
+    AdaptiveEngine, EngineSettings, EngineState, Judgement, MoreSamples, Next, RoundEvent,
+    RoundReading, RoundSampling, StoppingRule,
 };
 pub use error::{AdaptiveError, Result};
 pub use extrapolation::{extrapolation_share, nearest_run_distance};
@@ -58,4 +67,5 @@ pub use moment_error::{
     ComponentErrors, MomentError, MomentTerm, linearised_moment_error, sampled_moment_error,
     sampled_moment_errors_by_group, sampled_moment_errors_by_group_from_components,
 };
+pub use posterior_distance::{PosteriorDistance, posterior_distance};
 pub use sampler_agreement::{SamplerAgreement, sampler_agreement};
