@@ -4,10 +4,13 @@
 //! 2. sample its posterior with `replicates` independent BASIS runs of `samples` each (seeds
 //!    from the sampler's, the round and the replicate), pooled; their spread is the Monte Carlo
 //!    error of the moments;
-//! 3. judge convergence (`iuq_adaptive::convergence`): every parameter's posterior mean and std
-//!    moved by less than `tolerance` posterior stds since the previous round beyond the
-//!    sampler's noise, and that noise is below `tolerance` (else the next round's replicates
-//!    sample twice as many, up to `max_samples`); the GPs' error could move no posterior mean or
+//! 3. judge convergence (`iuq_adaptive::engine`, whose state and step decide the loop; this module
+//!    drives it with the campaign and the files): every parameter's posterior mean and std, and
+//!    with `stopping_rule = "distribution"` the posterior as a whole
+//!    (`iuq_adaptive::posterior_distance`), moved by less than `tolerance` posterior stds since
+//!    the previous round beyond the sampler's noise, and that noise is below `tolerance` (else the
+//!    next round's replicates sample twice as many, up to `max_samples`); the GPs' error could
+//!    move no posterior mean or
 //!    std by more than `tolerance` posterior stds (`iuq_adaptive::moment_error`: the std of the
 //!    reweighted moments over [`SURROGATE_ERROR_DRAWS`] joint draws of the GPs' error);
 //!    and the region of the posterior where a failure classifier is unsure
@@ -41,6 +44,10 @@ use std::time::Instant;
 
 use serde::{Deserialize, Serialize};
 
+use iuq_adaptive::engine::{
+    AdaptiveEngine, EngineSettings, EngineState, Judgement, RoundEvent, RoundReading,
+    RoundSampling, StoppingRule,
+};
 use iuq_adaptive::{
     ComponentErrors, ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments,
     SamplerAgreement, SensitivityTerm, extrapolation_share, group_batches, likelihood_weights,
@@ -51,12 +58,13 @@ use iuq_adaptive::{
 };
 use iuq_basis::carried_population::{Carried, carry};
 use iuq_basis::{Basis, BasisState, MAX_MIXING_LEVEL};
+use iuq_core::{Control, Observer};
 
 use super::Events;
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::{Acquisition, AdaptiveSettings, MoreSamples, PosteriorSampling};
+use super::settings::{Acquisition, AdaptiveSettings, PosteriorSampling};
 use super::surrogate::{Emulation, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
@@ -80,10 +88,6 @@ const UNSURE: (f64, f64) = (0.1, 0.9);
 /// classifier is unsure: a candidate there that is farther than this from every run of its group
 /// gets a run.
 pub const BOUNDARY_RESOLUTION: f64 = 0.25;
-
-/// When a round finds no candidate worth a run although the stopping rule does not hold, the
-/// next looks among this many times more candidates (from twice the samples), twice at most.
-pub const CANDIDATE_WIDENING: usize = 4;
 
 /// How near, in posterior stds, a failed run must be for the posterior to meet the boundary of
 /// the failure region there.
@@ -192,6 +196,13 @@ pub struct AdaptiveRound {
     /// max_k of the sampler's noise on those shifts (2 Monte Carlo errors of the difference),
     /// in posterior stds: a shift is resolved only when this is below the tolerance.
     pub shift_noise: Option<f64>,
+    /// The sliced distance between this round's posterior and the previous one's beyond the
+    /// samplers' noise, in posterior stds (`iuq_adaptive::posterior_distance`; `None` in the
+    /// first round, with `stopping_rule = "moments"`, or where the previous round's samples are
+    /// not in the store).
+    pub distance: Option<f64>,
+    /// The samplers' noise on that distance, in posterior stds.
+    pub distance_noise: Option<f64>,
     /// The surrogate's std of the log-likelihood, averaged over the posterior (nats).
     pub log_likelihood_std: f64,
     /// ε: the largest typical change (68.3 % quantile of its absolute value over draws of the
@@ -255,6 +266,10 @@ pub struct AdaptiveOutcome {
     /// The rows of `adaptive/runs.csv` so far.
     #[serde(skip)]
     run_rows: Vec<Vec<f64>>,
+    /// The last round's samples per replicate (where kept), the previous round of a loop that
+    /// goes on after a failed check.
+    #[serde(skip)]
+    populations: Option<Vec<Vec<Vec<f64>>>>,
 }
 
 /// A posterior check that failed its test: its runs joined the training runs and the rounds went
@@ -572,19 +587,6 @@ struct RoundMeasurement {
 }
 
 impl RoundMeasurement {
-    /// Whether this round makes boundary runs: some failure region wants them, the surrogate is
-    /// sure where the posterior lies, and rounds make runs at all.
-    /// The posterior depends on how it was sampled.
-    fn sampler_disagrees(&self) -> bool {
-        self.sampler_agreement.as_ref().is_some_and(|a| a.disagrees)
-    }
-
-    fn boundary_runs_due(&self, settings: &AdaptiveSettings) -> bool {
-        self.boundary_wanted
-            && self.log_likelihood_std < settings.log_likelihood_tolerance
-            && settings.batch > 0
-    }
-
     fn moments(&self) -> PosteriorMoments {
         PosteriorMoments {
             mean: self.mean.clone(),
@@ -633,18 +635,21 @@ const MEASUREMENT_VERSION: u32 = 2;
 /// the seeds, the samples and replicates of the round, the candidates, the error draws, and every
 /// run of every group with what it returned. The stopping rule's tolerances and `max_runs` are
 /// not in it: the rule is applied to the measurement afresh.
-#[allow(clippy::too_many_arguments)]
 fn round_fingerprint(
-    study: &Study,
-    data: &DataLikelihood,
-    settings: &AdaptiveSettings,
-    emulation: &Emulation,
-    training_seed: u64,
-    base_seed: u64,
+    inputs: &RoundInputs<'_>,
     sampling: &RoundSampling,
     groups: &[GroupRuns],
     carried_from: Option<&str>,
 ) -> String {
+    let RoundInputs {
+        study,
+        data,
+        settings,
+        emulation,
+        training_seed,
+        base_seed,
+        ..
+    } = *inputs;
     use std::fmt::Write;
     let table = |t: &Option<toml::Table>| {
         t.as_ref()
@@ -700,17 +705,6 @@ fn round_fingerprint(
     iuq_campaign::study::hex_sha256(text.as_bytes())
 }
 
-/// How a round samples its posterior and chooses its candidates.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct RoundSampling {
-    /// BASIS population of each replicate.
-    samples: usize,
-    /// Distinct posterior samples scored as candidates.
-    candidates: usize,
-    /// How much harder than `[sampler]` the chains mix (the check's replicates one more).
-    mixing_level: u32,
-}
-
 /// What a freshly measured round keeps for choosing its new runs.
 struct RoundScoring {
     surrogate: Surrogate,
@@ -743,9 +737,9 @@ struct ReplicateSampling {
 }
 
 /// Sample the surrogate `posterior` with the round's replicates, each from its population
-/// carried from the round before where `carried` holds one and the reweighting's ESS holds
-/// (`iuq_basis::carried_population`), else from the prior; `carried` receives each replicate's
-/// new population. Every second replicate mixes a level harder: the check of the sampler.
+/// carried from the round before where `sampling = "sequential"`, `carried` holds one and the
+/// reweighting's ESS holds (`iuq_basis::carried_population`), else from the prior; `carried`
+/// receives each replicate's new population. Every second replicate mixes a level harder: the check of the sampler.
 fn sample_replicates(
     ctx: &RoundContext<'_>,
     posterior: &crate::posterior::StudyPosterior,
@@ -780,7 +774,12 @@ fn sample_replicates(
         .with_stronger_mixing(ctx.sampling.mixing_level + harder);
         // A population carried from the round before, reweighted to this surrogate (None: the
         // first round, `sampling = "from-prior"`, or an ESS that collapsed).
-        let start = match carried.get(replicate).and_then(Option::as_ref) {
+        let carries = ctx.settings.sampling == PosteriorSampling::Sequential;
+        let start = match carried
+            .get(replicate)
+            .and_then(Option::as_ref)
+            .filter(|_| carries)
+        {
             Some(previous) => {
                 let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
                     .map_err(|e| {
@@ -963,23 +962,26 @@ fn surrogate_errors(
 
 /// Fit the surrogate of `groups`, sample its posterior with the replicates, and measure the
 /// round: moments, u, ε, extrapolation, the failure boundaries.
-#[allow(clippy::too_many_arguments)]
 fn measure_round(
-    study: &Study,
-    data: &DataLikelihood,
-    settings: &AdaptiveSettings,
-    emulation: &Emulation,
-    training_seed: u64,
-    base_seed: u64,
+    inputs: &RoundInputs<'_>,
     round: usize,
     sampling: &RoundSampling,
-    runs: &ModelRuns,
     groups: &[GroupRuns],
-    dir: &Path,
-    events: &Events,
-    describe: &dyn Fn(usize) -> String,
     carried: &mut [Option<BasisState>],
 ) -> Result<(RoundMeasurement, RoundScoring)> {
+    let RoundInputs {
+        study,
+        data,
+        settings,
+        emulation,
+        training_seed,
+        base_seed,
+        runs,
+        dir,
+        events,
+        describe,
+        ..
+    } = *inputs;
     let d = study.space.dimension();
     let modelling_error = data.modelling_error.is_some();
     let surrogate = Surrogate::fit(
@@ -1138,172 +1140,388 @@ fn measure_round(
     ))
 }
 
-/// Run the adaptive engine on `groups` (holding the initial and test runs), adding its runs to
-/// them. `out` receives `adaptive/round-<k>/` (each round's BASIS results),
-/// `adaptive/rounds.json` (the rounds' summaries) and `adaptive/runs.csv` (every new run: round,
-/// run group from 0, θ, and 1 where it failed).
-#[allow(clippy::too_many_arguments)]
-pub(super) fn refine(
-    study: &Study,
-    data: &DataLikelihood,
-    settings: &AdaptiveSettings,
-    emulation: &Emulation,
-    training_seed: u64,
-    runs: &ModelRuns,
+/// What every round of one [`refine`] reads: the study, its data and settings, the campaign and
+/// where the rounds' files go.
+pub(super) struct RoundInputs<'a> {
+    pub(super) study: &'a Study,
+    pub(super) data: &'a DataLikelihood,
+    pub(super) settings: &'a AdaptiveSettings,
+    pub(super) emulation: &'a Emulation,
+    /// Seed of the training designs (the GPs' fits are seeded by it).
+    pub(super) training_seed: u64,
+    /// The `[sampler]` seed, from which every round's replicates are seeded.
+    pub(super) base_seed: u64,
+    pub(super) runs: &'a ModelRuns,
+    /// `adaptive/` of the report folder.
+    pub(super) dir: &'a Path,
+    pub(super) events: &'a Events,
+    /// The run's description, for the surrogate's messages.
+    pub(super) describe: &'a dyn Fn(usize) -> String,
+    /// Measure every round again rather than read its recorded measurement.
+    pub(super) recompute: bool,
+}
+
+impl RoundInputs<'_> {
+    /// Whether the rounds' populations are kept (in the store and for the next round): to carry
+    /// them (`sampling = "sequential"`) or to measure the distance between rounds.
+    fn keeps_populations(&self) -> bool {
+        self.settings.sampling == PosteriorSampling::Sequential
+            || self.settings.stopping_rule == StoppingRule::Distribution
+    }
+}
+
+/// A round as measured or read back: its measurement, what choosing runs needs (a freshly
+/// measured round only) and its fingerprint.
+struct MeasuredRound {
+    measurement: RoundMeasurement,
+    scoring: Option<RoundScoring>,
+    fingerprint: String,
+}
+
+/// The samples of every replicate's population, where each is known.
+fn populations_of(carried: &[Option<BasisState>]) -> Option<Vec<Vec<Vec<f64>>>> {
+    carried
+        .iter()
+        .map(|s| s.as_ref().map(|s| s.samples.clone()))
+        .collect()
+}
+
+impl RoundMeasurement {
+    fn reading(&self, populations: Option<Vec<Vec<Vec<f64>>>>, runs: usize) -> RoundReading<'_> {
+        RoundReading {
+            moments: self.moments(),
+            log_likelihood_std: self.log_likelihood_std,
+            surrogate_error: self.surrogate_error,
+            boundary_wanted: self.boundary_wanted,
+            sampler_agreement: self.sampler_agreement.as_ref(),
+            populations,
+            runs,
+        }
+    }
+}
+
+/// Round `state.round`'s measurement: read back from the store where it was recorded for the
+/// same inputs and nothing new is to be chosen from it (the round stops, or its runs are
+/// recorded), else measured (the surrogate fitted, its posterior sampled) and recorded.
+/// `carried` holds each replicate's population of the round before and receives this round's.
+fn measure_or_read_round(
+    inputs: &RoundInputs<'_>,
+    engine: &AdaptiveEngine,
+    state: &EngineState,
+    groups: &[GroupRuns],
+    carried: &mut [Option<BasisState>],
+    carried_from: Option<&str>,
+    runs_recorded: bool,
+) -> Result<MeasuredRound> {
+    let round = state.round;
+    let label = format!("adaptive-round-{round}");
+    let made: usize = groups.iter().map(GroupRuns::len).sum();
+    let fingerprint = round_fingerprint(inputs, &state.sampling, groups, carried_from);
+    let key = format!("{label}/assessment");
+    let population_key = format!("{label}/population");
+    let runs = inputs.runs;
+    let cached = runs
+        .derived_result(&key, &fingerprint)?
+        .and_then(|text| serde_json::from_str::<RoundMeasurement>(&text).ok());
+    if let Some(m) = cached.as_ref().filter(|_| !inputs.recompute) {
+        let recorded_populations = if inputs.keeps_populations() {
+            runs.derived_result(&population_key, &fingerprint)?
+                .and_then(|text| serde_json::from_str::<Vec<Option<BasisState>>>(&text).ok())
+                .filter(|states| states.len() == inputs.settings.replicates)
+        } else {
+            None
+        };
+        let populations = recorded_populations.as_deref().and_then(populations_of);
+        let stops = engine
+            .judge(state, &m.reading(populations, made))
+            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?
+            .stop
+            .is_some();
+        if stops || runs_recorded {
+            let fresh = vec![None; inputs.settings.replicates];
+            carried.clone_from_slice(&recorded_populations.unwrap_or(fresh));
+            return Ok(MeasuredRound {
+                measurement: m.clone(),
+                scoring: None,
+                fingerprint,
+            });
+        }
+    }
+    let (m, scoring) = measure_round(inputs, round, &state.sampling, groups, carried)?;
+    if inputs.keeps_populations() {
+        let text = serde_json::to_string(&carried).map_err(|e| {
+            StudyError::Failure(format!(
+                "adaptive round {round}: cannot record the population: {e}"
+            ))
+        })?;
+        runs.record_derived_result(&population_key, &fingerprint, &text)?;
+    }
+    if let Some(old) = cached.as_ref().filter(|old| **old != m) {
+        inputs.events.message(format!(
+            "adaptive round {round}: the recomputed assessment differs from the one recorded in the store (surrogate error {} vs {}, log evidence {} vs {}); the new one is recorded",
+            m.surrogate_error, old.surrogate_error, m.log_evidence, old.log_evidence
+        ));
+    }
+    let text = serde_json::to_string(&m)
+        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: cannot record: {e}")))?;
+    runs.record_derived_result(&key, &fingerprint, &text)?;
+    Ok(MeasuredRound {
+        measurement: m,
+        scoring: Some(scoring),
+        fingerprint,
+    })
+}
+
+impl AdaptiveRound {
+    /// The round as judged, before its runs are made.
+    fn judged(
+        round: usize,
+        runs: usize,
+        measured: &RoundMeasurement,
+        judgement: &Judgement,
+        sampling: &RoundSampling,
+        settings: &AdaptiveSettings,
+        groups: usize,
+    ) -> Self {
+        let m = measured;
+        Self {
+            round,
+            runs,
+            new_runs: 0,
+            new_runs_per_group: vec![0; groups],
+            samples: sampling.samples * settings.replicates,
+            mean: m.mean.clone(),
+            std: m.std.clone(),
+            mean_error: m.mean_error.clone(),
+            std_error: m.std_error.clone(),
+            shift: judgement.assessment.shift,
+            shift_noise: judgement.assessment.noise,
+            distance: judgement.distance.as_ref().map(|d| d.distance),
+            distance_noise: judgement.distance.as_ref().map(|d| d.noise),
+            log_likelihood_std: m.log_likelihood_std,
+            surrogate_error: m.surrogate_error,
+            log_evidence_error: m.log_evidence_error,
+            group_surrogate_error: m.group_surrogate_error.clone(),
+            extrapolation_share: m.extrapolation_share,
+            unsure_share: m.unsure_share,
+            log_evidence: m.log_evidence,
+            mixing_level: sampling.mixing_level,
+            sampler_agreement: m.sampler_agreement.clone(),
+            candidates: sampling.candidates,
+            converged: judgement.converged,
+            seconds: 0.0,
+            carried_replicates: m.carried_replicates,
+            surrogate_evaluations: m.surrogate_evaluations,
+        }
+    }
+}
+
+/// The round's line in the log: what it measured and what it does next.
+fn round_message(
+    round: usize,
+    made: usize,
+    m: &RoundMeasurement,
+    j: &Judgement,
+    requests: usize,
+    candidates: usize,
+) -> String {
+    let shown = |v: Option<f64>| v.map_or("-".to_string(), |s| format!("{s:.3}"));
+    format!(
+        "adaptive round {round}: {made} runs so far; posterior shift {}, distance {} (sampler noise {}), surrogate error {:.3} posterior stds, surrogate log-likelihood std {:.3}, {:.0} % of the posterior extrapolated; {}",
+        shown(j.assessment.shift),
+        shown(j.distance.as_ref().map(|d| d.distance)),
+        shown(j.noise()),
+        j.assessment.surrogate_error,
+        m.log_likelihood_std,
+        100.0 * m.extrapolation_share,
+        match (&j.stop, requests) {
+            (Some(reason), _) => format!("stop: {reason}"),
+            (None, 0) => format!("no candidate run is worth making among {candidates} candidates"),
+            (None, n) => format!("{n} new runs"),
+        }
+    )
+}
+
+/// The engine's observer in the pipeline: the notes after a round's step into the pipeline's
+/// log, and a Ctrl-C as [`Control::Stop`].
+struct RoundLog<'a> {
+    events: &'a Events,
+}
+
+impl Observer<RoundEvent<'_>> for RoundLog<'_> {
+    fn observe(&mut self, event: &RoundEvent<'_>) -> Control {
+        let (round, state) = (event.round, event.state);
+        if event.judgement.sampler_disagrees && event.judgement.stop.is_none() {
+            self.events.message(format!(
+                "adaptive round {round}: the replicates that mixed harder differ by {:.3} posterior stds: not converged; the rounds from the next sample at mixing level {}",
+                event.judgement.sampler_disagreement, state.sampling.mixing_level
+            ));
+        } else if event.new_runs == 0 && state.stop_reason.is_none() {
+            self.events.message(format!(
+                "adaptive round {round}: no candidate run is worth making, although the rule does not hold; the next round looks among {} candidates from {} samples per replicate",
+                state.sampling.candidates, state.sampling.samples
+            ));
+        }
+        if self.events.check_interrupt().is_err() {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
+    }
+}
+
+/// Run the requests of round `round` through the campaign and add them to `groups` and to the
+/// rows of `adaptive/runs.csv`.
+fn make_round_runs(
+    inputs: &RoundInputs<'_>,
+    round: usize,
+    requests: Vec<(usize, Vec<f64>)>,
     groups: &mut [GroupRuns],
-    out: &Path,
-    events: &Events,
-    describe: &dyn Fn(usize) -> String,
-    recompute: bool,
+    rows: &mut Vec<Vec<f64>>,
+) -> Result<()> {
+    if requests.is_empty() {
+        return Ok(());
+    }
+    let label = format!("adaptive-round-{round}");
+    let outcomes = inputs.runs.run(Some(&label), &requests)?;
+    for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
+        let mut row = vec![round as f64, *g as f64];
+        row.extend(theta);
+        row.push(if outcome.is_ok() { 0.0 } else { 1.0 });
+        rows.push(row);
+    }
+    write_runs_table(inputs.study, inputs.dir, rows)?;
+    let mut per_group: Vec<(Vec<Vec<f64>>, Vec<iuq_core::Outcome>)> =
+        vec![(Vec::new(), Vec::new()); groups.len()];
+    for ((g, theta), outcome) in requests.into_iter().zip(outcomes) {
+        per_group[g].0.push(theta);
+        per_group[g].1.push(outcome);
+    }
+    for (group, (points, outcomes)) in groups.iter_mut().zip(per_group) {
+        group.extend(RunOrigin::Adaptive { round }, points, outcomes);
+    }
+    Ok(())
+}
+
+/// The engine's settings from the study's `[surrogate] adaptive`.
+fn engine_settings(settings: &AdaptiveSettings) -> EngineSettings {
+    EngineSettings {
+        criterion: ConvergenceCriterion {
+            tolerance: settings.tolerance,
+            log_likelihood_tolerance: settings.log_likelihood_tolerance,
+        },
+        stopping_rule: settings.stopping_rule,
+        max_runs: settings.max_runs,
+        max_rounds: settings.max_rounds,
+        samples: settings.samples,
+        max_samples: settings.max_samples,
+        candidates: settings.candidates,
+        more_samples: settings.more_samples,
+        max_mixing_level: MAX_MIXING_LEVEL,
+        makes_runs: settings.batch > 0,
+    }
+}
+
+/// Run the adaptive engine on `groups` (holding the initial and test runs), adding its runs to
+/// them. `inputs.dir` receives `round-<k>/` (each round's BASIS results), `rounds.json` (the
+/// rounds' summaries) and `runs.csv` (every new run: round, run group from 0, θ, and 1 where it
+/// failed).
+pub(super) fn refine(
+    inputs: &RoundInputs<'_>,
+    groups: &mut [GroupRuns],
     earlier: Option<AdaptiveOutcome>,
 ) -> Result<AdaptiveOutcome> {
+    let RoundInputs {
+        study,
+        data,
+        settings,
+        runs,
+        dir,
+        events,
+        ..
+    } = *inputs;
     let file = study.path.display().to_string();
-    let criterion = ConvergenceCriterion {
-        tolerance: settings.tolerance,
-        log_likelihood_tolerance: settings.log_likelihood_tolerance,
-    }
-    .check()
-    .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
-    let base_seed = parse_sampler(study, &SamplerOverrides::default())?.seed;
-    let min_score = (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64;
-    // A run must shrink the summed squared moment error by a hundredth of tolerance², shared
-    // among the run groups.
-    let min_moment_score = (settings.tolerance / 10.0).powi(2) / groups.len().max(1) as f64;
-    let dir = out.join("adaptive");
-    std::fs::create_dir_all(&dir)
+    let engine = AdaptiveEngine::new(engine_settings(settings))
+        .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
+    std::fs::create_dir_all(dir)
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
-    // Going on after a failed check: from the round after the last, its moments the previous
-    // ones (the shift then measures what the check's runs changed).
-    let first_round = earlier.as_ref().map_or(1, |e| e.last_round() + 1);
-    let (mut rounds, retrained_checks, mut new_rows, mut parameters) = match earlier {
-        Some(e) => (e.rounds, e.retrained_checks, e.run_rows, e.parameters),
-        None => (Vec::new(), Vec::new(), Vec::new(), Vec::new()),
-    };
-    if !new_rows.is_empty() {
-        write_runs_table(study, &dir, &new_rows)?;
-    }
-    let mut previous: Option<PosteriorMoments> = rounds.last().map(|r| PosteriorMoments {
-        mean: r.mean.clone(),
-        std: r.std.clone(),
-        mean_error: r.mean_error.clone(),
-        std_error: r.std_error.clone(),
-    });
-    let mut sampling = RoundSampling {
-        samples: rounds
-            .last()
-            .map_or(settings.samples, |r| r.samples / settings.replicates.max(1)),
-        candidates: rounds.last().map_or(settings.candidates, |r| r.candidates),
-        mixing_level: rounds.last().map_or(0, |r| r.mixing_level),
-    };
     let choice = RunChoice {
         data,
         settings,
         runs,
         groups: groups.len(),
-        min_score,
-        min_moment_score,
+        min_score: (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64,
+        // A run must shrink the summed squared moment error by a hundredth of tolerance², shared
+        // among the run groups.
+        min_moment_score: (settings.tolerance / 10.0).powi(2) / groups.len().max(1) as f64,
     };
-    let mut outcome_reason = format!("reached max_rounds = {}", settings.max_rounds);
+    // Going on after a failed check: from the round after the last, its moments the previous
+    // ones (the shift then measures what the check's runs changed).
+    let first_round = earlier.as_ref().map_or(1, |e| e.last_round() + 1);
+    let (mut rounds, retrained_checks, mut new_rows, mut parameters, last_populations) =
+        match earlier {
+            Some(e) => (
+                e.rounds,
+                e.retrained_checks,
+                e.run_rows,
+                e.parameters,
+                e.populations,
+            ),
+            None => (Vec::new(), Vec::new(), Vec::new(), Vec::new(), None),
+        };
+    if !new_rows.is_empty() {
+        write_runs_table(study, dir, &new_rows)?;
+    }
+    let mut state = engine.start(
+        first_round,
+        rounds.last().map(|r: &AdaptiveRound| {
+            (
+                PosteriorMoments {
+                    mean: r.mean.clone(),
+                    std: r.std.clone(),
+                    mean_error: r.mean_error.clone(),
+                    std_error: r.std_error.clone(),
+                },
+                RoundSampling {
+                    samples: r.samples / settings.replicates.max(1),
+                    candidates: r.candidates,
+                    mixing_level: r.mixing_level,
+                },
+            )
+        }),
+    );
+    state.previous_populations = last_populations;
+    let mut observer = RoundLog { events };
     // Each replicate's population, carried from round to round (`sampling = "sequential"`),
     // and the fingerprint of the round it comes from.
     let sequential = settings.sampling == PosteriorSampling::Sequential;
     let mut carried: Vec<Option<BasisState>> = vec![None; settings.replicates];
     let mut carried_from: Option<String> = None;
-    let mut converged = false;
-    for round in first_round..=settings.max_rounds {
+    if state.round > settings.max_rounds {
+        state.stop_reason = Some(format!("reached max_rounds = {}", settings.max_rounds));
+    }
+    while state.stop_reason.is_none() {
         events.check_interrupt()?;
+        let round = state.round;
         let started = Instant::now();
         let made: usize = groups.iter().map(GroupRuns::len).sum();
-        let label = format!("adaptive-round-{round}");
         // A round an earlier pipeline already chose (the same study, a rerun after a stop) is
         // replayed from the store as it was chosen, bit for bit, even where recomputing the
         // choice would differ in the last bits (another processor, another library version).
-        let recorded = runs.recorded_requests(&label)?;
-        let key = format!("{label}/assessment");
-        let fingerprint = round_fingerprint(
-            study,
-            data,
-            settings,
-            emulation,
-            training_seed,
-            base_seed,
-            &sampling,
+        let recorded = runs.recorded_requests(&format!("adaptive-round-{round}"))?;
+        let MeasuredRound {
+            measurement: measured,
+            scoring,
+            fingerprint,
+        } = measure_or_read_round(
+            inputs,
+            &engine,
+            &state,
             groups,
+            &mut carried,
             carried_from.as_deref(),
-        );
-        let population_key = format!("{label}/population");
-        let cached = runs
-            .derived_result(&key, &fingerprint)?
-            .and_then(|text| serde_json::from_str::<RoundMeasurement>(&text).ok());
-        let judge = |m: &RoundMeasurement| {
-            criterion.assess(
-                previous.as_ref(),
-                &m.moments(),
-                m.log_likelihood_std,
-                m.surrogate_error,
-            )
-        };
-        // The recorded measurement serves when nothing new is to be chosen from it: the round
-        // stops, or its runs are recorded.
-        let reusable = match &cached {
-            Some(m) if !recompute => {
-                let converged =
-                    judge(m)?.converged && !m.boundary_runs_due(settings) && !m.sampler_disagrees();
-                converged || made >= settings.max_runs || recorded.is_some()
-            }
-            _ => false,
-        };
-        let (measured, scoring) = if reusable {
-            let Some(m) = cached else {
-                return Err(StudyError::Failure(format!(
-                    "adaptive round {round}: the recorded assessment vanished"
-                )));
-            };
-            if sequential {
-                carried = runs
-                    .derived_result(&population_key, &fingerprint)?
-                    .and_then(|text| serde_json::from_str::<Vec<Option<BasisState>>>(&text).ok())
-                    .filter(|states| states.len() == settings.replicates)
-                    .unwrap_or_else(|| vec![None; settings.replicates]);
-            }
-            (m, None)
-        } else {
-            let (m, scoring) = measure_round(
-                study,
-                data,
-                settings,
-                emulation,
-                training_seed,
-                base_seed,
-                round,
-                &sampling,
-                runs,
-                groups,
-                &dir,
-                events,
-                describe,
-                if sequential { &mut carried } else { &mut [] },
-            )?;
-            if sequential {
-                let text = serde_json::to_string(&carried).map_err(|e| {
-                    StudyError::Failure(format!(
-                        "adaptive round {round}: cannot record the population: {e}"
-                    ))
-                })?;
-                runs.record_derived_result(&population_key, &fingerprint, &text)?;
-            }
-            if let Some(old) = cached.as_ref().filter(|old| **old != m) {
-                events.message(format!(
-                    "adaptive round {round}: the recomputed assessment differs from the one recorded in the store (surrogate error {} vs {}, log evidence {} vs {}); the new one is recorded",
-                    m.surrogate_error, old.surrogate_error, m.log_evidence, old.log_evidence
-                ));
-            }
-            let text = serde_json::to_string(&m).map_err(|e| {
-                StudyError::Failure(format!("adaptive round {round}: cannot record: {e}"))
-            })?;
-            runs.record_derived_result(&key, &fingerprint, &text)?;
-            (m, Some(scoring))
-        };
+            recorded.is_some(),
+        )?;
         if sequential {
             carried_from = carried
                 .iter()
@@ -1311,188 +1529,79 @@ pub(super) fn refine(
                 .then(|| fingerprint.clone());
         }
         parameters = measured.parameters.clone();
-        let moments = measured.moments();
-        let u = measured.log_likelihood_std;
-        let assessment = judge(&measured)?;
-        let boundary_due = measured.boundary_runs_due(settings);
-        let mut record = AdaptiveRound {
-            round,
-            runs: made,
-            new_runs: 0,
-            new_runs_per_group: vec![0; groups.len()],
-            samples: sampling.samples * settings.replicates,
-            mean: moments.mean.clone(),
-            std: moments.std.clone(),
-            mean_error: moments.mean_error.clone(),
-            std_error: moments.std_error.clone(),
-            shift: assessment.shift,
-            shift_noise: assessment.noise,
-            log_likelihood_std: u,
-            surrogate_error: measured.surrogate_error,
-            log_evidence_error: measured.log_evidence_error,
-            group_surrogate_error: measured.group_surrogate_error.clone(),
-            extrapolation_share: measured.extrapolation_share,
-            unsure_share: measured.unsure_share,
-            log_evidence: measured.log_evidence,
-            mixing_level: sampling.mixing_level,
-            sampler_agreement: measured.sampler_agreement.clone(),
-            candidates: sampling.candidates,
-            converged: assessment.converged && !measured.sampler_disagrees(),
-            seconds: 0.0,
-            carried_replicates: measured.carried_replicates,
-            surrogate_evaluations: measured.surrogate_evaluations,
-        };
-        let extrapolation = measured.extrapolation_share;
-        let disagrees = measured.sampler_disagrees();
-        let disagreement = measured
-            .sampler_agreement
-            .as_ref()
-            .map_or(0.0, |a| a.disagreement);
-        let stop = if assessment.converged && !boundary_due && !disagrees {
-            converged = true;
-            Some("converged".to_string())
-        } else if made >= settings.max_runs {
-            Some(format!("reached max_runs = {}", settings.max_runs))
-        } else if disagrees && sampling.mixing_level >= MAX_MIXING_LEVEL {
-            Some(format!(
-                "the surrogate posterior still depends on how it is sampled at the strongest mixing (the replicates that mixed harder differ by {disagreement:.3} posterior stds): raise `samples` of `[surrogate] adaptive` or of `[sampler]`, or set `[sampler] correlation` lower"
-            ))
+        let populations = if inputs.keeps_populations() {
+            populations_of(&carried)
         } else {
             None
         };
-        let mut requests: Vec<(usize, Vec<f64>)> = Vec::new();
-        let mut no_candidate = false;
-        let recorded = if stop.is_none() { recorded } else { None };
-        if let Some(recorded) = recorded {
-            for (g, theta) in recorded {
-                record.new_runs_per_group[g] += 1;
-                requests.push((g, theta));
-            }
-        } else if stop.is_none() {
-            let Some(scoring) = &scoring else {
-                return Err(StudyError::Failure(format!(
-                    "adaptive round {round}: no surrogate to choose runs from"
-                )));
-            };
-            let chosen = choose_runs(
+        let reading = measured.reading(populations, made);
+        let judgement = engine
+            .judge(&state, &reading)
+            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+        let mut record = AdaptiveRound::judged(
+            round,
+            made,
+            &measured,
+            &judgement,
+            &state.sampling,
+            settings,
+            groups.len(),
+        );
+        let requests: Vec<(usize, Vec<f64>)> = match (&judgement.stop, recorded, &scoring) {
+            (Some(_), _, _) => Vec::new(),
+            (None, Some(recorded), _) => recorded,
+            (None, None, Some(scoring)) => choose_runs(
                 &choice,
                 scoring,
                 &measured.group_surrogate_error,
-                boundary_due,
+                judgement.boundary_due,
                 settings.max_runs - made,
-            )?;
-            for (g, theta) in chosen {
-                record.new_runs_per_group[g] += 1;
-                requests.push((g, theta));
+            )?,
+            (None, None, None) => {
+                return Err(StudyError::Failure(format!(
+                    "adaptive round {round}: no surrogate to choose runs from"
+                )));
             }
-            no_candidate = requests.is_empty();
+        };
+        for (g, _) in &requests {
+            record.new_runs_per_group[*g] += 1;
         }
         record.new_runs = requests.len();
-        events.message(format!(
-            "adaptive round {round}: {made} runs so far; posterior shift {} (sampler noise {}), surrogate error {:.3} posterior stds, surrogate log-likelihood std {u:.3}, {:.0} % of the posterior extrapolated; {}",
-            assessment
-                .shift
-                .map_or("-".to_string(), |s| format!("{s:.3}")),
-            assessment
-                .noise
-                .map_or("-".to_string(), |s| format!("{s:.3}")),
-            assessment.surrogate_error,
-            100.0 * extrapolation,
-            match (&stop, no_candidate) {
-                (Some(reason), _) => format!("stop: {reason}"),
-                (None, true) => format!(
-                    "no candidate run is worth making among {} candidates",
-                    sampling.candidates
-                ),
-                (None, false) => format!("{} new runs", requests.len()),
-            }
+        events.message(round_message(
+            round,
+            made,
+            &measured,
+            &judgement,
+            requests.len(),
+            state.sampling.candidates,
         ));
-        if disagrees && stop.is_none() {
-            events.message(format!(
-                "adaptive round {round}: the replicates that mixed harder differ by {disagreement:.3} posterior stds: not converged; the rounds from the next sample at mixing level {}",
-                sampling.mixing_level + 1
-            ));
-        }
-        if !requests.is_empty() {
-            let outcomes = runs.run(Some(&label), &requests)?;
-            for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
-                let mut row = vec![round as f64, *g as f64];
-                row.extend(theta);
-                row.push(if outcome.is_ok() { 0.0 } else { 1.0 });
-                new_rows.push(row);
-            }
-            write_runs_table(study, &dir, &new_rows)?;
-            let mut per_group: Vec<(Vec<Vec<f64>>, Vec<iuq_core::Outcome>)> =
-                vec![(Vec::new(), Vec::new()); groups.len()];
-            for ((g, theta), outcome) in requests.into_iter().zip(outcomes) {
-                per_group[g].0.push(theta);
-                per_group[g].1.push(outcome);
-            }
-            for (group, (points, outcomes)) in groups.iter_mut().zip(per_group) {
-                group.extend(RunOrigin::Adaptive { round }, points, outcomes);
-            }
-        }
+        make_round_runs(inputs, round, requests, groups, &mut new_rows)?;
         record.seconds = started.elapsed().as_secs_f64();
+        let new_runs = record.new_runs;
         rounds.push(record);
-        write_rounds(&dir, &rounds)?;
-        if let Some(reason) = stop {
-            outcome_reason = reason;
-            break;
-        }
-        if disagrees {
-            sampling.mixing_level = (sampling.mixing_level + 1).min(MAX_MIXING_LEVEL);
-        }
-        if no_candidate && !disagrees {
-            // Nothing to run is no evidence of convergence (the rule did not hold): look among
-            // more and rarer points of the posterior, from a larger population, before giving
-            // up with the reason.
-            let widest = settings.candidates * CANDIDATE_WIDENING * CANDIDATE_WIDENING;
-            if sampling.candidates < widest {
-                sampling.candidates = (sampling.candidates * CANDIDATE_WIDENING).min(widest);
-                sampling.samples = (2 * sampling.samples).min(settings.max_samples);
-                events.message(format!(
-                    "adaptive round {round}: no candidate run is worth making, although the rule does not hold; the next round looks among {} candidates from {} samples per replicate",
-                    sampling.candidates, sampling.samples
-                ));
-                previous = Some(moments);
-                continue;
-            }
-            outcome_reason = format!(
-                "no candidate run is worth making among {} candidates, although the rule does not hold (shift {}, sampler noise {}, surrogate error {:.3} posterior stds against the tolerance {}; the surrogate's log-likelihood std over the posterior is {u:.3} nats): the surrogate's remaining error lies where no run can reduce it by the minimum worth a run; lower `log_likelihood_tolerance` to let smaller gains count, or raise `tolerance` if this error is acceptable",
-                sampling.candidates,
-                assessment
-                    .shift
-                    .map_or("-".to_string(), |s| format!("{s:.3}")),
-                assessment
-                    .noise
-                    .map_or("-".to_string(), |s| format!("{s:.3}")),
-                assessment.surrogate_error,
-                settings.tolerance,
-            );
-            break;
-        }
-        // The shift cannot be told from the sampler's noise: sample more next round (with
-        // `more_samples = "when-resolving"`, only once the surrogate's error no longer keeps the
-        // round from converging).
-        let resolving = match settings.more_samples {
-            MoreSamples::WhenNoisy => true,
-            MoreSamples::WhenResolving => assessment.surrogate_error < settings.tolerance,
+        write_rounds(dir, &rounds)?;
+        engine.step(&mut state, reading, &judgement, new_runs);
+        let event = RoundEvent {
+            round,
+            judgement: &judgement,
+            new_runs,
+            state: &state,
         };
-        if resolving && assessment.noise.is_some_and(|n| n >= settings.tolerance) {
-            sampling.samples = (2 * sampling.samples).min(settings.max_samples);
+        if observer.observe(&event) == Control::Stop {
+            return Err(StudyError::Interrupted);
         }
-        previous = Some(moments);
     }
     Ok(AdaptiveOutcome {
         rounds,
-        converged,
-        stop_reason: outcome_reason,
+        converged: state.converged,
+        stop_reason: state.stop_reason.unwrap_or_default(),
         parameters,
         tolerance: settings.tolerance,
         log_likelihood_tolerance: settings.log_likelihood_tolerance,
         retrained_checks,
-        mixing_level: sampling.mixing_level,
+        mixing_level: state.sampling.mixing_level,
         run_rows: new_rows,
+        populations: state.previous_populations,
     })
 }
 

@@ -6,9 +6,10 @@
 //! design = { kind = "lhs", n = 24, seed = 11 }   # initial runs per run group: maximin LHS
 //! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per group (n = 0: none)
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
-//! adaptive = { batch = 4, max_runs = 200, tolerance = 0.1, log_likelihood_tolerance = 0.05,
+//! adaptive = { batch = 2, max_runs = 300, tolerance = 0.1, log_likelihood_tolerance = 0.05,
 //!              samples = 2000, replicates = 4, max_samples = 32000, max_rounds = 30,
-//!              candidates = 1000, sampling = "sequential" }
+//!              candidates = 1000, sampling = "sequential", stopping_rule = "distribution",
+//!              more_samples = "when-resolving" }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
 //! # a whole-curve model emulated on its leading principal components (absent: a GP per point)
@@ -170,10 +171,10 @@ fn parse_posterior_check(mut s: StudySection<'_>) -> Result<PosteriorCheckSettin
 /// `[surrogate] adaptive = { ... }`: rounds of new runs placed where the posterior lies.
 #[derive(Debug, Clone, PartialEq, serde::Serialize)]
 pub struct AdaptiveSettings {
-    /// New runs per run group and round at most (`batch`, default 4).
+    /// New runs per run group and round at most (`batch`, default [`DEFAULT_BATCH`]).
     pub batch: usize,
     /// Model runs of the pipeline in all (initial, test and adaptive) at most (`max_runs`,
-    /// default 200).
+    /// default [`DEFAULT_MAX_RUNS`]).
     pub max_runs: usize,
     /// The largest shift of a posterior mean or std between rounds, in posterior stds, that
     /// counts as converged (`tolerance`, default 0.1).
@@ -197,10 +198,13 @@ pub struct AdaptiveSettings {
     pub candidates: usize,
     /// How candidates are scored (`acquisition`, default `"density"`).
     pub acquisition: Acquisition,
-    /// When a round's replicates sample more (`more_samples`, default `"when-noisy"`).
+    /// When a round's replicates sample more (`more_samples`, default `"when-resolving"`).
     pub more_samples: MoreSamples,
     /// How a round samples its posterior (`sampling`, default `"sequential"`).
     pub sampling: PosteriorSampling,
+    /// What the stopping rule compares between rounds (`stopping_rule`, default
+    /// `"distribution"`: the moments and the distance between the posteriors).
+    pub stopping_rule: StoppingRule,
 }
 
 /// How each round of the adaptive engine samples its surrogate posterior.
@@ -216,17 +220,10 @@ pub enum PosteriorSampling {
     FromPrior,
 }
 
-/// When the next round's replicates sample twice as many (up to `max_samples`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum MoreSamples {
-    /// `"when-noisy"`: whenever the sampler's noise on the shift reaches the tolerance.
-    WhenNoisy,
-    /// `"when-resolving"`: only once the surrogate's error is below the tolerance, so that the
-    /// sampler's noise is what stands between the round and convergence. Early rounds, whose
-    /// posterior moves by many stds anyway, keep their population (and their cost).
-    WhenResolving,
-}
+/// When the next round's replicates sample twice as many (`more_samples`).
+pub use iuq_adaptive::engine::MoreSamples;
+/// What the stopping rule compares between rounds (`stopping_rule`).
+pub use iuq_adaptive::engine::StoppingRule;
 
 /// How the adaptive engine scores a candidate for a new run.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
@@ -241,12 +238,25 @@ pub enum Acquisition {
     Density,
 }
 
+/// New runs per run group and round when `adaptive` gives no `batch` (as `iuq.calibrate`).
+pub const DEFAULT_BATCH: usize = 2;
+
+/// Model runs in all when `adaptive` gives no `max_runs` (as `iuq.calibrate`).
+pub const DEFAULT_MAX_RUNS: usize = 300;
+
+/// Initial runs of an adaptive study whose `design` gives no `n`: max(6, d + 2) for d
+/// parameters (as `iuq.calibrate`); the engine places the rest where the posterior lies. A
+/// one-shot design (no `adaptive`) takes 40.
+pub fn default_adaptive_design_runs(dimension: usize) -> usize {
+    6.max(dimension + 2)
+}
+
 /// Read `[surrogate] adaptive`.
 fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
     let samples = s.count("samples", 10)?.unwrap_or(2000);
     let settings = AdaptiveSettings {
-        batch: s.count("batch", 1)?.unwrap_or(4),
-        max_runs: s.count("max_runs", 1)?.unwrap_or(200),
+        batch: s.count("batch", 1)?.unwrap_or(DEFAULT_BATCH),
+        max_runs: s.count("max_runs", 1)?.unwrap_or(DEFAULT_MAX_RUNS),
         tolerance: s.positive("tolerance")?.unwrap_or(0.1),
         log_likelihood_tolerance: s.positive("log_likelihood_tolerance")?.unwrap_or(0.05),
         samples,
@@ -259,12 +269,16 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
             _ => Acquisition::Density,
         },
         more_samples: match s.choice("more_samples", &["when-noisy", "when-resolving"])? {
-            Some("when-resolving") => MoreSamples::WhenResolving,
-            _ => MoreSamples::WhenNoisy,
+            Some("when-noisy") => MoreSamples::WhenNoisy,
+            _ => MoreSamples::WhenResolving,
         },
         sampling: match s.choice("sampling", &["sequential", "from-prior"])? {
             Some("from-prior") => PosteriorSampling::FromPrior,
             _ => PosteriorSampling::Sequential,
+        },
+        stopping_rule: match s.choice("stopping_rule", &["distribution", "moments"])? {
+            Some("moments") => StoppingRule::Moments,
+            _ => StoppingRule::Distribution,
         },
     };
     s.finish()?;
@@ -303,7 +317,13 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         .map(parse_adaptive)
         .transpose()?;
     // A GP needs 3 successful runs.
-    let (training_runs, training_seed) = design(&mut surrogate, "design", "lhs", (40, 1), 3)?;
+    let default_runs = if adaptive.is_some() {
+        default_adaptive_design_runs(study.space.dimension())
+    } else {
+        40
+    };
+    let (training_runs, training_seed) =
+        design(&mut surrogate, "design", "lhs", (default_runs, 1), 3)?;
     // An adaptive study spends its runs where the posterior lies: no test runs unless asked for.
     let default_test = if adaptive.is_some() { 0 } else { 8 };
     let (test_runs, test_seed) = design(&mut surrogate, "test", "sobol", (default_test, 2), 0)?;
