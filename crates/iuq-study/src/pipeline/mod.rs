@@ -342,6 +342,11 @@ impl OwnedEvent {
     }
 }
 
+/// The Monte Carlo error of the model posterior's means, in posterior stds, above which the
+/// pipeline says how many members would bring it down: twice it is the engine's default
+/// tolerance.
+pub const MODEL_POSTERIOR_MCSE: f64 = 0.05;
+
 /// The sending end of the events (an observer that has gone away is not an error).
 struct Events {
     sender: mpsc::Sender<OwnedEvent>,
@@ -664,22 +669,24 @@ fn run_stages(
 
     // 2. The adaptive rounds.
     let emulation = Emulation::of(settings.reduced_basis, &data);
+    let adaptive_dir = out.join("adaptive");
+    let base_seed = parse_sampler(study, &SamplerOverrides::default())?.seed;
     let refine = |groups: &mut Vec<GroupRuns>, earlier: Option<adaptive::AdaptiveOutcome>| {
         settings.adaptive.as_ref().map(|adaptive_settings| {
-            adaptive::refine(
+            let inputs = adaptive::RoundInputs {
                 study,
-                &data,
-                adaptive_settings,
-                &emulation,
-                settings.training_seed,
-                &model_runs,
-                groups,
-                &out,
+                data: &data,
+                settings: adaptive_settings,
+                emulation: &emulation,
+                training_seed: settings.training_seed,
+                base_seed,
+                runs: &model_runs,
+                dir: &adaptive_dir,
                 events,
-                &describe,
-                options.recompute_rounds,
-                earlier,
-            )
+                describe: &describe,
+                recompute: options.recompute_rounds,
+            };
+            adaptive::refine(&inputs, groups, earlier)
         })
     };
     let stage = Instant::now();
@@ -936,14 +943,34 @@ fn run_stages(
                 &out,
                 &mut |line| events.message(line),
             )?;
+            let shifts = outcome.shift_from_surrogate();
+            let (largest, k) = shifts
+                .iter()
+                .enumerate()
+                .map(|(k, s)| (s.0.abs(), k))
+                .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a });
             events.message(format!(
-                "the model's posterior: {} (k̂ {:.3}, threshold {:.3}; ESS {:.0}; {} model runs)",
+                "the model's posterior: {} (k̂ {:.3}, threshold {:.3}; ESS {:.0}, {:.0} by ancestry from {} ancestors; {} model runs); it moved from the surrogate's by up to {largest:.3} posterior stds ({}, Monte Carlo error {:.3})",
                 outcome.posterior.stop,
                 outcome.posterior.pareto_k,
                 outcome.posterior.pareto_k_threshold,
                 outcome.posterior.effective_sample_size,
-                outcome.model_runs
+                outcome.effective_sample_size_by_ancestry(),
+                outcome.posterior.ancestors,
+                outcome.model_runs,
+                outcome.posterior.names.get(k).map_or("-", String::as_str),
+                shifts.get(k).map_or(0.0, |s| s.1),
             ));
+            // Members for a Monte Carlo error of the means of MODEL_POSTERIOR_MCSE posterior
+            // stds: the error falls as 1/√members (members grouped by ancestry alike).
+            let worst = shifts.iter().map(|s| s.1).fold(0.0, f64::max);
+            if worst > MODEL_POSTERIOR_MCSE {
+                let members = outcome.posterior.samples.len() as f64;
+                events.message(format!(
+                    "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than {MODEL_POSTERIOR_MCSE}; about {:.0} members (`[model_posterior] samples`) would bring it there",
+                    (members * (worst / MODEL_POSTERIOR_MCSE).powi(2)).ceil()
+                ));
+            }
             stage_seconds.push((
                 "the model's posterior".into(),
                 stage.elapsed().as_secs_f64(),

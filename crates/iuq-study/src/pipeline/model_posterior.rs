@@ -180,6 +180,9 @@ pub struct ModelPosteriorOutcome {
     pub map_runs: Vec<(Option<f64>, Option<f64>)>,
     /// The surrogate posterior's MAP (model parameters).
     pub surrogate_map: Vec<f64>,
+    /// The surrogate posterior's mean and std of every parameter the model posterior weighs
+    /// (the posterior it starts from: [`ModelPosteriorOutcome::shift_from_surrogate`]).
+    pub surrogate_moments: (Vec<f64>, Vec<f64>),
     /// The model's outputs (one per data point) at each member of the final population, read
     /// back from the member's stored run; `None` for a member without weight (a failed run, or
     /// a weight that underflows to 0) and where reading the run back failed. The report
@@ -202,6 +205,42 @@ pub struct ModelPosteriorOutcome {
 }
 
 impl ModelPosteriorOutcome {
+    /// How far the model's posterior moved from the surrogate's, per parameter, in the model
+    /// posterior's stds: (μ_model − μ_surrogate)/σ_model, with its Monte Carlo error
+    /// MCSE(μ_model)/σ_model (grouped by ancestry: [`iuq_basis::ancestral_variance`]; the
+    /// surrogate's 10,000-sample mean adds little). A shift beyond 2 MCSEs is the surrogate's
+    /// own error that the model's runs corrected; within them, the model posterior confirms the
+    /// surrogate's.
+    pub fn shift_from_surrogate(&self) -> Vec<(f64, f64)> {
+        let p = &self.posterior;
+        let (mean, _) = &self.surrogate_moments;
+        (0..p.mean.len().min(mean.len()))
+            .map(|k| {
+                let sd = p.std[k];
+                if sd > 0.0 {
+                    ((p.mean[k] - mean[k]) / sd, p.mcse_mean[k] / sd)
+                } else {
+                    (0.0, 0.0)
+                }
+            })
+            .collect()
+    }
+
+    /// The effective sample size the members' correlation leaves: min over parameters of
+    /// σ_k²/MCSE(μ_k)², the number of independent draws whose mean would have the grouped
+    /// error (Kish's ESS of the weights counts resampled copies of one ancestor as independent
+    /// and overstates it after a bridge).
+    pub fn effective_sample_size_by_ancestry(&self) -> f64 {
+        let p = &self.posterior;
+        p.std
+            .iter()
+            .zip(&p.mcse_mean)
+            .filter(|(s, e)| **s > 0.0 && **e > 0.0)
+            .map(|(s, e)| (s / e).powi(2))
+            .fold(f64::INFINITY, f64::min)
+            .min(p.effective_sample_size)
+    }
+
     /// The summary `pipeline.json` and `iuq pipeline --json` carry.
     pub fn to_json(&self) -> Value {
         let p = &self.posterior;
@@ -215,6 +254,9 @@ impl ModelPosteriorOutcome {
             "pareto_k": finite(p.pareto_k),
             "pareto_k_threshold": p.pareto_k_threshold,
             "effective_sample_size": p.effective_sample_size,
+            "effective_sample_size_by_ancestry": finite(self.effective_sample_size_by_ancestry()),
+            "shift_from_surrogate": by_name(&self.shift_from_surrogate().iter().map(|s| s.0).collect::<Vec<_>>()),
+            "shift_from_surrogate_mcse": by_name(&self.shift_from_surrogate().iter().map(|s| s.1).collect::<Vec<_>>()),
             "map": by_name(&p.map),
             "mean": by_name(&p.mean),
             "std": by_name(&p.std),
@@ -452,9 +494,14 @@ pub fn reweight_to_model(
         })
         .collect();
     let member_outputs = member_outputs(model_runs, &posterior, d)?;
+    let k = posterior.mean.len();
     let outcome = ModelPosteriorOutcome {
         map_runs,
         surrogate_map,
+        surrogate_moments: (
+            gp_posterior.summary.mean.iter().take(k).copied().collect(),
+            gp_posterior.summary.std.iter().take(k).copied().collect(),
+        ),
         member_outputs,
         log_evidence: state.log_evidence + posterior.log_evidence_ratio,
         model_runs: (posterior.model_evaluations
