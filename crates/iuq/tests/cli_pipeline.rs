@@ -307,11 +307,29 @@ fn bad_pipeline_settings_are_input_errors() {
 /// Run the pipeline of the shipped study `name` (`examples/<name>.toml`) on a copy of its shipped
 /// store, checking that it makes no model run; returns its `--json` summary and the copy's
 /// directory (the report in `report/`).
+/// The replay leaves the store byte for byte as shipped (the README's main command leaves the
+/// checkout clean: a store whose every needed record is there is only read).
 fn replay_shipped_study(name: &str) -> (serde_json::Value, std::path::PathBuf) {
     let store = format!("examples/{name}.campaign/campaign.sqlite");
-    replay_study(&format!("shipped-{name}"), name, &store, &|text| {
+    let (summary, dir) = replay_study(&format!("shipped-{name}"), name, &store, &|text| {
         text.to_string()
-    })
+    });
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let shipped = std::fs::read(root.join(&store)).unwrap();
+    let replayed = std::fs::read(dir.join(&store)).unwrap();
+    assert!(
+        shipped == replayed,
+        "the replay rewrote {store} (the shipped file must be in WAL mode and nothing written)"
+    );
+    for leftover in ["-wal", "-shm", "-journal"] {
+        let file = dir.join(format!("{store}{leftover}"));
+        assert!(
+            std::fs::metadata(&file).map_or(true, |m| m.len() == 0),
+            "{} holds data",
+            file.display()
+        );
+    }
+    (summary, dir)
 }
 
 /// Replays the study `examples/<name>.toml`, its text passed through `edit`, from the store
