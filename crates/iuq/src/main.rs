@@ -6,9 +6,10 @@
 
 mod commands;
 mod input_error;
+mod markdown_help;
 mod report_output;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 
 use input_error::{EXIT_BAD_INPUT, EXIT_FAILURE, EXIT_SUCCESS, is_input_error};
 
@@ -60,6 +61,9 @@ enum Command {
     /// Serve a study's model and its log-posterior to other tools (UM-Bridge 1.0 over HTTP).
     #[command(subcommand)]
     Serve(commands::serve::ServeCommand),
+    /// Print the whole command-line reference as Markdown (the documentation site's CLI page).
+    #[command(hide = true)]
+    MarkdownHelp,
 }
 
 fn main() {
@@ -83,6 +87,10 @@ fn main() {
         Command::Worker(args) => commands::worker::run(args, cli.json),
         Command::Rbc(command) => commands::rbc::run(command, cli.json),
         Command::Serve(command) => commands::serve::run(command, cli.json),
+        Command::MarkdownHelp => {
+            print!("{}", markdown_help::markdown_help(&Cli::command()));
+            Ok(())
+        }
     };
     let code = match result {
         Ok(()) => EXIT_SUCCESS,
