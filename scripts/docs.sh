@@ -63,7 +63,7 @@ export PYTHONPATH="$scratch/python${PYTHONPATH:+:$PYTHONPATH}"
 
 step "the notebook, executed (examples/python/calibrate.ipynb)"
 rm -rf docs/notebooks
-"$py" scripts/docs/notebook_to_md.py examples/python/calibrate.ipynb docs/notebooks/calibrate.md
+"$py" scripts/docs/notebook_to_md.py examples/python/calibrate.ipynb docs/notebooks/calibrate.md 2
 
 step "the book (mdBook)"
 rm -rf book

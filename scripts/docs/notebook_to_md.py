@@ -1,13 +1,14 @@
 #!/usr/bin/env python3
 """Execute a Jupyter notebook and write it as a page of the book, with its outputs and figures.
 
-    python scripts/docs/notebook_to_md.py examples/python/calibrate.ipynb docs/notebooks/calibrate.md
+    python scripts/docs/notebook_to_md.py examples/python/calibrate.ipynb docs/notebooks/calibrate.md [MIN_FIGURES]
 
 The notebook runs (nbclient, the `python3` kernel) in a temporary folder, so what it writes
 (e.g. a calibration store) leaves the checkout alone; a cell that raises fails the build. The
 page holds the Markdown cells as they are, each code cell as a Python block, and its outputs:
 text as text blocks, images as PNG files beside the page (`<name>-files/`), HTML (tables) as
-it is. The notebook itself is not changed (it is committed without outputs).
+it is. The notebook itself is not changed (it is committed without outputs). With MIN_FIGURES,
+a page with fewer figures than that is an error (a plot that did not render).
 """
 
 import base64
@@ -30,9 +31,11 @@ def text_block(text: str) -> str:
 
 def main() -> None:
     notebook_path, page_path = Path(sys.argv[1]), Path(sys.argv[2])
+    min_figures = int(sys.argv[3]) if len(sys.argv) > 3 else 0
     nb = nbformat.read(notebook_path, as_version=4)
     with tempfile.TemporaryDirectory(prefix="iuq-notebook-") as work:
-        os.environ.setdefault("MPLBACKEND", "module://matplotlib_inline.backend_inline")
+        # Figures as PNG outputs: the inline backend, whatever MPLBACKEND the caller set.
+        os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
         NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": work}}).execute()
     files = page_path.parent / f"{page_path.stem}-files"
     files.mkdir(parents=True, exist_ok=True)
@@ -73,6 +76,8 @@ def main() -> None:
     page_path.parent.mkdir(parents=True, exist_ok=True)
     page_path.write_text("\n".join(parts))
     print(f"{page_path}: {len(nb.cells)} cells, {figure} figures")
+    if figure < min_figures:
+        sys.exit(f"{notebook_path}: {figure} figures, expected at least {min_figures}")
 
 
 if __name__ == "__main__":
