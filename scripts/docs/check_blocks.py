@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Run every command and code sample of the README and the book (docs/), as scripts/docs.sh does.
 
-    python scripts/docs/check_blocks.py [FILE.md ...]      # default: README.md and docs/**/*.md
+    python scripts/docs/check_blocks.py [--update] [FILE.md ...]   # default: README.md and docs/**/*.md
 
 Each Markdown file gets a scratch copy of the repository's `examples/` and `data/` (the shipped
 campaign stores included, the cooling example's campaigns left out), and its blocks run there
@@ -25,6 +25,10 @@ computing, or installs into the user's environment) is marked on the line just a
 fence, with the reason, and is then only parsed where its language allows:
 
     <!-- check: skip (needs a Slurm cluster) -->
+
+`--update` writes each `console` command's real output (its stdout) under it in the page, in
+place of what the page showed; an output the page trims with `…` is left as it is, and so is a
+page whose commands failed.
 
 Exit status 0 when every block passed, 1 otherwise.
 """
@@ -66,7 +70,7 @@ def blocks(path: Path):
             body.append(lines[j][len(indent):] if lines[j].startswith(indent) else lines[j])
             j += 1
         text = INCLUDE.sub(lambda inc: (path.parent / inc.group(1)).read_text(), "\n".join(body))
-        yield i + 1, language.lower(), text, skip.group(1) if skip else None
+        yield i + 1, language.lower(), text, skip.group(1) if skip else None, j
         i = j + 1
 
 
@@ -109,8 +113,45 @@ def sandbox(tmp: Path, iuq: str) -> dict:
     return env
 
 
-def run_block(language, text, cwd, env):
-    """(ok, message) of one block."""
+def shown_outputs(text: str):
+    """The output lines the page shows under each `$` command of a console block."""
+    outputs, current = [], None
+    continuing = False
+    for line in text.split("\n"):
+        if continuing:
+            continuing = line.endswith("\\")
+            continue
+        if line.startswith("$ "):
+            current = []
+            outputs.append(current)
+            continuing = line.endswith("\\")
+        elif current is not None:
+            current.append(line)
+    return outputs
+
+
+def updated_console(text: str, stdouts) -> str:
+    """The console block with each command's output replaced by ``stdouts`` (not where it is trimmed)."""
+    shown = shown_outputs(text)
+    out, k, continuing = [], -1, False
+    for line in text.split("\n"):
+        if continuing:
+            out.append(line)
+            continuing = line.endswith("\\")
+            if not continuing and k < len(stdouts):
+                out.extend(stdouts[k] if not any("…" in l for l in shown[k]) else shown[k])
+            continue
+        if line.startswith("$ "):
+            k += 1
+            out.append(line)
+            continuing = line.endswith("\\")
+            if not continuing:
+                out.extend(stdouts[k] if not any("…" in l for l in shown[k]) else shown[k])
+    return "\n".join(out)
+
+
+def run_block(language, text, cwd, env, stdouts=None):
+    """(ok, message) of one block; the stdout of each command is appended to ``stdouts``."""
     if language in RUN:
         for command in commands(language, text):
             command = re.sub(r"\bcargo run --release -p iuq --\s*", "iuq ", command)
@@ -123,6 +164,8 @@ def run_block(language, text, cwd, env):
                 tail = (p.stderr or p.stdout).strip().splitlines()[-8:]
                 return False, f"`{command}` exited with {p.returncode}:\n    " + "\n    ".join(tail)
             print(f"      $ {command.splitlines()[0][:90]}  ({time.monotonic() - started:.1f} s)")
+            if stdouts is not None:
+                stdouts.append(p.stdout.rstrip("\n").split("\n") if p.stdout.strip() else [])
         return True, ""
     if language == "python":
         script = cwd / ".block.py"
@@ -153,13 +196,17 @@ def main() -> int:
     if not os.access(iuq, os.X_OK):
         print(f"check_blocks: no iuq binary at {iuq} (set IUQ_BIN)", file=sys.stderr)
         return 1
+    args = sys.argv[1:]
+    update = "--update" in args
+    args = [a for a in args if a != "--update"]
     # The notebook's page (docs/notebooks/) is made by running the notebook: not run again.
-    files = [Path(f).resolve() for f in sys.argv[1:]] or [ROOT / "README.md"] + sorted(
+    files = [Path(f).resolve() for f in args] or [ROOT / "README.md"] + sorted(
         p for p in (ROOT / "docs").rglob("*.md")
         if p.name != "SUMMARY.md" and "notebooks" not in p.relative_to(ROOT / "docs").parts)
     failures, counted, skipped = [], 0, 0
     for path in files:
         found = list(blocks(path))
+        edits = []
         checked = [b for b in found if b[1] in RUN | {"python", "toml", "json"}]
         if not checked:
             continue
@@ -167,7 +214,7 @@ def main() -> int:
         print(f"{rel}")
         with tempfile.TemporaryDirectory(prefix="iuq-docs-check-") as tmp:
             env = sandbox(Path(tmp), iuq)
-            for line, language, text, skip in checked:
+            for line, language, text, skip, end in checked:
                 if skip is not None:
                     skipped += 1
                     print(f"  {rel}:{line} {language}: not run ({skip})")
@@ -175,13 +222,22 @@ def main() -> int:
                 else:
                     counted += 1
                     started = time.monotonic()
+                    stdouts = [] if update and language == "console" else None
                     try:
-                        ok, message = run_block(language, text, Path(tmp), env)
+                        ok, message = run_block(language, text, Path(tmp), env, stdouts)
+                        if ok and stdouts is not None:
+                            edits.append((line, end, updated_console(text, stdouts)))
                     except subprocess.TimeoutExpired as e:
                         ok, message = False, f"timed out after {e.timeout} s"
                     print(f"  {rel}:{line} {language}: {'ok' if ok else 'FAILED'} ({time.monotonic() - started:.1f} s)")
                 if not ok:
                     failures.append(f"{rel}:{line} ({language}): {message}")
+        if update and edits and not any(f.startswith(f"{rel}:") for f in failures):
+            lines = path.read_text().split("\n")
+            for start, end, body in sorted(edits, reverse=True):
+                lines[start:end] = body.split("\n")
+            path.write_text("\n".join(lines))
+            print(f"  {rel}: outputs updated")
     print(f"check_blocks: {counted} blocks run or parsed, {skipped} marked not to run, {len(failures)} failed")
     for failure in failures:
         print(f"FAILED {failure}", file=sys.stderr)
