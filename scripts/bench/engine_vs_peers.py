@@ -267,8 +267,9 @@ def run_cli(problem, binary, workdir, seed=1):
     lines += [f"{n} = {_toml_prior(problem['priors'][n])}" for n in problem["names"]]
     lines += ["[likelihood]", 'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
               "[model]", 'kind = "expression"', f"outputs = {{ {outputs} }}",
-              "[surrogate]", f'design = {{ kind = "lhs", n = {max(6, len(problem["names"]) + 2)}, seed = {seed} }}',
-              "adaptive = { max_runs = 300 }", "[sampler]", f"seed = {seed}"]
+              # The CLI's adaptive defaults are iuq.calibrate's (max(6, d + 2) initial runs,
+              # batch 2, max_runs 300).
+              "[surrogate]", "adaptive = {}", "[sampler]", f"seed = {seed}"]
     study = os.path.join(workdir, "study.toml")
     with open(study, "w") as f:
         f.write("\n".join(lines) + "\n")

@@ -105,16 +105,77 @@ fn slug(text: &str) -> String {
     slug.trim_matches('_').to_string()
 }
 
-/// Builds every section of a validated report, drawing its figures into `figures_dir`.
+/// What every section is built from: the validated report, what was derived from it, and where
+/// the figures go.
+#[derive(Clone, Copy)]
+struct SectionContext<'a> {
+    report: &'a StudyReport,
+    derived: &'a DerivedResults,
+    figures_dir: &'a Path,
+}
+
+/// Builds every section of a validated report, drawing its figures into `figures_dir`, in the
+/// order the report shows them; a section without its data is left out.
 pub(crate) fn build_sections(
     report: &StudyReport,
     derived: &DerivedResults,
     figures_dir: &Path,
 ) -> Result<Vec<Section>> {
-    let mut sections = Vec::new();
+    let c = SectionContext {
+        report,
+        derived,
+        figures_dir,
+    };
+    let has_posteriors = !report.posteriors.is_empty();
+    let mut sections = vec![data_fit_section(&c)?];
+    if has_posteriors {
+        sections.push(posterior_section(&c));
+    }
+    if !report.sensitivity.is_empty() {
+        sections.push(sensitivity_section(&c)?);
+    }
+    if has_posteriors {
+        sections.extend(posterior_figure_sections(&c)?);
+    }
+    if !report.gp_diagnostics.is_empty() {
+        sections.push(surrogate_section(&c)?);
+    }
+    if report.posteriors.iter().any(|p| !p.stages.is_empty()) {
+        sections.push(sampler_section(&c)?);
+    }
+    if let Some(convergence) = &report.convergence {
+        sections.push(convergence_section(convergence, figures_dir)?);
+    }
+    if let Some(check) = &report.posterior_check {
+        sections.push(posterior_check_section(&c, check)?);
+    }
+    if let Some(m) = &report.model_posterior {
+        sections.push(model_posterior_section(&c, m)?);
+    }
+    if let Some(portraits) = &report.cell_portraits {
+        sections.push(cell_shapes_section(&c, portraits)?);
+    }
+    // Shown with the failure map, or else with the run statistics.
+    let mut runs_per_point =
+        (!report.runs_per_point.is_empty()).then(|| build::runs_per_point(report));
+    if !report.failure_map.is_empty() {
+        let mut section = failure_map_section(&c)?;
+        section.tables.extend(runs_per_point.take());
+        sections.push(section);
+    }
+    sections.push(runs_section(&c, runs_per_point));
+    Ok(sections)
+}
+
+/// The measurements with the calibrated model's MAP curve and band.
+fn data_fit_section(c: &SectionContext<'_>) -> Result<Section> {
+    let SectionContext {
+        report,
+        derived,
+        figures_dir,
+    } = *c;
     let has_posteriors = !report.posteriors.is_empty();
     let y = &report.data.y_label;
-
     let mut fit = Section::new(
         "data-fit",
         "Measurements and calibrated model",
@@ -148,361 +209,416 @@ pub(crate) fn build_sections(
         figures_dir,
     )?);
     fit.tables.push(build::propagated(report, derived));
-    sections.push(fit);
+    Ok(fit)
+}
 
-    if has_posteriors {
-        let mut posterior = Section::new(
-            "posterior",
-            "Posterior summary",
-            "Maximum a posteriori estimate, mean, standard deviation and the 5 % and 95 % quantiles of each parameter, one column group per source.",
-        );
-        posterior.tables.push(build::posterior_summary(report));
-        posterior
-            .tables
-            .push(build::posterior_evidence(report, derived));
-        let mut used = Vec::new();
-        for (s, p) in report.posteriors.iter().enumerate() {
-            let mut name = format!("posterior_samples_{}", slug(&p.source));
-            if used.contains(&name) {
-                name = format!("{name}_{s}");
-            }
-            used.push(name.clone());
-            posterior
-                .downloads
-                .push(build::posterior_samples(report, s, name));
+/// The posterior summary tables and the samples to download.
+fn posterior_section(c: &SectionContext<'_>) -> Section {
+    let report = c.report;
+    let derived = c.derived;
+    let mut posterior = Section::new(
+        "posterior",
+        "Posterior summary",
+        "Maximum a posteriori estimate, mean, standard deviation and the 5 % and 95 % quantiles of each parameter, one column group per source.",
+    );
+    posterior.tables.push(build::posterior_summary(report));
+    posterior
+        .tables
+        .push(build::posterior_evidence(report, derived));
+    let mut used = Vec::new();
+    for (s, p) in report.posteriors.iter().enumerate() {
+        let mut name = format!("posterior_samples_{}", slug(&p.source));
+        if used.contains(&name) {
+            name = format!("{name}_{s}");
         }
-        sections.push(posterior);
+        used.push(name.clone());
+        posterior
+            .downloads
+            .push(build::posterior_samples(report, s, name));
     }
+    posterior
+}
 
-    if !report.sensitivity.is_empty() {
-        let chart = SensitivityChart::new(report);
-        let mut section = Section::new(
-            "sensitivity",
-            "Sensitivity",
-            "Sobol' indices of each output: the first-order index S1 is the share of the output variance due to the parameter alone, the total index ST includes all its interactions.",
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "sensitivity",
-                title: "Sobol' indices per output",
-                caption: format!(
-                    "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group. An estimate whose interval is wider than the index's whole range [0, 1] says nothing and is not drawn: a grey question mark stands in its place. The axis stops at {} and {}: bars or intervals beyond are cut and marked with an arrowhead (the table gives their values).",
-                    DISPLAY_RANGE.0, DISPLAY_RANGE.1
-                ),
-                size: chart.size(),
-                tables: &["sensitivity"],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        section.tables.push(build::sensitivity(report));
-        sections.push(section);
-    }
-
-    if has_posteriors {
-        let chart = CornerChart::new(report);
-        let mut section = Section::new(
-            "corner",
-            "Posterior densities",
-            "Marginal and pairwise posterior densities (Gaussian kernel density estimates, Scott's rule) of the final posterior samples.",
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "corner",
-                title: "Posterior marginals and pairwise densities",
-                caption: "Diagonal: 1-D marginal densities, with the MAP estimate as a thin vertical line. Below: contours enclosing 68 % (thick) and 95 % (thin) of the 2-D density, MAP marked ×. Sources overlaid in their colours.".to_string(),
-                size: chart.size(),
-                tables: &[],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        sections.push(section);
-
-        let chart = ViolinChart::new(report)?;
-        let mut section = Section::new(
-            "propagation",
-            "Propagated uncertainty",
-            format!(
-                "The distribution of the model output ({y}) over the posterior at each stress, with the measurements and the MAP curves."
+/// Sobol' indices per output.
+fn sensitivity_section(c: &SectionContext<'_>) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let chart = SensitivityChart::new(report);
+    let mut section = Section::new(
+        "sensitivity",
+        "Sensitivity",
+        "Sobol' indices of each output: the first-order index S1 is the share of the output variance due to the parameter alone, the total index ST includes all its interactions.",
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "sensitivity",
+            title: "Sobol' indices per output",
+            caption: format!(
+                "First-order (solid) and total (light) Sobol' indices per parameter with their confidence intervals; sources side by side in each group. An estimate whose interval is wider than the index's whole range [0, 1] says nothing and is not drawn: a grey question mark stands in its place. The axis stops at {} and {}: bars or intervals beyond are cut and marked with an arrowhead (the table gives their values).",
+                DISPLAY_RANGE.0, DISPLAY_RANGE.1
             ),
-        );
-        let split = if report.posteriors.len() == 2 {
-            " With two sources each violin is split: the first source on the left, the second on the right."
-        } else {
-            ""
-        };
-        section.figures.push(figure(
-            FigureSpec {
-                name: "violins",
-                title: "Propagated output per stress",
-                caption: format!("Violins: kernel density of the output at the posterior samples, mirrored around each stress.{split} Black: measurements ± one std; lines: MAP curves."),
-                size: (920, 600),
-                tables: &["propagated"],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        sections.push(section);
+            size: chart.size(),
+            tables: &["sensitivity"],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    section.tables.push(build::sensitivity(report));
+    Ok(section)
+}
 
-        let mut section = Section::new(
-            "map-error",
-            "Error of the MAP prediction",
-            "Absolute difference between the MAP prediction and the measurement at each stress, compared with the measurement's standard deviation.",
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "map_error",
-                title: "Absolute error of the MAP prediction",
-                caption: "Bars: |MAP prediction − measurement| per source; black dash: the measurement's standard deviation.".to_string(),
-                size: (920, 460),
-                tables: &["map_error"],
-            },
-            &MapErrorChart { data: &report.data, derived },
-            figures_dir,
-        )?);
-        section.tables.push(build::map_error(report, derived));
-        sections.push(section);
-    }
+/// The corner plot, the propagated output's violins and the MAP's error.
+fn posterior_figure_sections(c: &SectionContext<'_>) -> Result<Vec<Section>> {
+    let SectionContext {
+        report,
+        derived,
+        figures_dir,
+    } = *c;
+    let y = &report.data.y_label;
+    let mut sections = Vec::new();
+    let chart = CornerChart::new(report);
+    let mut section = Section::new(
+        "corner",
+        "Posterior densities",
+        "Marginal and pairwise posterior densities (Gaussian kernel density estimates, Scott's rule) of the final posterior samples.",
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "corner",
+            title: "Posterior marginals and pairwise densities",
+            caption: "Diagonal: 1-D marginal densities, with the MAP estimate as a thin vertical line. Below: contours enclosing 68 % (thick) and 95 % (thin) of the 2-D density, MAP marked ×. Sources overlaid in their colours.".to_string(),
+            size: chart.size(),
+            tables: &[],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    sections.push(section);
 
-    if !report.gp_diagnostics.is_empty() {
-        let chart = GpDiagnosticsChart {
-            diagnostics: &report.gp_diagnostics,
-        };
-        let mut section = Section::new(
-            "surrogate",
-            "Surrogate quality",
-            "Each output's Gaussian process against model runs it was not trained on. Q² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²: 1 is a perfect prediction.",
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "gp_diagnostics",
-                title: "GP prediction against simulation",
-                caption: "GP predictive mean against the simulated output on the independent test set, with ± 2 predictive std whiskers and the identity line; Q² on the test set in each title.".to_string(),
-                size: chart.size(),
-                tables: &["gp_quality", "gp_hyperparameters"],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        section.tables.push(build::gp_quality(report));
-        section.tables.push(build::gp_hyperparameters(report));
-        sections.push(section);
-    }
+    let chart = ViolinChart::new(report)?;
+    let mut section = Section::new(
+        "propagation",
+        "Propagated uncertainty",
+        format!(
+            "The distribution of the model output ({y}) over the posterior at each stress, with the measurements and the MAP curves."
+        ),
+    );
+    let split = if report.posteriors.len() == 2 {
+        " With two sources each violin is split: the first source on the left, the second on the right."
+    } else {
+        ""
+    };
+    section.figures.push(figure(
+        FigureSpec {
+            name: "violins",
+            title: "Propagated output per stress",
+            caption: format!("Violins: kernel density of the output at the posterior samples, mirrored around each stress.{split} Black: measurements ± one std; lines: MAP curves."),
+            size: (920, 600),
+            tables: &["propagated"],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    sections.push(section);
 
-    if report.posteriors.iter().any(|p| !p.stages.is_empty()) {
-        let mut section = Section::new(
-            "sampler",
-            "Sampler diagnostics",
-            "Per stage of the BASIS sampler: the annealing exponent (1 at the posterior), the coefficient of variation of the plausibility weights, the acceptance rate of the Markov chains and the running log-evidence estimate.",
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "sampler_stages",
-                title: "Sampler diagnostics per stage",
-                caption: "Annealing exponent, CV of the weights, acceptance rate and log evidence against the stage, one line per source.".to_string(),
-                size: sampler_stages::SIZE,
-                tables: &["sampler_stages"],
-            },
-            &SamplerStagesChart {
-                posteriors: &report.posteriors,
-            },
-            figures_dir,
-        )?);
-        section.tables.push(build::sampler_stages(report));
-        sections.push(section);
-    }
+    let mut section = Section::new(
+        "map-error",
+        "Error of the MAP prediction",
+        "Absolute difference between the MAP prediction and the measurement at each stress, compared with the measurement's standard deviation.",
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "map_error",
+            title: "Absolute error of the MAP prediction",
+            caption: "Bars: |MAP prediction − measurement| per source; black dash: the measurement's standard deviation.".to_string(),
+            size: (920, 460),
+            tables: &["map_error"],
+        },
+        &MapErrorChart { data: &report.data, derived },
+        figures_dir,
+    )?);
+    section.tables.push(build::map_error(report, derived));
+    sections.push(section);
+    Ok(sections)
+}
 
-    if let Some(convergence) = &report.convergence {
-        sections.push(convergence_section(convergence, figures_dir)?);
-    }
+/// Each output's GP against test runs.
+fn surrogate_section(c: &SectionContext<'_>) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let chart = GpDiagnosticsChart {
+        diagnostics: &report.gp_diagnostics,
+    };
+    let mut section = Section::new(
+        "surrogate",
+        "Surrogate quality",
+        "Each output's Gaussian process against model runs it was not trained on. Q² = 1 − Σ(y − ŷ)² / Σ(y − ȳ)²: 1 is a perfect prediction.",
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "gp_diagnostics",
+            title: "GP prediction against simulation",
+            caption: "GP predictive mean against the simulated output on the independent test set, with ± 2 predictive std whiskers and the identity line; Q² on the test set in each title.".to_string(),
+            size: chart.size(),
+            tables: &["gp_quality", "gp_hyperparameters"],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    section.tables.push(build::gp_quality(report));
+    section.tables.push(build::gp_hyperparameters(report));
+    Ok(section)
+}
 
-    if let Some(check) = &report.posterior_check {
-        let mut section = Section::new(
-            "posterior-check",
-            "The model at the posterior",
-            format!(
-                "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std and the check's resolution (a tenth of the datum's likelihood std by default).{}",
-                check.source,
-                check.samples,
-                if check.test.is_empty() {
-                    String::new()
-                } else {
-                    format!(" {}", check.test)
-                }
+/// BASIS's diagnostics per stage.
+fn sampler_section(c: &SectionContext<'_>) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let mut section = Section::new(
+        "sampler",
+        "Sampler diagnostics",
+        "Per stage of the BASIS sampler: the annealing exponent (1 at the posterior), the coefficient of variation of the plausibility weights, the acceptance rate of the Markov chains and the running log-evidence estimate.",
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "sampler_stages",
+            title: "Sampler diagnostics per stage",
+            caption: "Annealing exponent, CV of the weights, acceptance rate and log evidence against the stage, one line per source.".to_string(),
+            size: sampler_stages::SIZE,
+            tables: &["sampler_stages"],
+        },
+        &SamplerStagesChart {
+            posteriors: &report.posteriors,
+        },
+        figures_dir,
+    )?);
+    section.tables.push(build::sampler_stages(report));
+    Ok(section)
+}
+
+/// The model run at the posterior beside the surrogate.
+fn posterior_check_section(
+    c: &SectionContext<'_>,
+    check: &crate::model::PosteriorCheckReport,
+) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let mut section = Section::new(
+        "posterior-check",
+        "The model at the posterior",
+        format!(
+            "The model itself run at the MAP of the {} posterior and at {} of its samples, at every data point, beside the surrogate's prediction at the same parameters: the surrogate checked where the calibration relies on it. RMSE is the root mean square of model − surrogate over these runs; within 2σ the share of runs within two stds of the surrogate: its predictive std for a new run as the likelihood uses it (latent function and the GP's noise), with the run's own frame std and the check's resolution (a tenth of the datum's likelihood std by default).{}",
+            check.source,
+            check.samples,
+            if check.test.is_empty() {
+                String::new()
+            } else {
+                format!(" {}", check.test)
+            }
+        ),
+    );
+    section.figures.push(figure(
+        FigureSpec {
+            name: "posterior_check",
+            title: "Model − surrogate at the posterior",
+            caption: format!(
+                "Model output minus surrogate mean at every data point ({}): posterior samples (blue), the MAP (red), twice the surrogate's median predictive std (grey band), and at each sample twice its own predictive std with the run's frame std (grey line): a sample beyond its line is outside 2σ. The MAP runs also appear in the first figure.",
+                report.data.x_label
             ),
-        );
-        section.figures.push(figure(
-            FigureSpec {
-                name: "posterior_check",
-                title: "Model − surrogate at the posterior",
-                caption: format!(
-                    "Model output minus surrogate mean at every data point ({}): posterior samples (blue), the MAP (red), twice the surrogate's median predictive std (grey band), and at each sample twice its own predictive std with the run's frame std (grey line): a sample beyond its line is outside 2σ. The MAP runs also appear in the first figure.",
-                    report.data.x_label
-                ),
-                size: posterior_check::SIZE,
-                tables: &["posterior_check"],
-            },
-            &PosteriorCheckChart {
-                check,
-                x_label: &report.data.x_label,
-            },
-            figures_dir,
-        )?);
-        section.tables.push(build::posterior_check(report, check));
-        sections.push(section);
-    }
+            size: posterior_check::SIZE,
+            tables: &["posterior_check"],
+        },
+        &PosteriorCheckChart {
+            check,
+            x_label: &report.data.x_label,
+        },
+        figures_dir,
+    )?);
+    section.tables.push(build::posterior_check(report, check));
+    Ok(section)
+}
 
-    if let Some(m) = &report.model_posterior {
-        let mut section = Section::new(
-            "model-posterior",
-            "The model's own posterior",
-            format!(
-                "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.{noisy}",
-                noisy = if m.pseudo_marginal {
-                    noisy_caveat(m)
-                } else {
-                    String::new()
-                },
-                model = m.model_source,
-                surrogate = m.surrogate_source,
-                samples = first_batch(m),
-                runs = m.model_runs,
-                stop = sentence_case(&m.stop),
-                corrected = if m.pseudo_marginal {
-                    mismatch_sentence(m)
-                } else {
-                    correction_sentence(m)
-                },
-                probe = probe_sentence(m),
+/// The model's own posterior beside the surrogate's.
+fn model_posterior_section(
+    c: &SectionContext<'_>,
+    m: &crate::model::ModelPosteriorReport,
+) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let mut section = Section::new(
+        "model-posterior",
+        "The model's own posterior",
+        format!(
+            "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.{noisy}",
+            noisy = if m.pseudo_marginal {
+                noisy_caveat(m)
+            } else {
+                String::new()
+            },
+            model = m.model_source,
+            surrogate = m.surrogate_source,
+            samples = first_batch(m),
+            runs = m.model_runs,
+            stop = sentence_case(&m.stop),
+            corrected = if m.pseudo_marginal {
+                mismatch_sentence(m)
+            } else {
+                correction_sentence(m)
+            },
+            probe = probe_sentence(m),
+        ),
+    );
+    section.tables.push(build::model_posterior_comparison(m));
+    section.figures.push(figure(
+        FigureSpec {
+            name: "model_posterior_map_runs",
+            title: "The model at both MAPs",
+            caption: format!(
+                "The {} run at the MAP of the {} posterior (crosses) and at the MAP of its own posterior (dots), beside the measurements (± one std); the table gives the absolute errors.",
+                m.model_source, m.surrogate_source
             ),
-        );
-        section.tables.push(build::model_posterior_comparison(m));
-        section.figures.push(figure(
-            FigureSpec {
-                name: "model_posterior_map_runs",
-                title: "The model at both MAPs",
-                caption: format!(
-                    "The {} run at the MAP of the {} posterior (crosses) and at the MAP of its own posterior (dots), beside the measurements (± one std); the table gives the absolute errors.",
-                    m.model_source, m.surrogate_source
-                ),
-                size: (920, 520),
-                tables: &["model_posterior_map_runs"],
+            size: (920, 520),
+            tables: &["model_posterior_map_runs"],
+        },
+        &MapRunsChart {
+            report: m,
+            data: &report.data,
+        },
+        figures_dir,
+    )?);
+    section
+        .tables
+        .push(build::model_posterior_map_runs(report, m));
+    section.figures.push(figure(
+        FigureSpec {
+            name: "model_posterior_weights",
+            title: "Importance log-weights",
+            caption: if first_batch(m) < m.samples {
+                "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's posterior and the second batch's (the corrected or the tempered surrogate's), (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the log of the second posterior's ratio to the first: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
+            } else {
+                "Histogram of the final step's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded (the last stage's; where the method stopped uncertified, the rest of the way to β = 1 in one step): a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
             },
-            &MapRunsChart {
-                report: m,
-                data: &report.data,
-            },
-            figures_dir,
-        )?);
-        section
-            .tables
-            .push(build::model_posterior_map_runs(report, m));
-        section.figures.push(figure(
-            FigureSpec {
-                name: "model_posterior_weights",
-                title: "Importance log-weights",
-                caption: if first_batch(m) < m.samples {
-                    "Histogram of the log-weights of both batches' members whose model run succeeded, weighed as one sample of the even mixture of the surrogate's posterior and the second batch's (the corrected or the tempered surrogate's), (ℓ model − ℓ surrogate) − ln ½(1 + e^(g − ln c)) with g the log of the second posterior's ratio to the first: a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
-                } else {
-                    "Histogram of the final step's log-weights Δβ·(ℓ model − ℓ surrogate) of the members whose model run succeeded (the last stage's; where the method stopped uncertified, the rest of the way to β = 1 in one step): a long right tail means a few members carry the estimate (k̂ measures it).".to_string()
-                },
-                size: (920, 460),
-                tables: &["model_posterior_stages"],
-            },
-            &LogWeightsChart { report: m },
-            figures_dir,
-        )?);
-        section.tables.push(build::model_posterior_stages(m));
-        sections.push(section);
-    }
+            size: (920, 460),
+            tables: &["model_posterior_stages"],
+        },
+        &LogWeightsChart { report: m },
+        figures_dir,
+    )?);
+    section.tables.push(build::model_posterior_stages(m));
+    Ok(section)
+}
 
-    if let Some(portraits) = &report.cell_portraits {
-        let mut section = Section::new(
-            "cell-shapes",
-            "The cell at the MAP",
-            format!(
-                "The cell model run at {} at every stress: the final shape in the shear plane, whose contour (per bin along the flow, the outermost vertices across it) the elongation index is measured on with its fitted ellipse, and from the side; and the elongation index through the whole run, from the cell at rest to the end of the measuring window (shaded), whose frames give the measured value{}.",
-                portraits.source,
-                portraits
-                    .compared
-                    .as_ref()
-                    .map_or(String::new(), |c| format!(
-                        ", beside the same runs at {}",
-                        c.source
-                    ))
+/// The cell's shapes and elongation traces at the MAP.
+fn cell_shapes_section(
+    c: &SectionContext<'_>,
+    portraits: &crate::model::CellPortraits,
+) -> Result<Section> {
+    let SectionContext { figures_dir, .. } = *c;
+    let mut section = Section::new(
+        "cell-shapes",
+        "The cell at the MAP",
+        format!(
+            "The cell model run at {} at every stress: the final shape in the shear plane, whose contour (per bin along the flow, the outermost vertices across it) the elongation index is measured on with its fitted ellipse, and from the side; and the elongation index through the whole run, from the cell at rest to the end of the measuring window (shaded), whose frames give the measured value{}.",
+            portraits.source,
+            portraits
+                .compared
+                .as_ref()
+                .map_or(String::new(), |c| format!(
+                    ", beside the same runs at {}",
+                    c.source
+                ))
+        ),
+    );
+    let chart = CellShapesChart { portraits };
+    section.figures.push(figure(
+        FigureSpec {
+            name: "cell_shapes",
+            title: "The cell's shape at every stress",
+            caption: "Each panel: the last frame's contour in the shear plane (orange dots; flow to the right, gradient up) with its fitted ellipse (black), and below it the same shape seen from the side (blue; flow to the right, vorticity up). Lengths in µm, centred on the cell's centroid; every panel at the same scale.".to_string(),
+            size: chart.size(),
+            tables: &[],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    section.figures.push(figure(
+        FigureSpec {
+            name: "elongation_trace",
+            title: "Elongation index against strain",
+            caption: match &portraits.compared {
+                Some(compared) => format!(
+                    "The elongation index of the shear-plane contour through each run (one colour per stress, darker for higher stress): solid, the cell at {}; dashed, at {}. Shaded, the measuring window whose frames give the run's value.",
+                    portraits.source, compared.source
+                ),
+                None => "The elongation index of the shear-plane contour through each run (one line per stress, darker for higher stress); shaded, the measuring window whose frames give the run's value.".to_string(),
+            },
+            size: (920, 520),
+            tables: &[],
+        },
+        &ElongationTraceChart { portraits },
+        figures_dir,
+    )?);
+    Ok(section)
+}
+
+/// Where the model fails, per run group.
+fn failure_map_section(c: &SectionContext<'_>) -> Result<Section> {
+    let SectionContext {
+        report,
+        figures_dir,
+        ..
+    } = *c;
+    let chart = FailureMapChart {
+        panels: &report.failure_map,
+    };
+    let mut section = Section::new(
+        "failure-map",
+        "Where the model fails",
+        "The model runs in the plane of two parameters, one panel per run group with failed runs: which runs failed, where the adaptive design placed its runs, and the failure classifier's probability of failure.",
+    );
+    let shown = report.failure_map.len().min(failure_map::MAX_PANELS);
+    let left_out = if shown < report.failure_map.len() {
+        format!(
+            " Only the first {shown} of {} panels are shown (report.json holds all).",
+            report.failure_map.len()
+        )
+    } else {
+        String::new()
+    };
+    section.figures.push(figure(
+        FigureSpec {
+            name: "failure_map",
+            title: "Where the model fails",
+            caption: format!(
+                "Runs of each group: initial and test designs as hollow circles, adaptive runs filled, failed runs as crosses; shaded red, the failure classifier's probability of failure (the darker, the likelier), with the other parameters at their posterior means.{left_out}"
             ),
-        );
-        let chart = CellShapesChart { portraits };
-        section.figures.push(figure(
-            FigureSpec {
-                name: "cell_shapes",
-                title: "The cell's shape at every stress",
-                caption: "Each panel: the last frame's contour in the shear plane (orange dots; flow to the right, gradient up) with its fitted ellipse (black), and below it the same shape seen from the side (blue; flow to the right, vorticity up). Lengths in µm, centred on the cell's centroid; every panel at the same scale.".to_string(),
-                size: chart.size(),
-                tables: &[],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        section.figures.push(figure(
-            FigureSpec {
-                name: "elongation_trace",
-                title: "Elongation index against strain",
-                caption: match &portraits.compared {
-                    Some(compared) => format!(
-                        "The elongation index of the shear-plane contour through each run (one colour per stress, darker for higher stress): solid, the cell at {}; dashed, at {}. Shaded, the measuring window whose frames give the run's value.",
-                        portraits.source, compared.source
-                    ),
-                    None => "The elongation index of the shear-plane contour through each run (one line per stress, darker for higher stress); shaded, the measuring window whose frames give the run's value.".to_string(),
-                },
-                size: (920, 520),
-                tables: &[],
-            },
-            &ElongationTraceChart { portraits },
-            figures_dir,
-        )?);
-        sections.push(section);
-    }
+            size: chart.size(),
+            tables: &[],
+        },
+        &chart,
+        figures_dir,
+    )?);
+    Ok(section)
+}
 
-    // Shown with the failure map, or else with the run statistics.
-    let mut runs_per_point =
-        (!report.runs_per_point.is_empty()).then(|| build::runs_per_point(report));
-    if !report.failure_map.is_empty() {
-        let chart = FailureMapChart {
-            panels: &report.failure_map,
-        };
-        let mut section = Section::new(
-            "failure-map",
-            "Where the model fails",
-            "The model runs in the plane of two parameters, one panel per run group with failed runs: which runs failed, where the adaptive design placed its runs, and the failure classifier's probability of failure.",
-        );
-        let shown = report.failure_map.len().min(failure_map::MAX_PANELS);
-        let left_out = if shown < report.failure_map.len() {
-            format!(
-                " Only the first {shown} of {} panels are shown (report.json holds all).",
-                report.failure_map.len()
-            )
-        } else {
-            String::new()
-        };
-        section.figures.push(figure(
-            FigureSpec {
-                name: "failure_map",
-                title: "Where the model fails",
-                caption: format!(
-                    "Runs of each group: initial and test designs as hollow circles, adaptive runs filled, failed runs as crosses; shaded red, the failure classifier's probability of failure (the darker, the likelier), with the other parameters at their posterior means.{left_out}"
-                ),
-                size: chart.size(),
-                tables: &[],
-            },
-            &chart,
-            figures_dir,
-        )?);
-        section.tables.extend(runs_per_point.take());
-        sections.push(section);
-    }
-
+/// The run statistics, with the runs per data point where no failure map shows them.
+fn runs_section(c: &SectionContext<'_>, runs_per_point: Option<Table>) -> Section {
+    let (report, derived) = (c.report, c.derived);
     let mut runs = Section::new(
         "runs",
         "Run statistics",
@@ -512,10 +628,9 @@ pub(crate) fn build_sections(
     if !report.run_statistics.failures_by_reason.is_empty() {
         runs.tables.push(build::failures_by_reason(report));
     }
-    runs.tables.extend(runs_per_point.take());
+    runs.tables.extend(runs_per_point);
     runs.tables.push(build::stage_times(report, derived));
-    sections.push(runs);
-    Ok(sections)
+    runs
 }
 
 /// Members of the first batch: all of them, or half when both batches of a correction are the

@@ -100,15 +100,18 @@ fn write_command(out: &mut String, command: &Command, path: &str, depth: usize) 
         out.push('\n');
     }
     let subcommands: Vec<&Command> = visible_subcommands(command).collect();
-    if !subcommands.is_empty() && depth > 2 {
+    if !subcommands.is_empty() && path.contains(' ') {
         let _ = writeln!(out, "Subcommands:\n");
         for sub in &subcommands {
             let _ = writeln!(out, "- `{}`: {}", sub.get_name(), first_line(sub));
         }
         out.push('\n');
     }
+    // The root's commands are sections of their own (as deep as the root), their subcommands
+    // one level deeper.
+    let child_depth = if path.contains(' ') { depth + 1 } else { depth };
     for sub in subcommands {
-        write_command(out, sub, &format!("{path} {}", sub.get_name()), depth + 1);
+        write_command(out, sub, &format!("{path} {}", sub.get_name()), child_depth);
     }
 }
 

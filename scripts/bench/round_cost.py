@@ -1,0 +1,73 @@
+#!/usr/bin/env python3
+"""What one adaptive round costs at 50, 100 and 500 model runs (a benchmark, not a test).
+
+    python3 scripts/bench/round_cost.py [--iuq-bin target/release/iuq] [--runs 50,100,500]
+
+The problem is engine_vs_peers.py's `twoexp` (4 parameters with log-normal priors, 20 outputs,
+a posterior about 10⁻⁶ of the prior's volume), run by `iuq pipeline` with the engine's
+defaults except the initial design: a maximin LHS of n runs, then two rounds (`max_rounds = 2`)
+— the first anneals from the prior, the second carries the first's population. Printed per n
+and round: wall seconds, the surrogate evaluations of the round's samplers, and the seconds the
+pipeline's stages took (GP fits, BASIS), from `rounds.json` and `pipeline.json`.
+"""
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from engine_vs_peers import PROBLEMS, _toml_prior  # noqa: E402
+
+
+def study(problem, n, workdir):
+    with open(os.path.join(workdir, "data.csv"), "w") as f:
+        f.write("x,y,y_err\n")
+        for a, b, c in zip(problem["x"], problem["y"], problem["y_std"]):
+            f.write(f"{float(a)!r},{float(b)!r},{float(c)!r}\n")
+    outputs = ", ".join(f'y{j} = "{e}"' for j, e in enumerate(problem["formula"]))
+    lines = ['name = "round-cost"', "[parameters]"]
+    lines += [f"{k} = {_toml_prior(problem['priors'][k])}" for k in problem["names"]]
+    lines += ["[likelihood]", 'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
+              "[model]", 'kind = "expression"', f"outputs = {{ {outputs} }}",
+              "[surrogate]", f'design = {{ kind = "lhs", n = {n}, seed = 1 }}',
+              f"adaptive = {{ max_rounds = 2, max_runs = {n + 100} }}",
+              "[sampler]", "seed = 1", "samples = 1000"]
+    path = os.path.join(workdir, "study.toml")
+    with open(path, "w") as f:
+        f.write("\n".join(lines) + "\n")
+    return path
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--iuq-bin", default="target/release/iuq")
+    parser.add_argument("--runs", default="50,100,500")
+    args = parser.parse_args()
+    problem = PROBLEMS["twoexp"]()
+    print("runs  round  seconds  surrogate evaluations  carried replicates")
+    for n in (int(v) for v in args.runs.split(",")):
+        with tempfile.TemporaryDirectory(prefix=f"iuq-round-cost-{n}-") as workdir:
+            path = study(problem, n, workdir)
+            out = os.path.join(workdir, "out")
+            started = time.time()
+            done = subprocess.run([args.iuq_bin, "pipeline", path, "--out", out, "--json"],
+                                  capture_output=True, text=True)
+            wall = time.time() - started
+            if done.returncode != 0:
+                print(f"{n}: failed: {done.stderr.strip().splitlines()[-1:]}")
+                continue
+            with open(os.path.join(out, "adaptive", "rounds.json")) as f:
+                rounds = json.load(f)
+            rounds = rounds if isinstance(rounds, list) else rounds["rounds"]
+            for r in rounds:
+                print(f"{r['runs']:4d}  {r['round']:5d}  {r['seconds']:7.2f}  "
+                      f"{r['surrogate_evaluations']:21d}  {r['carried_replicates']:18d}")
+            print(f"      pipeline in all {wall:.1f} s")
+
+
+if __name__ == "__main__":
+    main()
