@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Run every command and code sample of the README and the book (docs/), as scripts/docs.sh does.
 
-    python scripts/docs/check_blocks.py [--update] [FILE.md ...]   # default: README.md and docs/**/*.md
+    python scripts/docs/check_blocks.py [--update] [--jobs=N] [FILE.md ...]   # default: README.md and docs/**/*.md
 
 Each Markdown file gets a scratch copy of the repository's `examples/` and `data/` (the shipped
 campaign stores included, the cooling example's campaigns left out), and its blocks run there
@@ -29,6 +29,8 @@ fence, with the reason, and is then only parsed where its language allows:
 `--update` writes each `console` command's real output (its stdout) under it in the page, in
 place of what the page showed; an output the page trims with `…` is left as it is, and so is a
 page whose commands failed.
+
+`--jobs=N` checks N files at once (each in its own scratch copy).
 
 Exit status 0 when every block passed, 1 otherwise.
 """
@@ -150,7 +152,7 @@ def updated_console(text: str, stdouts) -> str:
     return "\n".join(out)
 
 
-def run_block(language, text, cwd, env, stdouts=None):
+def run_block(language, text, cwd, env, stdouts=None, say=print):
     """(ok, message) of one block; the stdout of each command is appended to ``stdouts``."""
     if language in RUN:
         for command in commands(language, text):
@@ -163,7 +165,7 @@ def run_block(language, text, cwd, env, stdouts=None):
             if p.returncode != 0:
                 tail = (p.stderr or p.stdout).strip().splitlines()[-8:]
                 return False, f"`{command}` exited with {p.returncode}:\n    " + "\n    ".join(tail)
-            print(f"      $ {command.splitlines()[0][:90]}  ({time.monotonic() - started:.1f} s)")
+            say(f"      $ {command.splitlines()[0][:90]}  ({time.monotonic() - started:.1f} s)")
             if stdouts is not None:
                 stdouts.append(p.stdout.rstrip("\n").split("\n") if p.stdout.strip() else [])
         return True, ""
@@ -191,6 +193,49 @@ def run_block(language, text, cwd, env, stdouts=None):
     return True, ""
 
 
+def check_file(path: Path, iuq: str, update: bool):
+    """(log text, failures, blocks run, blocks not run) of one Markdown file."""
+    log, failures, counted, skipped = [], [], 0, 0
+
+    def say(text):
+        log.append(text + "\n")
+
+    found = list(blocks(path))
+    edits = []
+    checked = [b for b in found if b[1] in RUN | {"python", "toml", "json"}]
+    if not checked:
+        return "", failures, counted, skipped
+    rel = path.relative_to(ROOT)
+    say(f"{rel}")
+    with tempfile.TemporaryDirectory(prefix="iuq-docs-check-") as tmp:
+        env = sandbox(Path(tmp), iuq)
+        for line, language, text, skip, end in checked:
+            if skip is not None:
+                skipped += 1
+                say(f"  {rel}:{line} {language}: not run ({skip})")
+                ok, message = run_block(language, text, Path(tmp), env) if language in ("toml", "json") else (True, "")
+            else:
+                counted += 1
+                started = time.monotonic()
+                stdouts = [] if update and language == "console" else None
+                try:
+                    ok, message = run_block(language, text, Path(tmp), env, stdouts, say)
+                    if ok and stdouts is not None:
+                        edits.append((line, end, updated_console(text, stdouts)))
+                except subprocess.TimeoutExpired as e:
+                    ok, message = False, f"timed out after {e.timeout} s"
+                say(f"  {rel}:{line} {language}: {'ok' if ok else 'FAILED'} ({time.monotonic() - started:.1f} s)")
+            if not ok:
+                failures.append(f"{rel}:{line} ({language}): {message}")
+    if update and edits and not failures:
+        lines = path.read_text().split("\n")
+        for start, end, body in sorted(edits, reverse=True):
+            lines[start:end] = body.split("\n")
+        path.write_text("\n".join(lines))
+        say(f"  {rel}: outputs updated")
+    return "".join(log), failures, counted, skipped
+
+
 def main() -> int:
     iuq = os.path.abspath(os.environ.get("IUQ_BIN", ROOT / "target/release/iuq"))
     if not os.access(iuq, os.X_OK):
@@ -199,45 +244,31 @@ def main() -> int:
     args = sys.argv[1:]
     update = "--update" in args
     args = [a for a in args if a != "--update"]
+    options = [a for a in args if a.startswith("--")]
+    args = [a for a in args if not a.startswith("--")]
     # The notebook's page (docs/notebooks/) is made by running the notebook: not run again.
     files = [Path(f).resolve() for f in args] or [ROOT / "README.md"] + sorted(
         p for p in (ROOT / "docs").rglob("*.md")
         if p.name != "SUMMARY.md" and "notebooks" not in p.relative_to(ROOT / "docs").parts)
-    failures, counted, skipped = [], 0, 0
-    for path in files:
-        found = list(blocks(path))
-        edits = []
-        checked = [b for b in found if b[1] in RUN | {"python", "toml", "json"}]
-        if not checked:
-            continue
-        rel = path.relative_to(ROOT)
-        print(f"{rel}")
-        with tempfile.TemporaryDirectory(prefix="iuq-docs-check-") as tmp:
-            env = sandbox(Path(tmp), iuq)
-            for line, language, text, skip, end in checked:
-                if skip is not None:
-                    skipped += 1
-                    print(f"  {rel}:{line} {language}: not run ({skip})")
-                    ok, message = run_block(language, text, Path(tmp), env) if language in ("toml", "json") else (True, "")
-                else:
-                    counted += 1
-                    started = time.monotonic()
-                    stdouts = [] if update and language == "console" else None
-                    try:
-                        ok, message = run_block(language, text, Path(tmp), env, stdouts)
-                        if ok and stdouts is not None:
-                            edits.append((line, end, updated_console(text, stdouts)))
-                    except subprocess.TimeoutExpired as e:
-                        ok, message = False, f"timed out after {e.timeout} s"
-                    print(f"  {rel}:{line} {language}: {'ok' if ok else 'FAILED'} ({time.monotonic() - started:.1f} s)")
-                if not ok:
-                    failures.append(f"{rel}:{line} ({language}): {message}")
-        if update and edits and not any(f.startswith(f"{rel}:") for f in failures):
-            lines = path.read_text().split("\n")
-            for start, end, body in sorted(edits, reverse=True):
-                lines[start:end] = body.split("\n")
-            path.write_text("\n".join(lines))
-            print(f"  {rel}: outputs updated")
+    jobs = 1
+    for a in options:
+        if a.startswith("--jobs="):
+            jobs = max(1, int(a.split("=", 1)[1]))
+    results = []
+    if jobs == 1:
+        for path in files:
+            results.append(check_file(path, iuq, update))
+            print(results[-1][0], end="", flush=True)
+    else:
+        from concurrent.futures import ThreadPoolExecutor
+
+        with ThreadPoolExecutor(jobs) as pool:
+            for result in pool.map(lambda p: check_file(p, iuq, update), files):
+                results.append(result)
+                print(result[0], end="", flush=True)
+    failures = [f for r in results for f in r[1]]
+    counted = sum(r[2] for r in results)
+    skipped = sum(r[3] for r in results)
     print(f"check_blocks: {counted} blocks run or parsed, {skipped} marked not to run, {len(failures)} failed")
     for failure in failures:
         print(f"FAILED {failure}", file=sys.stderr)
