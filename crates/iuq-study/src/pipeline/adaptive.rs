@@ -960,6 +960,68 @@ fn surrogate_errors(
     Ok((surrogate_error, group_surrogate_error))
 }
 
+/// u: the posterior mean of the surrogate's std of the log-likelihood at the candidates, each
+/// weighted by the `copies` of the population it stands for (`iuq_adaptive::acquisition`).
+fn posterior_log_likelihood_std(
+    data: &DataLikelihood,
+    predictions: &[iuq_gp::Prediction],
+    likelihood_variance: &[Vec<f64>],
+    copies: &[f64],
+) -> f64 {
+    let spread: Vec<f64> = (0..likelihood_variance.len())
+        .map(|i| {
+            predictions
+                .iter()
+                .enumerate()
+                .map(|(j, p)| {
+                    log_likelihood_variance(
+                        data.observations.values[j],
+                        p.mean[i],
+                        p.variance[i],
+                        likelihood_variance[i][j],
+                    )
+                })
+                .sum()
+        })
+        .collect();
+    surrogate_log_likelihood_std(&spread, copies)
+}
+
+/// Where a classifier is unsure over the posterior, runs on the boundary of its failure region
+/// (the acquisition does not go there: the GPs are sure of their extrapolation, the classifier
+/// is not): the largest unsure share over the run groups, and up to `per_group` boundary picks
+/// (group, candidate) each. They are made only once the GPs are sure where the posterior lies
+/// (the caller's decision): before, the posterior is not yet where it will be, and far from
+/// every run the classifier is unsure of everything.
+fn failure_boundaries(
+    surrogate: &Surrogate,
+    groups: &[GroupRuns],
+    candidates: &[Vec<f64>],
+    posterior_std: &[f64],
+    per_group: usize,
+) -> Result<(f64, Vec<(usize, usize)>)> {
+    let mut boundary: Vec<(usize, usize)> = Vec::new();
+    let mut unsure_share: f64 = 0.0;
+    for (g, group) in groups.iter().enumerate() {
+        if surrogate.classifiers[g].is_none() {
+            continue;
+        }
+        let p_fail = surrogate.group_failure_probability(g, candidates)?;
+        let (_, failed) = group.failure_labels();
+        let (share, picks) = boundary_picks(
+            &p_fail,
+            candidates,
+            &group.points,
+            &failed,
+            posterior_std,
+            per_group,
+        );
+        unsure_share = unsure_share.max(share);
+        boundary.extend(picks.into_iter().map(|i| (g, i)));
+    }
+    Ok((unsure_share, boundary))
+}
+
 /// Fit the surrogate of `groups`, sample its posterior with the replicates, and measure the
 /// round: moments, u, ε, extrapolation, the failure boundaries.
 fn measure_round(
@@ -1030,24 +1092,7 @@ fn measure_round(
         &unresolved,
         &c.variance,
     );
-    let spread: Vec<f64> = (0..c.theta.len())
-        .map(|i| {
-            predictions
-                .iter()
-                .enumerate()
-                .map(|(j, p)| {
-                    log_likelihood_variance(
-                        data.observations.values[j],
-                        p.mean[i],
-                        p.variance[i],
-                        likelihood_variance[i][j],
-                    )
-                })
-                .sum()
-        })
-        .collect();
-    // The posterior mean of the spread: each candidate weighted by the samples it stands for.
-    let u = surrogate_log_likelihood_std(&spread, &c.copies);
+    let u = posterior_log_likelihood_std(data, &predictions, &likelihood_variance, &c.copies);
     // ε, and ε_g: the same measure with only group g's likelihood terms (its share of the runs).
     let group_outputs: Vec<std::ops::Range<usize>> =
         (0..groups.len()).map(|g| runs.group_outputs(g)).collect();
@@ -1087,30 +1132,13 @@ fn measure_round(
     } else {
         (c, likelihood_variance)
     };
-    // Where a classifier is unsure over the posterior, runs on the boundary of its failure
-    // region (the acquisition does not go there: the GPs are sure of their extrapolation, the
-    // classifier is not). They are made only once the GPs are sure where the posterior lies
-    // (the caller's decision): before, the posterior is not yet where it will be, and far from
-    // every run the classifier is unsure of everything.
-    let mut boundary: Vec<(usize, usize)> = Vec::new();
-    let mut unsure_share: f64 = 0.0;
-    for (g, group) in groups.iter().enumerate() {
-        if surrogate.classifiers[g].is_none() {
-            continue;
-        }
-        let p_fail = surrogate.group_failure_probability(g, &c.theta)?;
-        let (_, failed) = group.failure_labels();
-        let (share, picks) = boundary_picks(
-            &p_fail,
-            &c.theta,
-            &group.points,
-            &failed,
-            &moments.std[..d],
-            settings.batch.max(1),
-        );
-        unsure_share = unsure_share.max(share);
-        boundary.extend(picks.into_iter().map(|i| (g, i)));
-    }
+    let (unsure_share, boundary) = failure_boundaries(
+        &surrogate,
+        groups,
+        &c.theta,
+        &moments.std[..d],
+        settings.batch.max(1),
+    )?;
     let measurement = RoundMeasurement {
         parameters,
         mean: moments.mean,
@@ -1273,6 +1301,23 @@ fn measure_or_read_round(
 }
 
 impl AdaptiveRound {
+    /// The round's moments and sampling, for an engine that goes on after it.
+    fn resumed(&self, settings: &AdaptiveSettings) -> (PosteriorMoments, RoundSampling) {
+        (
+            PosteriorMoments {
+                mean: self.mean.clone(),
+                std: self.std.clone(),
+                mean_error: self.mean_error.clone(),
+                std_error: self.std_error.clone(),
+            },
+            RoundSampling {
+                samples: self.samples / settings.replicates.max(1),
+                candidates: self.candidates,
+                mixing_level: self.mixing_level,
+            },
+        )
+    }
+
     /// The round as judged, before its runs are made.
     fn judged(
         round: usize,
@@ -1445,16 +1490,7 @@ pub(super) fn refine(
         .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
     std::fs::create_dir_all(dir)
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
-    let choice = RunChoice {
-        data,
-        settings,
-        runs,
-        groups: groups.len(),
-        min_score: (settings.log_likelihood_tolerance / 2.0).powi(2) / groups.len().max(1) as f64,
-        // A run must shrink the summed squared moment error by a hundredth of tolerance², shared
-        // among the run groups.
-        min_moment_score: (settings.tolerance / 10.0).powi(2) / groups.len().max(1) as f64,
-    };
+    let choice = RunChoice::new(data, settings, runs, groups.len());
     // Going on after a failed check: from the round after the last, its moments the previous
     // ones (the shift then measures what the check's runs changed).
     let first_round = earlier.as_ref().map_or(1, |e| e.last_round() + 1);
@@ -1472,24 +1508,7 @@ pub(super) fn refine(
     if !new_rows.is_empty() {
         write_runs_table(study, dir, &new_rows)?;
     }
-    let mut state = engine.start(
-        first_round,
-        rounds.last().map(|r: &AdaptiveRound| {
-            (
-                PosteriorMoments {
-                    mean: r.mean.clone(),
-                    std: r.std.clone(),
-                    mean_error: r.mean_error.clone(),
-                    std_error: r.std_error.clone(),
-                },
-                RoundSampling {
-                    samples: r.samples / settings.replicates.max(1),
-                    candidates: r.candidates,
-                    mixing_level: r.mixing_level,
-                },
-            )
-        }),
-    );
+    let mut state = engine.start(first_round, rounds.last().map(|r| r.resumed(settings)));
     state.previous_populations = last_populations;
     let mut observer = RoundLog { events };
     // Each replicate's population, carried from round to round (`sampling = "sequential"`),
@@ -1547,20 +1566,18 @@ pub(super) fn refine(
             settings,
             groups.len(),
         );
-        let requests: Vec<(usize, Vec<f64>)> = match (&judgement.stop, recorded, &scoring) {
+        let requests = match (&judgement.stop, recorded, &scoring) {
             (Some(_), _, _) => Vec::new(),
             (None, Some(recorded), _) => recorded,
-            (None, None, Some(scoring)) => choose_runs(
-                &choice,
-                scoring,
-                &measured.group_surrogate_error,
-                judgement.boundary_due,
-                settings.max_runs - made,
-            )?,
-            (None, None, None) => {
-                return Err(StudyError::Failure(format!(
-                    "adaptive round {round}: no surrogate to choose runs from"
-                )));
+            (None, None, scoring) => {
+                let scoring = scoring.as_ref().ok_or_else(|| {
+                    StudyError::Failure(format!(
+                        "adaptive round {round}: no surrogate to choose runs from"
+                    ))
+                })?;
+                let remaining = settings.max_runs - made;
+                let errors = &measured.group_surrogate_error;
+                choose_runs(&choice, scoring, errors, judgement.boundary_due, remaining)?
             }
         };
         for (g, _) in &requests {
@@ -1617,6 +1634,27 @@ struct RunChoice<'a> {
     min_score: f64,
     /// The least moment score worth a run (per group).
     min_moment_score: f64,
+}
+
+impl<'a> RunChoice<'a> {
+    fn new(
+        data: &'a DataLikelihood,
+        settings: &'a AdaptiveSettings,
+        runs: &'a ModelRuns,
+        groups: usize,
+    ) -> Self {
+        let shared = groups.max(1) as f64;
+        Self {
+            data,
+            settings,
+            runs,
+            groups,
+            min_score: (settings.log_likelihood_tolerance / 2.0).powi(2) / shared,
+            // A run must shrink the summed squared moment error by a hundredth of tolerance²,
+            // shared among the run groups.
+            min_moment_score: (settings.tolerance / 10.0).powi(2) / shared,
+        }
+    }
 }
 
 /// A round's new runs (run group, θ), in group order and, within a group, in the order they were
