@@ -11,7 +11,9 @@ checkout (which they leave as it was). By the block's language:
 - `console`: every line `$ COMMAND` (continued by a trailing backslash) runs in bash and must
   exit 0; the lines after it are the output shown to the reader and are not compared;
 - `sh`, `bash`, `shell`: every line that is not a comment runs the same way;
-- `python`: the block runs as a script;
+- `python`: the block runs as a script; where the next block is a `text` block marked
+  `<!-- check: output -->` on the line above its fence, that block is the script's stdout and
+  must equal it (`--update` rewrites it);
 - `toml`, `json`: the block must parse (in TOML a line `…`, a comment after it allowed, stands
   for lines left out and is dropped first).
 
@@ -48,6 +50,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
 SKIP = re.compile(r"^<!--\s*check:\s*skip\s*\((.+)\)\s*-->\s*$")
+OUTPUT = re.compile(r"^<!--\s*check:\s*output\s*-->\s*$")
 FENCE = re.compile(r"^(\s*)(`{3,}|~{3,})\s*([\w+-]*)")
 INCLUDE = re.compile(r"\{\{#include\s+([^}\s]+)\s*\}\}")
 RUN = {"console", "sh", "bash", "shell"}
@@ -66,6 +69,8 @@ def blocks(path: Path):
         indent, fence, language = m.groups()
         previous = next((l for l in reversed(lines[:i]) if l.strip()), "")
         skip = SKIP.match(previous.strip())
+        if OUTPUT.match(previous.strip()):
+            language = "output"
         body = []
         j = i + 1
         while j < len(lines) and not lines[j].strip().startswith(fence):
@@ -176,6 +181,8 @@ def run_block(language, text, cwd, env, stdouts=None, say=print):
                            text=True, timeout=TIMEOUT)
         if p.returncode != 0:
             return False, "the Python block failed:\n    " + "\n    ".join(p.stderr.strip().splitlines()[-8:])
+        if stdouts is not None:
+            stdouts.append(p.stdout.rstrip("\n"))
         return True, ""
     if language == "toml":
         text = "\n".join(l for l in text.split("\n") if l.split("#")[0].strip() != "…")
@@ -202,14 +209,28 @@ def check_file(path: Path, iuq: str, update: bool):
 
     found = list(blocks(path))
     edits = []
-    checked = [b for b in found if b[1] in RUN | {"python", "toml", "json"}]
+    checked = [b for b in found if b[1] in RUN | {"python", "toml", "json", "output"}]
     if not checked:
         return "", failures, counted, skipped
+    last_python = None
     rel = path.relative_to(ROOT)
     say(f"{rel}")
     with tempfile.TemporaryDirectory(prefix="iuq-docs-check-") as tmp:
         env = sandbox(Path(tmp), iuq)
         for line, language, text, skip, end in checked:
+            if language == "output":
+                if last_python is None:
+                    failures.append(f"{rel}:{line} (output): no Python block ran just before it")
+                elif update:
+                    edits.append((line, end, last_python))
+                elif text.rstrip("\n") != last_python:
+                    failures.append(f"{rel}:{line} (output): the Python block above printed\n    "
+                                    + "\n    ".join(last_python.split("\n")))
+                else:
+                    say(f"  {rel}:{line} output: as printed")
+                last_python = None
+                continue
+            last_python = None
             if skip is not None:
                 skipped += 1
                 say(f"  {rel}:{line} {language}: not run ({skip})")
@@ -217,10 +238,12 @@ def check_file(path: Path, iuq: str, update: bool):
             else:
                 counted += 1
                 started = time.monotonic()
-                stdouts = [] if update and language == "console" else None
+                stdouts = [] if (update and language == "console") or language == "python" else None
                 try:
                     ok, message = run_block(language, text, Path(tmp), env, stdouts, say)
-                    if ok and stdouts is not None:
+                    if ok and language == "python":
+                        last_python = stdouts[0]
+                    elif ok and stdouts is not None:
                         edits.append((line, end, updated_console(text, stdouts)))
                 except subprocess.TimeoutExpired as e:
                     ok, message = False, f"timed out after {e.timeout} s"
