@@ -13,7 +13,10 @@ extensions = ["sphinx.ext.autodoc", "numpydoc"]
 exclude_patterns = ["_build"]
 html_theme = "alabaster"
 html_title = f"iuq {release}: the Python API"
-html_theme_options = {"description": "Inverse uncertainty quantification of expensive simulation models"}
+html_theme_options = {
+    "description": "Inverse uncertainty quantification of expensive simulation models",
+    "extra_nav_links": {"The iuq book": "../index.html"},
+}
 html_static_path = []
 
 autodoc_member_order = "bysource"
