@@ -77,32 +77,27 @@
 //! requests the same model points in the same order, which is what lets a campaign store resume
 //! an interrupted run without repeating a finished model run.
 
-use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
+mod bridge;
+mod correction;
+
+use bridge::Bridge;
+use correction::{CorrectedBatch, FirstBatch, correct_first_batch};
 use serde::{Deserialize, Serialize};
 
 use iuq_core::ParameterSpace;
-use iuq_core::random::{StreamRng, stream};
+use iuq_core::random::stream;
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
 use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
-use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 use crate::member_selection::nested_selection;
-use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch};
+use crate::moment_matching::ProposalMismatch;
 use crate::pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
 };
-use crate::proposal::Proposal;
 use crate::pseudo_marginal::{Members, noisy_estimate};
-use crate::quadratic_regression::QuadraticFit;
-use crate::resampling::resample;
-use crate::sampler::{Basis, Silent};
-use crate::settings::BasisSettings;
-use crate::settings::Resampling;
 use crate::spread_ratio::{widest_spread_ratio, within_proposal_spread};
 
 /// A stage's weights whose CV is at most this are certified whatever their k̂: so nearly equal
@@ -536,15 +531,6 @@ impl ModelPosterior {
     }
 }
 
-/// One chain's state in a bridge.
-struct Chain {
-    theta: Vec<f64>,
-    surrogate: f64,
-    model: f64,
-    prior: f64,
-    rng: StreamRng,
-}
-
 /// The likelihoods, with batch failures turned into errors naming what was evaluated.
 pub(crate) fn evaluate(
     likelihood: &dyn LogLikelihood,
@@ -617,39 +603,8 @@ pub fn model_posterior(
     on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
 ) -> Result<ModelPosterior> {
     settings.check()?;
-    let d = space.dimension();
+    check_inputs(space, &population, surrogate, model)?;
     let n = population.samples.len();
-    if n == 0
-        || population.log_likelihood.len() != n
-        || population.log_prior.len() != n
-        || population.samples.iter().any(|s| s.len() != d)
-    {
-        return Err(BasisError::InvalidData(format!(
-            "the surrogate population needs samples of {d} parameters with one log-likelihood and log-prior each ({n} samples, {} and {})",
-            population.log_likelihood.len(),
-            population.log_prior.len()
-        )));
-    }
-    for (what, l) in [("surrogate", surrogate), ("model", model)] {
-        if l.parameter_count() != d {
-            return Err(BasisError::InvalidLikelihood(format!(
-                "the {what} likelihood takes {} parameters, the space has {d}",
-                l.parameter_count()
-            )));
-        }
-    }
-    if let Some(i) = (0..n).find(|&i| {
-        !population.log_likelihood[i].is_finite() || !population.log_prior[i].is_finite()
-    }) {
-        return Err(BasisError::InvalidData(format!(
-            "member {i} of the surrogate population has a non-finite log-likelihood or log-prior"
-        )));
-    }
-    if n < MIN_SAMPLES {
-        return Err(BasisError::InvalidData(format!(
-            "the surrogate population has {n} members, fewer than the {MIN_SAMPLES} k̂ needs"
-        )));
-    }
     let s = settings.samples.min(n);
     let widths: Vec<f64> = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
     let chosen = selected_members(n, settings);
@@ -672,8 +627,6 @@ pub fn model_posterior(
     let mut best = Best::default();
     best.offer(&theta, &lm, &lp);
     let mut stage_evaluations = (s, failures);
-    let mut bridge_rates: (Option<f64>, Option<f64>) = (None, None);
-    let mut beta = 0.0;
     let mut log_evidence_ratio = 0.0;
     let mut stages = Vec::new();
     let mut threshold = pareto_k_threshold(s);
@@ -685,139 +638,47 @@ pub fn model_posterior(
     let mut both_batches = false;
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
-        let r: Vec<f64> = log_ratios(&lm, &ls);
-        let max_r = largest_finite(&r);
-        let one_stage = max_r.is_finite() && {
-            let rule = next_step(&r, 0.0, settings.cv_target, max_r);
-            let smoothing = pareto_smooth(&r);
-            rule.reaches_one
-                && (smoothing.pareto_k <= threshold
-                    || coefficient_of_variation(&r) <= NEARLY_EQUAL_CV)
-                && within_proposal_spread(&theta, &smoothing.log_weights, 1)
+        let first = Members {
+            theta: theta.clone(),
+            surrogate: ls.clone(),
+            model: lm.clone(),
+            prior: lp.clone(),
         };
-        if !one_stage {
-            let smoothing = pareto_smooth(&r);
-            let record = |quadratic: bool, moment_matched: bool| SurrogateCorrection {
-                pareto_k_before: smoothing.pareto_k,
-                cv_before: coefficient_of_variation(&r),
-                spread_ratio_before: recorded_spread_ratio(&theta, &smoothing.log_weights, 1),
-                model_evaluations: s,
-                quadratic,
-                moment_matched,
-                tempering: None,
-                defensive_normal: false,
-                refused: Vec::new(),
-            };
-            let mut candidates: Vec<(SurrogateCorrection, BoxedCorrection)> = Vec::new();
-            if let Some(fit) = QuadraticFit::fit(&theta, &r) {
-                candidates.push((
-                    record(fit.is_quadratic(), false),
-                    Box::new(move |x: &[f64]| fit.predict(x)),
-                ));
-            }
-            if let Some(g) = GaussianLogRatio::fit(
-                &theta,
-                &smoothing.log_weights,
-                DEFENSIVE_WIDENING,
-                settings.seed,
-            ) {
-                candidates.push((
-                    record(true, true),
-                    Box::new(move |x: &[f64]| g.log_ratio(x)),
-                ));
-            }
-            let basis_settings = BasisSettings {
-                samples: n.max(s),
-                burn_in: 10,
-                seed: settings.seed,
-                ..Default::default()
-            }
-            .check()?;
-            let mut refused = Vec::new();
-            let mut accepted = None;
-            for (record, correction) in candidates {
-                let kind = if record.moment_matched {
-                    "the moment-matched correction"
-                } else {
-                    "the least-squares fit of r"
-                };
-                let candidate = CorrectedLikelihood {
-                    base: surrogate,
-                    correction,
-                };
-                let state = match Basis::new(space, &candidate, basis_settings)
-                    .and_then(|b| b.run(&mut Silent))
-                {
-                    Ok(run) => run.state,
-                    Err(e) => {
-                        refused.push(format!("{kind}: its posterior could not be sampled ({e})"));
-                        continue;
-                    }
-                };
-                if let Some(why) = outside_batch(space, &state.samples, &theta) {
-                    refused.push(format!("{kind}: its posterior {why}"));
-                    continue;
-                }
-                accepted = Some((record, candidate, state));
-                break;
-            }
-            match accepted {
-                Some((mut record, candidate, state)) => {
-                    record.refused = refused;
-                    on_event(ModelPosteriorEvent::Correction(&record));
-                    corrections.push(record);
-                    corrected_holder = candidate;
-                    surrogate = &corrected_holder;
-                    log_evidence_ratio += state.log_evidence - population.log_evidence;
-                    let first = Members {
-                        theta: theta.clone(),
-                        surrogate: ls.clone(),
-                        model: lm.clone(),
-                        prior: lp.clone(),
-                    };
-                    let chosen = nested_selection(
-                        &mut stream(settings.seed, STREAM_BASE, 1),
-                        state.samples.len(),
-                        s,
-                    );
-                    theta = chosen.iter().map(|&i| state.samples[i].clone()).collect();
-                    ls = chosen.iter().map(|&i| state.log_likelihood[i]).collect();
-                    lp = chosen.iter().map(|&i| state.log_prior[i]).collect();
-                    lm = evaluate(
-                        model,
-                        &theta,
-                        "the model at the corrected surrogate's posterior samples",
-                    )?;
-                    evaluations += s;
-                    let batch_failures = lm.iter().filter(|v| !v.is_finite()).count();
-                    failures += batch_failures;
-                    best.offer(&theta, &lm, &lp);
-                    stage_evaluations = (s, batch_failures);
-                    let g = |x: &[f64]| (corrected_holder.correction)(x);
-                    let on_population: Vec<f64> = population.samples.iter().map(|x| g(x)).collect();
-                    let on_corrected: Vec<f64> = state.samples.iter().map(|x| g(x)).collect();
-                    let second = Members {
-                        theta: theta.clone(),
-                        surrogate: theta.iter().zip(&ls).map(|(x, l)| l - g(x)).collect(),
-                        model: lm.clone(),
-                        prior: lp.clone(),
-                    };
-                    mixture = Some(mixture_of_batches(
-                        first,
-                        second,
-                        &|x: &[f64], _, _| g(x),
-                        log_normalising_ratio(&on_population, &on_corrected),
-                    ));
-                }
-                None if !refused.is_empty() => {
-                    let reason = format!(
-                        "{}; the stages go on from the first batch",
-                        refused.join("; ")
-                    );
-                    on_event(ModelPosteriorEvent::CorrectionNotMade(&reason));
-                    correction_not_made = Some(reason);
-                }
-                None => {}
+        match correct_first_batch(
+            space,
+            &population,
+            surrogate,
+            model,
+            settings,
+            first,
+            threshold,
+            on_event,
+        )? {
+            FirstBatch::Kept { not_corrected } => correction_not_made = not_corrected,
+            FirstBatch::Corrected(corrected) => {
+                let CorrectedBatch {
+                    record,
+                    likelihood,
+                    log_evidence_ratio: ratio,
+                    batch,
+                    mixture: both,
+                } = *corrected;
+                corrections.push(record);
+                corrected_holder = likelihood;
+                surrogate = &corrected_holder;
+                log_evidence_ratio += ratio;
+                let batch_failures = batch.model.iter().filter(|v| !v.is_finite()).count();
+                evaluations += s;
+                failures += batch_failures;
+                stage_evaluations = (s, batch_failures);
+                Members {
+                    theta,
+                    surrogate: ls,
+                    model: lm,
+                    prior: lp,
+                } = batch;
+                best.offer(&theta, &lm, &lp);
+                mixture = Some(both);
             }
         }
     }
@@ -880,219 +741,55 @@ pub fn model_posterior(
             ModelPosteriorStop::Certified,
         )
     } else {
-        loop {
-            let r: Vec<f64> = log_ratios(&lm, &ls);
-            let max_r = largest_finite(&r);
-            if !max_r.is_finite() {
-                return Err(BasisError::NoFiniteLikelihood {
-                    stage: stages.len() + 1,
-                    failures: s,
-                });
+        let bridge = Bridge {
+            space,
+            surrogate,
+            model,
+            settings,
+            widths: &widths,
+        };
+        let mut tempering = Tempering {
+            members: Members {
+                theta: std::mem::take(&mut theta),
+                surrogate: std::mem::take(&mut ls),
+                model: std::mem::take(&mut lm),
+                prior: std::mem::take(&mut lp),
+            },
+            ancestor: std::mem::take(&mut ancestor),
+            beta: 0.0,
+            log_evidence_ratio,
+            stages: std::mem::take(&mut stages),
+            stage_evaluations,
+            bridge_rates: (None, None),
+            evaluations,
+            failures,
+            best: std::mem::take(&mut best),
+        };
+        let weights = loop {
+            if let Some(done) = tempering.step(&bridge, threshold, on_event)? {
+                break done;
             }
-            let cv_target = if stages.is_empty() {
-                settings.cv_target
-            } else {
-                settings.bridge_cv_target
-            };
-            let rule = next_step(&r, beta, cv_target, max_r);
-            let mut step = rule.step;
-            let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
-            let mut smoothing = pareto_smooth(&scaled(step));
-            // A step to β = 1 is the estimate: its target must not be wider than the
-            // population (a narrow proposal's weights hide their tail from k̂). A step short of
-            // it is followed by a bridge, whose moves spread the population.
-            let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
-                (smoothing.pareto_k <= threshold
-                    || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV)
-                    && (!(rule.reaches_one && step == rule.step)
-                        || within_proposal_spread(&theta, &smoothing.log_weights, 1))
-            };
-            while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
-                step /= 2.0;
-                smoothing = pareto_smooth(&scaled(step));
-            }
-            let reaches_one = rule.reaches_one && step == rule.step;
-            let next_beta = if reaches_one { 1.0 } else { beta + step };
-            let raw = scaled(step);
-            let record = ModelPosteriorStage {
-                stage: stages.len() + 1,
-                beta: next_beta,
-                step,
-                cv: coefficient_of_variation(&raw),
-                pareto_k: smoothing.pareto_k,
-                cv_step: rule.step,
-                effective_sample_size: effective_sample_size(&normalised_weights(
-                    &smoothing.log_weights,
-                )),
-                model_evaluations: stage_evaluations.0,
-                failures: stage_evaluations.1,
-                screen_acceptance: bridge_rates.0,
-                confirm_acceptance: bridge_rates.1,
-                spread_ratio: recorded_spread_ratio(&theta, &smoothing.log_weights, 1),
-            };
-            on_event(ModelPosteriorEvent::Stage(&record));
-            stages.push(record);
-            let certified_step = holds(&smoothing, step);
-            if reaches_one && certified_step {
-                log_evidence_ratio += log_evidence_increment(&r, step, max_r);
-                break (
-                    raw,
-                    smoothing.log_weights,
-                    smoothing.pareto_k,
-                    ModelPosteriorStop::Certified,
-                );
-            }
-            if !certified_step || stages.len() >= settings.max_stages {
-                // The rest of the way in one step, uncertified.
-                let rest = scaled(1.0 - beta);
-                log_evidence_ratio += log_evidence_increment(&r, 1.0 - beta, max_r);
-                let last = pareto_smooth(&rest);
-                let stop = if certified_step {
-                    ModelPosteriorStop::MaxStages { beta: next_beta }
-                } else {
-                    ModelPosteriorStop::StepBelowMinimum { beta }
-                };
-                break (rest, last.log_weights, last.pareto_k, stop);
-            }
-            log_evidence_ratio += log_evidence_increment(&r, step, max_r);
-            beta = next_beta;
-
-            // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
-            let stage_key = STREAM_BASE + stages.len() as u64;
-            let weights = normalised_weights(&smoothing.log_weights);
-            let proposal = Proposal::new(&theta, &weights, settings.scale, &widths)?;
-            let discrepancy = QuadraticFit::fit(&theta, &r);
-            let correction = |x: &[f64]| discrepancy.as_ref().map_or(0.0, |f| beta * f.predict(x));
-            let mut resampling_rng =
-                stream(settings.seed, stage_key, crate::sampler::RESAMPLING_STREAM);
-            let counts = resample(&weights, s, Resampling::Multinomial, &mut resampling_rng);
-            let mut chains: Vec<Chain> = Vec::with_capacity(s);
-            let mut descent: Vec<usize> = Vec::with_capacity(s);
-            for (i, &c) in counts.iter().enumerate() {
-                for _ in 0..c {
-                    descent.push(ancestor[i]);
-                    let index = chains.len() as u64;
-                    chains.push(Chain {
-                        theta: theta[i].clone(),
-                        surrogate: ls[i],
-                        model: lm[i],
-                        prior: lp[i],
-                        rng: stream(settings.seed, stage_key, index),
-                    });
-                }
-            }
-            let (mut screened, mut screen_accepted) = (0usize, 0usize);
-            let (mut confirmed, mut confirm_accepted, mut confirm_failed) =
-                (0usize, 0usize, 0usize);
-            for _ in 0..settings.moves {
-                // The surrogate subchain of every chain, one batch per step.
-                // (θ, ℓ_s, ln π, β·r̂) at each subchain's position.
-                let mut ends: Vec<(Vec<f64>, f64, f64, f64)> = chains
-                    .iter()
-                    .map(|c| (c.theta.clone(), c.surrogate, c.prior, correction(&c.theta)))
-                    .collect();
-                for _ in 0..settings.subchain {
-                    let proposals: Vec<(Vec<f64>, f64)> = chains
-                        .par_iter_mut()
-                        .zip(&ends)
-                        .map(|(chain, (at, _, _, _))| {
-                            let z: Vec<f64> = (0..d)
-                                .map(|_| StandardNormal.sample(&mut chain.rng))
-                                .collect();
-                            let u: f64 = chain.rng.random();
-                            (proposal.step(at, &z), u)
-                        })
-                        .collect();
-                    let inside: Vec<usize> = (0..chains.len())
-                        .filter(|&c| space.in_support(&proposals[c].0))
-                        .collect();
-                    let points: Vec<Vec<f64>> =
-                        inside.iter().map(|&c| proposals[c].0.clone()).collect();
-                    let values = evaluate(surrogate, &points, "the surrogate in a bridge")?;
-                    screened += chains.len();
-                    for (&c, v) in inside.iter().zip(values) {
-                        let prior = space
-                            .log_prior(&proposals[c].0)
-                            .unwrap_or(f64::NEG_INFINITY);
-                        let (_, ls_at, lp_at, rc_at) = &ends[c];
-                        let rc = correction(&proposals[c].0);
-                        let log_ratio = (v + prior + rc) - (ls_at + lp_at + rc_at);
-                        if v.is_finite() && prior.is_finite() && proposals[c].1.ln() < log_ratio {
-                            ends[c] = (proposals[c].0.clone(), v, prior, rc);
-                            screen_accepted += 1;
-                        }
-                    }
-                }
-                // The model confirms the subchains that moved, in one batch.
-                let confirm_u: Vec<f64> = chains.iter_mut().map(|c| c.rng.random()).collect();
-                let moved: Vec<usize> = (0..chains.len())
-                    .filter(|&c| ends[c].0 != chains[c].theta)
-                    .collect();
-                let points: Vec<Vec<f64>> = moved.iter().map(|&c| ends[c].0.clone()).collect();
-                let values = evaluate(model, &points, "the model in a bridge")?;
-                evaluations += points.len();
-                confirmed += points.len();
-                best.offer(
-                    &points,
-                    &values,
-                    &moved.iter().map(|&c| ends[c].2).collect::<Vec<_>>(),
-                );
-                for (&c, v) in moved.iter().zip(values) {
-                    if !v.is_finite() {
-                        confirm_failed += 1;
-                        continue;
-                    }
-                    let (at, ls_at, lp_at, rc_at) = &ends[c];
-                    let chain = &chains[c];
-                    let log_ratio = (beta * (v - ls_at) - rc_at)
-                        - (beta * (chain.model - chain.surrogate) - correction(&chain.theta));
-                    if confirm_u[c].ln() < log_ratio {
-                        let chain = &mut chains[c];
-                        chain.theta = at.clone();
-                        chain.surrogate = *ls_at;
-                        chain.prior = *lp_at;
-                        chain.model = v;
-                        confirm_accepted += 1;
-                    }
-                }
-            }
-            failures += confirm_failed;
-            stage_evaluations = (confirmed, confirm_failed);
-            bridge_rates = (
-                Some(screen_accepted as f64 / screened.max(1) as f64),
-                Some(confirm_accepted as f64 / confirmed.max(1) as f64),
-            );
-            ancestor = descent;
-            theta = chains.iter().map(|c| c.theta.clone()).collect();
-            ls = chains.iter().map(|c| c.surrogate).collect();
-            lm = chains.iter().map(|c| c.model).collect();
-            lp = chains.iter().map(|c| c.prior).collect();
-        }
+        };
+        Tempering {
+            members: Members {
+                theta,
+                surrogate: ls,
+                model: lm,
+                prior: lp,
+            },
+            ancestor,
+            log_evidence_ratio,
+            stages,
+            evaluations,
+            failures,
+            best,
+            ..
+        } = tempering;
+        weights
     };
-    let weights = normalised_weights(&smoothed);
-    let mut mean = vec![0.0; d];
-    for (t, w) in theta.iter().zip(&weights) {
-        for k in 0..d {
-            mean[k] += w * t[k];
-        }
-    }
-    let std: Vec<f64> = (0..d)
-        .map(|k| {
-            theta
-                .iter()
-                .zip(&weights)
-                .map(|(t, w)| w * (t[k] - mean[k]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
-        .collect();
+    let (weights, mean, std, quantiles) =
+        weighted_moments(&theta, &smoothed, &settings.probabilities)?;
     let errors = ancestral_errors(&theta, &weights, &ancestor, &mean, &std);
-    let quantiles = (0..d)
-        .map(|k| {
-            let values: Vec<f64> = theta.iter().map(|t| t[k]).collect();
-            weighted_quantiles(&values, &weights, &settings.probabilities)
-        })
-        .collect::<std::result::Result<Vec<_>, _>>()?;
     let Some((map, map_log_likelihood, map_log_prior)) = best.point else {
         return Err(BasisError::NoFiniteLikelihood {
             stage: stages.len(),
@@ -1130,6 +827,217 @@ pub fn model_posterior(
         model_evaluations: evaluations,
         failures,
     })
+}
+
+/// The surrogate population and both likelihoods fit `space`: samples of its dimension, one
+/// finite log-likelihood and log-prior each, at least [`MIN_SAMPLES`] of them.
+fn check_inputs(
+    space: &ParameterSpace,
+    population: &SurrogatePopulation<'_>,
+    surrogate: &dyn LogLikelihood,
+    model: &dyn LogLikelihood,
+) -> Result<()> {
+    let d = space.dimension();
+    let n = population.samples.len();
+    if n == 0
+        || population.log_likelihood.len() != n
+        || population.log_prior.len() != n
+        || population.samples.iter().any(|s| s.len() != d)
+    {
+        return Err(BasisError::InvalidData(format!(
+            "the surrogate population needs samples of {d} parameters with one log-likelihood and log-prior each ({n} samples, {} and {})",
+            population.log_likelihood.len(),
+            population.log_prior.len()
+        )));
+    }
+    for (what, l) in [("surrogate", surrogate), ("model", model)] {
+        if l.parameter_count() != d {
+            return Err(BasisError::InvalidLikelihood(format!(
+                "the {what} likelihood takes {} parameters, the space has {d}",
+                l.parameter_count()
+            )));
+        }
+    }
+    if let Some(i) = (0..n).find(|&i| {
+        !population.log_likelihood[i].is_finite() || !population.log_prior[i].is_finite()
+    }) {
+        return Err(BasisError::InvalidData(format!(
+            "member {i} of the surrogate population has a non-finite log-likelihood or log-prior"
+        )));
+    }
+    if n < MIN_SAMPLES {
+        return Err(BasisError::InvalidData(format!(
+            "the surrogate population has {n} members, fewer than the {MIN_SAMPLES} k̂ needs"
+        )));
+    }
+    Ok(())
+}
+
+/// The normalised weights of `log_weights`, and the weighted mean, std and quantiles at
+/// `probabilities` of every parameter of `theta`.
+#[allow(clippy::type_complexity)]
+fn weighted_moments(
+    theta: &[Vec<f64>],
+    log_weights: &[f64],
+    probabilities: &[f64],
+) -> Result<(Vec<f64>, Vec<f64>, Vec<f64>, Vec<Vec<f64>>)> {
+    let d = theta.first().map_or(0, Vec::len);
+    let weights = normalised_weights(log_weights);
+    let mut mean = vec![0.0; d];
+    for (t, w) in theta.iter().zip(&weights) {
+        for k in 0..d {
+            mean[k] += w * t[k];
+        }
+    }
+    let std: Vec<f64> = (0..d)
+        .map(|k| {
+            theta
+                .iter()
+                .zip(&weights)
+                .map(|(t, w)| w * (t[k] - mean[k]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+        .collect();
+    let quantiles = (0..d)
+        .map(|k| {
+            let values: Vec<f64> = theta.iter().map(|t| t[k]).collect();
+            weighted_quantiles(&values, &weights, probabilities)
+        })
+        .collect::<std::result::Result<Vec<_>, _>>()?;
+    Ok((weights, mean, std, quantiles))
+}
+
+/// The tempered stages from the (corrected) surrogate's posterior, β = 0, to the model's,
+/// β = 1: the state between two stages, one [`Tempering::step`] per stage (argmin's shape).
+struct Tempering {
+    members: Members,
+    /// Each member's ancestor in the batch the stages started from (itself until a bridge
+    /// resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
+    ancestor: Vec<usize>,
+    beta: f64,
+    log_evidence_ratio: f64,
+    stages: Vec<ModelPosteriorStage>,
+    /// Model evaluations and failures of the batch the next stage weighs.
+    stage_evaluations: (usize, usize),
+    /// The last bridge's screen and confirmation acceptance rates.
+    bridge_rates: (Option<f64>, Option<f64>),
+    evaluations: usize,
+    failures: usize,
+    best: Best,
+}
+
+/// A finished tempering: the raw and Pareto-smoothed log-weights of the final step, its k̂ and
+/// why it stopped.
+type TemperedWeights = (Vec<f64>, Vec<f64>, f64, ModelPosteriorStop);
+
+impl Tempering {
+    /// One stage: the largest step of β whose weights hold (k̂ below `threshold`, or nearly
+    /// equal weights; a step to 1 also within the members' spread), halved down to
+    /// `min_step`; then, short of β = 1, a bridge. `Some` when the stages are done.
+    fn step(
+        &mut self,
+        bridge: &Bridge<'_>,
+        threshold: f64,
+        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    ) -> Result<Option<TemperedWeights>> {
+        let settings = bridge.settings;
+        let s = self.members.theta.len();
+        let r: Vec<f64> = log_ratios(&self.members.model, &self.members.surrogate);
+        let max_r = largest_finite(&r);
+        if !max_r.is_finite() {
+            return Err(BasisError::NoFiniteLikelihood {
+                stage: self.stages.len() + 1,
+                failures: s,
+            });
+        }
+        let cv_target = if self.stages.is_empty() {
+            settings.cv_target
+        } else {
+            settings.bridge_cv_target
+        };
+        let rule = next_step(&r, self.beta, cv_target, max_r);
+        let mut step = rule.step;
+        let scaled = |step: f64| -> Vec<f64> { r.iter().map(|v| step * v).collect() };
+        let mut smoothing = pareto_smooth(&scaled(step));
+        // A step to β = 1 is the estimate: its target must not be wider than the
+        // population (a narrow proposal's weights hide their tail from k̂). A step short of
+        // it is followed by a bridge, whose moves spread the population.
+        let holds = |smoothing: &crate::ParetoSmoothing, step: f64| {
+            (smoothing.pareto_k <= threshold
+                || coefficient_of_variation(&scaled(step)) <= NEARLY_EQUAL_CV)
+                && (!(rule.reaches_one && step == rule.step)
+                    || within_proposal_spread(&self.members.theta, &smoothing.log_weights, 1))
+        };
+        while !holds(&smoothing, step) && step / 2.0 >= settings.min_step {
+            step /= 2.0;
+            smoothing = pareto_smooth(&scaled(step));
+        }
+        let reaches_one = rule.reaches_one && step == rule.step;
+        let next_beta = if reaches_one { 1.0 } else { self.beta + step };
+        let raw = scaled(step);
+        let record = ModelPosteriorStage {
+            stage: self.stages.len() + 1,
+            beta: next_beta,
+            step,
+            cv: coefficient_of_variation(&raw),
+            pareto_k: smoothing.pareto_k,
+            cv_step: rule.step,
+            effective_sample_size: effective_sample_size(&normalised_weights(
+                &smoothing.log_weights,
+            )),
+            model_evaluations: self.stage_evaluations.0,
+            failures: self.stage_evaluations.1,
+            screen_acceptance: self.bridge_rates.0,
+            confirm_acceptance: self.bridge_rates.1,
+            spread_ratio: recorded_spread_ratio(&self.members.theta, &smoothing.log_weights, 1),
+        };
+        on_event(ModelPosteriorEvent::Stage(&record));
+        self.stages.push(record);
+        let certified_step = holds(&smoothing, step);
+        if reaches_one && certified_step {
+            self.log_evidence_ratio += log_evidence_increment(&r, step, max_r);
+            return Ok(Some((
+                raw,
+                smoothing.log_weights,
+                smoothing.pareto_k,
+                ModelPosteriorStop::Certified,
+            )));
+        }
+        if !certified_step || self.stages.len() >= settings.max_stages {
+            // The rest of the way in one step, uncertified.
+            let rest = scaled(1.0 - self.beta);
+            self.log_evidence_ratio += log_evidence_increment(&r, 1.0 - self.beta, max_r);
+            let last = pareto_smooth(&rest);
+            let stop = if certified_step {
+                ModelPosteriorStop::MaxStages { beta: next_beta }
+            } else {
+                ModelPosteriorStop::StepBelowMinimum { beta: self.beta }
+            };
+            return Ok(Some((rest, last.log_weights, last.pareto_k, stop)));
+        }
+        self.log_evidence_ratio += log_evidence_increment(&r, step, max_r);
+        self.beta = next_beta;
+
+        // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
+        let moved = bridge.run(
+            self.stages.len(),
+            self.beta,
+            &r,
+            &smoothing.log_weights,
+            &mut self.members,
+            &mut self.ancestor,
+            &mut self.best,
+        )?;
+        self.evaluations += moved.evaluations;
+        self.failures += moved.failures;
+        self.stage_evaluations = (moved.evaluations, moved.failures);
+        self.bridge_rates = (
+            Some(moved.screen_acceptance),
+            Some(moved.confirm_acceptance),
+        );
+        Ok(None)
+    }
 }
 
 /// Both batches' mixture weights ([`crate::batch_mixture`]) as the model posterior's one full
