@@ -70,9 +70,14 @@ fn write_command(out: &mut String, command: &Command, path: &str, depth: usize) 
     let mut usage_command = command.clone();
     let usage = usage_command.render_usage().to_string();
     let usage = usage.trim_start_matches("Usage: ").trim();
-    let usage = match usage.split_once(' ') {
-        Some((_, rest)) => format!("{path} {rest}"),
-        None => path.to_string(),
+    // A built command's usage names its whole path already; an unbuilt one only its own name.
+    let usage = if usage.starts_with(path) {
+        usage.to_string()
+    } else {
+        match usage.split_once(' ') {
+            Some((_, rest)) => format!("{path} {rest}"),
+            None => path.to_string(),
+        }
     };
     let _ = writeln!(out, "```text\n{usage}\n```\n");
     let arguments: Vec<&Arg> = command
