@@ -1,5 +1,5 @@
 //! Study files and the calibration pipeline of iuq as a library: the command line, the tests
-//! and a coming Python package call it.
+//! and the Python package (`python/`, `iuq.calibrate`) call it.
 //!
 //! A study file (TOML) names the parameters with their priors, the model, the data and the
 //! prediction-error model, and the settings of every stage. This crate reads and validates it

@@ -846,7 +846,7 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
 fn the_shipped_healthy_study_replays_the_cell_models_certified_posterior() {
     let summary = assert_shipped_model_posterior("rbc-healthy-hemocell", "healthy cells");
     let m = &summary["model_posterior"];
-    // The figures of README.md and PROVENANCE.md: a noisy likelihood at 9.04 Pa weighed in one
+    // The figures of docs/case-study.md and PROVENANCE.md: a noisy likelihood at 9.04 Pa weighed in one
     // pseudo-marginal step over both batches (400 members: the surrogate posterior's and the
     // defensive normal's), 4,428 runs (400 evaluations at 8 stresses, the probe's 32 and 1,196
     // replicates); k̂ 0.401, ESS 142.
@@ -869,7 +869,7 @@ fn the_shipped_healthy_study_replays_the_cell_models_certified_posterior() {
 fn the_shipped_tbhp_study_replays_the_cell_models_certified_posterior() {
     let summary = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
     let m = &summary["model_posterior"];
-    // The figures of README.md and PROVENANCE.md: 1,198 model evaluations and the probe's 4, at
+    // The figures of docs/case-study.md and PROVENANCE.md: 1,198 model evaluations and the probe's 4, at
     // 6 stresses; 5 stages; k̂ 0.556, ESS 186 and 66 ancestors.
     assert_eq!(m["model_runs"], 7212, "{m}");
     assert_eq!(m["model_evaluations"], 1198, "{m}");

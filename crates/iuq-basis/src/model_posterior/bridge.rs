@@ -24,14 +24,24 @@ use crate::settings::Resampling;
 use iuq_core::random::StreamRng;
 use iuq_core::random::stream;
 
-/// What a bridge reads besides the members: the space, both likelihoods and the settings.
-pub(super) struct Bridge<'a> {
+/// What the method's steps read besides the members: the space, both likelihoods and the
+/// settings.
+pub(super) struct MethodInputs<'a> {
     pub(super) space: &'a ParameterSpace,
     pub(super) surrogate: &'a dyn LogLikelihood,
     pub(super) model: &'a dyn LogLikelihood,
     pub(super) settings: &'a ModelPosteriorSettings,
     /// The prior ranges' widths (the proposal's scale where the members have no spread).
     pub(super) widths: &'a [f64],
+}
+
+/// The stage a bridge follows: its number, the β it stepped to, the members' log-ratios
+/// r = ℓ_m − ℓ_s and the stage's log-weights.
+pub(super) struct StageWeights<'a> {
+    pub(super) stage: usize,
+    pub(super) beta: f64,
+    pub(super) log_ratios: &'a [f64],
+    pub(super) log_weights: &'a [f64],
 }
 
 /// What a bridge's moves cost and how often they moved.
@@ -46,22 +56,24 @@ pub(super) struct BridgeMoves {
     pub(super) confirm_acceptance: f64,
 }
 
-impl Bridge<'_> {
-    /// Resample `members` by `log_weights` (stage `stage`'s, after its step to `beta`; `r` the
-    /// members' log-ratios) and move them: `members` and each member's `ancestor` are replaced
-    /// by the moved population, and every model evaluation is offered to `best`.
-    #[allow(clippy::too_many_arguments)]
-    pub(super) fn run(
+impl MethodInputs<'_> {
+    /// The bridge after stage `weights.stage`: resample `members` by the stage's weights and
+    /// move them; `members` and each member's `ancestor` are replaced by the moved population,
+    /// and every model evaluation is offered to `best`.
+    pub(super) fn bridge(
         &self,
-        stage: usize,
-        beta: f64,
-        r: &[f64],
-        log_weights: &[f64],
+        weights: &StageWeights<'_>,
         members: &mut Members,
         ancestor: &mut Vec<usize>,
         best: &mut Best,
     ) -> Result<BridgeMoves> {
         let (space, settings, widths) = (self.space, self.settings, self.widths);
+        let StageWeights {
+            stage,
+            beta,
+            log_ratios: r,
+            log_weights,
+        } = *weights;
         let d = space.dimension();
         let s = members.theta.len();
         let stage_key = STREAM_BASE + stage as u64;

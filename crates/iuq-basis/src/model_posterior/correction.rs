@@ -5,19 +5,17 @@
 //! weigh as one sample of their even mixture ([`crate::batch_mixture`]). A correction whose
 //! posterior lies mostly outside the first batch's range is refused, with the reason.
 
-use iuq_core::ParameterSpace;
 use iuq_core::random::stream;
 
+use super::bridge::MethodInputs;
 use super::{
-    BoxedCorrection, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings,
-    NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
-    coefficient_of_variation, evaluate, largest_finite, log_ratios, outside_batch,
-    recorded_spread_ratio,
+    BoxedCorrection, CorrectedLikelihood, ModelPosteriorEvent, NEARLY_EQUAL_CV, STREAM_BASE,
+    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
+    log_ratios, outside_batch, recorded_spread_ratio,
 };
 use crate::annealing::next_step;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::Result;
-use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
 use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio};
 use crate::pareto_smoothing::pareto_smooth;
@@ -52,17 +50,20 @@ pub(super) struct CorrectedBatch<'a> {
 
 /// Correct the surrogate where the `first` batch (its model log-likelihoods evaluated) does
 /// not hold in one stage at the k̂ `threshold` (module docs).
-#[allow(clippy::too_many_arguments)]
 pub(super) fn correct_first_batch<'a>(
-    space: &ParameterSpace,
+    inputs: &MethodInputs<'a>,
     population: &SurrogatePopulation<'_>,
-    surrogate: &'a dyn LogLikelihood,
-    model: &dyn LogLikelihood,
-    settings: &ModelPosteriorSettings,
     first: Members,
     threshold: f64,
     on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
 ) -> Result<FirstBatch<'a>> {
+    let MethodInputs {
+        space,
+        surrogate,
+        model,
+        settings,
+        ..
+    } = *inputs;
     let n = population.samples.len();
     let (theta, s) = (&first.theta, first.theta.len());
     let r: Vec<f64> = log_ratios(&first.model, &first.surrogate);

@@ -80,7 +80,7 @@
 mod bridge;
 mod correction;
 
-use bridge::Bridge;
+use bridge::{MethodInputs, StageWeights};
 use correction::{CorrectedBatch, FirstBatch, correct_first_batch};
 use serde::{Deserialize, Serialize};
 
@@ -644,16 +644,14 @@ pub fn model_posterior(
             model: lm.clone(),
             prior: lp.clone(),
         };
-        match correct_first_batch(
+        let inputs = MethodInputs {
             space,
-            &population,
             surrogate,
             model,
             settings,
-            first,
-            threshold,
-            on_event,
-        )? {
+            widths: &widths,
+        };
+        match correct_first_batch(&inputs, &population, first, threshold, on_event)? {
             FirstBatch::Kept { not_corrected } => correction_not_made = not_corrected,
             FirstBatch::Corrected(corrected) => {
                 let CorrectedBatch {
@@ -741,7 +739,7 @@ pub fn model_posterior(
             ModelPosteriorStop::Certified,
         )
     } else {
-        let bridge = Bridge {
+        let bridge = MethodInputs {
             space,
             surrogate,
             model,
@@ -937,7 +935,7 @@ impl Tempering {
     /// `min_step`; then, short of β = 1, a bridge. `Some` when the stages are done.
     fn step(
         &mut self,
-        bridge: &Bridge<'_>,
+        bridge: &MethodInputs<'_>,
         threshold: f64,
         on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
     ) -> Result<Option<TemperedWeights>> {
@@ -1020,11 +1018,14 @@ impl Tempering {
         self.beta = next_beta;
 
         // The bridge: resample by the stage's weights, then delayed-acceptance moves at β.
-        let moved = bridge.run(
-            self.stages.len(),
-            self.beta,
-            &r,
-            &smoothing.log_weights,
+        let weights = StageWeights {
+            stage: self.stages.len(),
+            beta: self.beta,
+            log_ratios: &r,
+            log_weights: &smoothing.log_weights,
+        };
+        let moved = bridge.bridge(
+            &weights,
             &mut self.members,
             &mut self.ancestor,
             &mut self.best,
