@@ -32,6 +32,25 @@
 //! | [`error`] | the crate's error type [`AdaptiveError`] |
 //!
 //! The crate does no I/O.
+//!
+//! ```
+//! use iuq_adaptive::posterior_distance;
+//!
+//! // Two rounds' posteriors, two replicates each: the second moved by half a std in x.
+//! let round = |shift: f64| -> Vec<Vec<Vec<f64>>> {
+//!     (0..2)
+//!         .map(|r| (0..400).map(|i| {
+//!             let u = (i as f64 + 0.5 + 0.25 * r as f64) / 400.0;
+//!             vec![(u - 0.5) * 3.46 + shift, ((7.0 * u) % 1.0 - 0.5) * 3.46]
+//!         }).collect())
+//!         .collect()
+//! };
+//! let same = posterior_distance(&round(0.0), &round(0.0))?;
+//! assert_eq!(same.distance, 0.0);
+//! let moved = posterior_distance(&round(0.0), &round(0.5))?;
+//! assert!(moved.distance > 0.3, "{moved:?}");
+//! # Ok::<(), iuq_adaptive::AdaptiveError>(())
+//! ```
 
 #![warn(missing_docs)]
 

@@ -7,6 +7,21 @@
 //!
 //! Errors are the `std::io::Error` of the failing step; callers name the file in their own
 //! error type.
+//!
+//! ```
+//! use iuq_atomic_file::{Durability, write_atomically};
+//!
+//! let dir = std::env::temp_dir().join(format!("iuq-atomic-file-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(&dir)?;
+//! let path = dir.join("summary.json");
+//! write_atomically(&path, b"{\"runs\": 1}", Durability::Atomic)?;
+//! write_atomically(&path, b"{\"runs\": 2}", Durability::Durable)?;
+//! assert_eq!(std::fs::read_to_string(&path)?, "{\"runs\": 2}");
+//! // Nothing but the file itself is left in the folder.
+//! assert_eq!(std::fs::read_dir(&dir)?.count(), 1);
+//! std::fs::remove_dir_all(&dir)?;
+//! # Ok::<(), std::io::Error>(())
+//! ```
 
 #![warn(missing_docs)]
 

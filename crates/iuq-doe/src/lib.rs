@@ -17,6 +17,21 @@
 //! | [`error`] | the crate's error type [`DoeError`] |
 //!
 //! Designs are returned as `Vec<Vec<f64>>`, one inner vector (of `d` coordinates) per point.
+//!
+//! ```
+//! use iuq_doe::{LhsMethod, latin_hypercube, min_distance};
+//!
+//! // 10 points in the unit square, one per row and column stratum, seeded.
+//! let design = latin_hypercube(10, 2, LhsMethod::Random, 7)?;
+//! assert_eq!(design.len(), 10);
+//! for k in 0..2 {
+//!     let mut strata: Vec<usize> = design.iter().map(|p| (p[k] * 10.0) as usize).collect();
+//!     strata.sort();
+//!     assert_eq!(strata, (0..10).collect::<Vec<_>>());
+//! }
+//! assert!(min_distance(&design) > 0.0);
+//! # Ok::<(), iuq_doe::DoeError>(())
+//! ```
 
 #![warn(missing_docs)]
 
