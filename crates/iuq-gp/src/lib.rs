@@ -20,6 +20,21 @@
 //! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
 //! The crate does no I/O.
+//!
+//! ```
+//! use iuq_gp::{FitOptions, GaussianProcess};
+//!
+//! // A GP of sin(x) from 12 runs, checked between them.
+//! let x: Vec<Vec<f64>> = (0..12).map(|i| vec![i as f64 * 0.5]).collect();
+//! let y: Vec<f64> = x.iter().map(|p| p[0].sin()).collect();
+//! let gp = GaussianProcess::fit(&x, &y, &FitOptions::default().check()?)?;
+//! let at = vec![vec![1.25], vec![3.75]];
+//! let prediction = gp.predict(&at)?;
+//! for (p, m) in at.iter().zip(&prediction.mean) {
+//!     assert!((m - p[0].sin()).abs() < 0.02, "{m} against {}", p[0].sin());
+//! }
+//! # Ok::<(), iuq_gp::GpError>(())
+//! ```
 
 #![warn(missing_docs)]
 
