@@ -24,6 +24,41 @@
 //! | [`pipeline`] | the calibration study end to end, its settings, the report's data |
 //! | [`table_io`] | numeric CSV tables, atomic writes |
 //! | [`error`] | the crate's error type [`StudyError`] and its helpers |
+//!
+//! ```
+//! use iuq_basis::LogLikelihood;
+//! use iuq_study::{Study, build_posterior};
+//!
+//! // A study of T = 20 + (T0 − 20)·e^(−k t) at t = 1, 2 against two measurements with their
+//! // stds (one output per data row, in order).
+//! let dir = std::env::temp_dir().join(format!("iuq-study-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(&dir)?;
+//! std::fs::write(dir.join("data.csv"), "t,T,T_err\n1,60,0.5\n2,45,0.5\n")?;
+//! let text = r#"
+//! name = "cooling"
+//! [parameters]
+//! k = { uniform = [0.05, 0.8] }
+//! T0 = { uniform = [60, 100] }
+//! [likelihood]
+//! data = { file = "data.csv", x = "t", y = "T", y_err = "T_err" }
+//! [model]
+//! kind = "expression"
+//! outputs = { T1 = "20 + (T0 - 20) * exp(-k * 1)", T2 = "20 + (T0 - 20) * exp(-k * 2)" }
+//! "#;
+//! let study = Study::parse(text, &dir.join("study.toml"))?;
+//! let posterior = build_posterior(&study)?;
+//! // The likelihood is exactly N(y | model, y_err²): at k = 0.3, T0 = 80 against the formula.
+//! let (k, t0) = (0.3f64, 80.0f64);
+//! let mut expected = 0.0;
+//! for (t, y) in [(1.0f64, 60.0f64), (2.0, 45.0)] {
+//!     let r = (y - (20.0 + (t0 - 20.0) * (-k * t).exp())) / 0.5;
+//!     expected += -0.5 * r * r - (0.5 * (2.0 * std::f64::consts::PI).sqrt()).ln();
+//! }
+//! let value = posterior.likelihood.log_likelihood_batch(&[vec![k, t0]])?[0].clone().unwrap();
+//! assert!((value - expected).abs() < 1e-9, "{value} against {expected}");
+//! std::fs::remove_dir_all(&dir)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 
