@@ -408,13 +408,6 @@ impl AdaptiveEngine {
         Next::Continue
     }
 
-    /// Whether the state's sampling will widen the candidates (rather than stop) after a round
-    /// that found no run worth making.
-    pub fn can_widen(&self, state: &EngineState) -> bool {
-        state.sampling.candidates
-            < self.settings.candidates * CANDIDATE_WIDENING * CANDIDATE_WIDENING
-    }
-
     fn no_candidate_reason(&self, state: &EngineState, u: f64, judgement: &Judgement) -> String {
         let shown = |v: Option<f64>| v.map_or("-".to_string(), |s| format!("{s:.3}"));
         format!(

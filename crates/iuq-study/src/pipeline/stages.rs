@@ -46,6 +46,8 @@ struct PipelineRun<'a> {
     /// The final surrogate posterior's sampler.
     sampler_settings: iuq_basis::CheckedSettings,
     model_posterior_method: Option<model_posterior::ModelPosteriorMethod>,
+    /// BASIS on the model itself (`--model-posterior` with `[model_sampler]`).
+    model_sampler_settings: Option<iuq_basis::CheckedSettings>,
     out: PathBuf,
     model_runs: ModelRuns,
     emulation: Emulation,
@@ -187,10 +189,13 @@ impl<'a> PipelineRun<'a> {
             )
             .into());
         }
-        if model_posterior_method == Some(model_posterior::ModelPosteriorMethod::Basis) {
-            // Checked before any run; read again where BASIS on the model starts.
-            parse_model_sampler(study, &SamplerOverrides::default())?;
-        }
+        // Checked before any run.
+        let model_sampler_settings =
+            if model_posterior_method == Some(model_posterior::ModelPosteriorMethod::Basis) {
+                Some(parse_model_sampler(study, &SamplerOverrides::default())?)
+            } else {
+                None
+            };
         let out = options.out.clone();
         std::fs::create_dir_all(&out)
             .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
@@ -223,6 +228,7 @@ impl<'a> PipelineRun<'a> {
             settings,
             sampler_settings,
             model_posterior_method,
+            model_sampler_settings,
             out,
             model_runs,
             emulation,
@@ -739,10 +745,9 @@ impl<'a> PipelineRun<'a> {
     /// BASIS on the model itself (`--model-posterior` with `[model_sampler]`), resuming its
     /// checkpoint.
     fn basis_on_model(&self, times: &mut StageTimes) -> Result<Option<SampledPosterior>> {
-        if self.model_posterior_method != Some(model_posterior::ModelPosteriorMethod::Basis) {
+        let Some(settings) = self.model_sampler_settings else {
             return Ok(None);
-        }
-        let settings = parse_model_sampler(self.study, &SamplerOverrides::default())?;
+        };
         let stage = Instant::now();
         let dir = self.out.join("basis-model");
         let checkpoint = resume_checkpoint(&dir, self.events)?;
