@@ -254,25 +254,33 @@ def _toml_prior(p):
     return f"{{ {kind} = [{', '.join(repr(float(a)) for a in args)}] }}"
 
 
-def run_cli(problem, binary, workdir, seed=1):
-    if problem["formula"] is None:
-        return None
+def write_study(problem, workdir, name, surrogate, sampler):
+    """The problem as an `iuq pipeline` study in `workdir` (its data in data.csv, the model as
+    expressions, one output per data row), with the `[surrogate]` and `[sampler]` lines given;
+    returns the study file's path."""
     os.makedirs(workdir, exist_ok=True)
     with open(os.path.join(workdir, "data.csv"), "w") as f:
         f.write("x,y,y_err\n")
         for a, b, c in zip(problem["x"], problem["y"], problem["y_std"]):
             f.write(f"{float(a)!r},{float(b)!r},{float(c)!r}\n")
     outputs = ", ".join(f'y{j} = "{e}"' for j, e in enumerate(problem["formula"]))
-    lines = ['name = "bench"', "[parameters]"]
+    lines = [f'name = "{name}"', "[parameters]"]
     lines += [f"{n} = {_toml_prior(problem['priors'][n])}" for n in problem["names"]]
     lines += ["[likelihood]", 'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
               "[model]", 'kind = "expression"', f"outputs = {{ {outputs} }}",
-              # The CLI's adaptive defaults are iuq.calibrate's (max(6, d + 2) initial runs,
-              # batch 2, max_runs 300).
-              "[surrogate]", "adaptive = {}", "[sampler]", f"seed = {seed}"]
+              "[surrogate]", *surrogate, "[sampler]", *sampler]
     study = os.path.join(workdir, "study.toml")
     with open(study, "w") as f:
         f.write("\n".join(lines) + "\n")
+    return study
+
+
+def run_cli(problem, binary, workdir, seed=1):
+    if problem["formula"] is None:
+        return None
+    # The CLI's adaptive defaults are iuq.calibrate's (max(6, d + 2) initial runs, batch 2,
+    # max_runs 300).
+    study = write_study(problem, workdir, "bench", ["adaptive = {}"], [f"seed = {seed}"])
     started = time.time()
     done = subprocess.run([binary, "pipeline", study, "--out", os.path.join(workdir, "out"), "--json"],
                           capture_output=True, text=True, timeout=900)

@@ -20,26 +20,14 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from engine_vs_peers import PROBLEMS, _toml_prior  # noqa: E402
+from engine_vs_peers import PROBLEMS, write_study  # noqa: E402
 
 
 def study(problem, n, workdir):
-    with open(os.path.join(workdir, "data.csv"), "w") as f:
-        f.write("x,y,y_err\n")
-        for a, b, c in zip(problem["x"], problem["y"], problem["y_std"]):
-            f.write(f"{float(a)!r},{float(b)!r},{float(c)!r}\n")
-    outputs = ", ".join(f'y{j} = "{e}"' for j, e in enumerate(problem["formula"]))
-    lines = ['name = "round-cost"', "[parameters]"]
-    lines += [f"{k} = {_toml_prior(problem['priors'][k])}" for k in problem["names"]]
-    lines += ["[likelihood]", 'data = { file = "data.csv", x = "x", y = "y", y_err = "y_err" }',
-              "[model]", 'kind = "expression"', f"outputs = {{ {outputs} }}",
-              "[surrogate]", f'design = {{ kind = "lhs", n = {n}, seed = 1 }}',
-              f"adaptive = {{ max_rounds = 2, max_runs = {n + 100} }}",
-              "[sampler]", "seed = 1", "samples = 1000"]
-    path = os.path.join(workdir, "study.toml")
-    with open(path, "w") as f:
-        f.write("\n".join(lines) + "\n")
-    return path
+    return write_study(problem, workdir, "round-cost",
+                       [f'design = {{ kind = "lhs", n = {n}, seed = 1 }}',
+                        f"adaptive = {{ max_rounds = 2, max_runs = {n + 100} }}"],
+                       ["seed = 1", "samples = 1000"])
 
 
 def main():
