@@ -15,7 +15,7 @@ use iuq_campaign::{CampaignStore, store_path};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
 use iuq_study::campaign_runs::{CampaignStatus, campaign_error, load_study, progress_line};
 use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
-use iuq_study::posterior::{build_posterior, sample_posterior};
+use iuq_study::posterior::{SamplingJob, build_posterior, sample_posterior};
 use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
 use iuq_study::{Study, StudyError};
@@ -315,17 +315,18 @@ impl NativeStudy {
             .allow_threads(|| {
                 let posterior = build_posterior(study)?;
                 let settings = parse_sampler(study, &overrides)?;
-                let sampled = sample_posterior(
-                    &study.name,
-                    &study.path,
-                    &posterior,
-                    settings,
-                    &out,
-                    None,
-                    None,
-                    None,
-                    &mut |_| iuq_basis::Control::Continue,
-                )?;
+                let job = SamplingJob {
+                    study_name: &study.name,
+                    study_file: &study.path,
+                    out: &out,
+                    checkpoint: None,
+                    resume_dir: None,
+                    stop_after: None,
+                    marginals: true,
+                };
+                let sampled = sample_posterior(job, &posterior, settings, &mut |_| {
+                    iuq_basis::Control::Continue
+                })?;
                 let stages = serde_json::to_string(&sampled.run.state.diagnostics)
                     .map_err(|e| StudyError::Failure(e.to_string()))?;
                 Ok::<_, StudyError>((sampled, stages))

@@ -170,6 +170,8 @@ pub fn carry<L: LogLikelihood + ?Sized>(
         failure_reasons: reasons,
         evaluations: previous.samples.len(),
         batches: 1,
+        screenings: 0,
+        screened_out: 0,
         unique_fraction: counts.iter().filter(|&&c| c > 0).count() as f64 / n as f64,
         wall_seconds: start.elapsed().as_secs_f64(),
     });

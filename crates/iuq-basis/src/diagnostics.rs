@@ -70,6 +70,13 @@ pub struct StageDiagnostics {
     pub evaluations: usize,
     /// Batches sent to the likelihood in this stage (1 + one per MCMC step at most).
     pub batches: usize,
+    /// Points sent to the likelihood's screen in this stage (delayed acceptance; 0 without).
+    #[serde(default)]
+    pub screenings: usize,
+    /// Proposals the screen rejected, so that the likelihood never saw them (a subset of
+    /// `screenings`; screen failures are counted in `failures` too).
+    #[serde(default)]
+    pub screened_out: usize,
     /// Distinct members of the population after the stage, divided by N.
     pub unique_fraction: f64,
     /// Wall-clock seconds the stage took (the only field that differs between identical runs).

@@ -56,6 +56,7 @@ pub mod likelihood;
 pub mod member_selection;
 pub mod model_posterior;
 pub mod moment_matching;
+mod moves;
 pub mod pareto_smoothing;
 pub mod prediction_error;
 pub mod proposal;

@@ -31,6 +31,19 @@ pub trait LogLikelihood: Send + Sync {
     /// The outer `Err` is for a failure of the whole batch (the model's infrastructure); a
     /// failure at one point is an `Err` entry of the vector.
     fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>>;
+
+    /// A cheap approximation of ln f at every point, where the likelihood has one (the screen
+    /// of delayed acceptance, [`crate::BasisSettings::delayed_acceptance`]): finite exactly
+    /// where [`LogLikelihood::log_likelihood_batch`] is. The closer it follows ln f, the more
+    /// of the moves it lets through are accepted; the sampled law does not depend on it.
+    /// `None` (the default): no screen, every move is evaluated.
+    fn screening_log_likelihood_batch(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Option<Result<Vec<PointLogLikelihood>>> {
+        let _ = points;
+        None
+    }
 }
 
 impl<L: LogLikelihood + ?Sized> LogLikelihood for &L {
@@ -40,6 +53,12 @@ impl<L: LogLikelihood + ?Sized> LogLikelihood for &L {
     fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>> {
         (**self).log_likelihood_batch(points)
     }
+    fn screening_log_likelihood_batch(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Option<Result<Vec<PointLogLikelihood>>> {
+        (**self).screening_log_likelihood_batch(points)
+    }
 }
 
 impl<L: LogLikelihood + ?Sized> LogLikelihood for Box<L> {
@@ -48,6 +67,12 @@ impl<L: LogLikelihood + ?Sized> LogLikelihood for Box<L> {
     }
     fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>> {
         (**self).log_likelihood_batch(points)
+    }
+    fn screening_log_likelihood_batch(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Option<Result<Vec<PointLogLikelihood>>> {
+        (**self).screening_log_likelihood_batch(points)
     }
 }
 

@@ -341,6 +341,29 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
     }
 
     fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>> {
+        let model_points = self.model_points(points)?;
+        let outcomes = self.model.evaluate_batch(&model_points);
+        self.of_outcomes(points, outcomes)
+    }
+
+    /// The same likelihood of the model's screen ([`iuq_core::Model::screening_batch`]).
+    fn screening_log_likelihood_batch(
+        &self,
+        points: &[Vec<f64>],
+    ) -> Option<Result<Vec<PointLogLikelihood>>> {
+        let model_points = match self.model_points(points) {
+            Ok(m) => m,
+            Err(e) => return Some(Err(e)),
+        };
+        let outcomes = self.model.screening_batch(&model_points)?;
+        Some(self.of_outcomes(points, outcomes))
+    }
+}
+
+impl<M: Model> PredictionErrorLikelihood<M> {
+    /// The model's inputs of every point (σ_m, when estimated, left off), after checking the
+    /// points' length.
+    fn model_points(&self, points: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
         let n_model = self.model.input_dimension();
         let expected = self.parameter_count();
         if let Some(p) = points.iter().find(|p| p.len() != expected) {
@@ -349,14 +372,20 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
                 p.len()
             )));
         }
-        let model_points: Vec<Vec<f64>> = points.iter().map(|p| p[..n_model].to_vec()).collect();
-        let outcomes = self
-            .model
-            .evaluate_batch(&model_points)
-            .map_err(|e| match e {
-                iuq_core::CoreError::ModelInput(reason) => BasisError::ModelInput(reason),
-                e => BasisError::ModelBatch(e.to_string()),
-            })?;
+        Ok(points.iter().map(|p| p[..n_model].to_vec()).collect())
+    }
+
+    /// ln f at every point from the model's outcomes there.
+    fn of_outcomes(
+        &self,
+        points: &[Vec<f64>],
+        outcomes: iuq_core::Result<Vec<iuq_core::Outcome>>,
+    ) -> Result<Vec<PointLogLikelihood>> {
+        let n_model = self.model.input_dimension();
+        let outcomes = outcomes.map_err(|e| match e {
+            iuq_core::CoreError::ModelInput(reason) => BasisError::ModelInput(reason),
+            e => BasisError::ModelBatch(e.to_string()),
+        })?;
         if outcomes.len() != points.len() {
             return Err(BasisError::ModelBatch(format!(
                 "the model returned {} outcomes for {} points",

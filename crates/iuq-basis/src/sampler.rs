@@ -34,19 +34,18 @@
 use std::collections::{BTreeMap, HashSet};
 use std::time::Instant;
 
-use rand::Rng;
-use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use iuq_core::ParameterSpace;
 use iuq_core::normal::quantile;
-use iuq_core::random::{StreamRng, stages::SAMPLER_BASE, stream};
+use iuq_core::random::{stages::SAMPLER_BASE, stream};
 
 use crate::annealing::{incremental_weights, log_evidence_increment, max_finite, next_step};
 use crate::diagnostics::{StageDiagnostics, count_failure, merge_failure_reasons};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
+use crate::moves::{Chain, run_moves};
 use crate::proposal::Proposal;
 use crate::resampling::resample;
 use crate::settings::{CheckedSettings, MinStepAction, Mixing};
@@ -340,20 +339,30 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         if points.is_empty() {
             return Ok(Vec::new());
         }
-        let values = self
-            .likelihood
-            .log_likelihood_batch(points)
-            .map_err(|e| match e {
-                BasisError::ModelBatch(reason) => BasisError::Evaluation { stage, reason },
-                other => other,
-            })?;
-        if values.len() != points.len() {
+        let values = self.likelihood.log_likelihood_batch(points);
+        self.finite_or_failure(stage, points.len(), values, reasons, failures)
+    }
+
+    /// A batch's log-likelihoods with failures and non-finite values as −∞, each counted with
+    /// its reason.
+    fn finite_or_failure(
+        &self,
+        stage: usize,
+        count: usize,
+        values: Result<Vec<PointLogLikelihood>>,
+        reasons: &mut BTreeMap<String, usize>,
+        failures: &mut usize,
+    ) -> Result<Vec<f64>> {
+        let values = values.map_err(|e| match e {
+            BasisError::ModelBatch(reason) => BasisError::Evaluation { stage, reason },
+            other => other,
+        })?;
+        if values.len() != count {
             return Err(BasisError::Evaluation {
                 stage,
                 reason: format!(
-                    "the likelihood returned {} values for {} points",
+                    "the likelihood returned {} values for {count} points",
                     values.len(),
-                    points.len()
                 ),
             });
         }
@@ -419,6 +428,8 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
             failure_reasons: reasons,
             evaluations: n,
             batches: 1,
+            screenings: 0,
+            screened_out: 0,
             unique_fraction: unique_fraction(&samples),
             wall_seconds: start.elapsed().as_secs_f64(),
         };
@@ -446,11 +457,7 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         }
         self.check_compatible(&state)?;
         let start = Instant::now();
-        let settings = &self.settings;
-        let n = settings.samples;
         let stage = state.stage + 1;
-        let stage_key = SAMPLER_BASE + stage as u64;
-        let p = state.exponent;
         let failed_members = state
             .log_likelihood
             .iter()
@@ -460,65 +467,161 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
             stage: state.stage,
             failures: failed_members,
         })?;
-
-        // Step 2: the next exponent.
-        let final_pass = p >= 1.0;
-        let (step, new_p, cv_solved, clamped, iterations) = if final_pass {
-            (0.0, 1.0, 0.0, false, 0)
-        } else {
-            let solved = next_step(&state.log_likelihood, p, settings.cv_target, max_ll);
-            if solved.reaches_one {
-                (solved.step, 1.0, solved.cv, false, solved.iterations)
-            } else if solved.step < settings.min_step {
-                match settings.on_min_step {
-                    MinStepAction::Stop => {
-                        state.stop_reason = Some(StopReason::StepBelowMinimum {
-                            step: solved.step,
-                            min_step: settings.min_step,
-                            exponent: p,
-                        });
-                        return Ok(state);
-                    }
-                    MinStepAction::Clamp => {
-                        let step = settings.min_step.min(1.0 - p);
-                        let new_p = if p + step >= 1.0 { 1.0 } else { p + step };
-                        (step, new_p, f64::NAN, true, solved.iterations)
-                    }
-                }
-            } else {
-                (
-                    solved.step,
-                    p + solved.step,
-                    solved.cv,
-                    false,
-                    solved.iterations,
-                )
+        let next = match self.next_exponent(&state, max_ll) {
+            Ok(next) => next,
+            Err(stop) => {
+                state.stop_reason = Some(stop);
+                return Ok(state);
             }
         };
+        let weighed = self.weigh(&state, &next, max_ll)?;
+        let chains = self.seed_chains(&state, &weighed.weights, stage);
+        let chain_count = chains.len();
+        let moved = run_moves(self, chains, &weighed.proposal, next.exponent, stage)?;
+        let counts = moved.counts;
+        let log_evidence = state.log_evidence + weighed.increment;
+        let diagnostics = StageDiagnostics {
+            stage,
+            exponent: next.exponent,
+            step: next.step,
+            cv: weighed.cv,
+            ess_fraction: weighed.ess_fraction,
+            step_clamped: next.clamped,
+            bisection_iterations: next.iterations,
+            log_evidence_increment: weighed.increment,
+            log_evidence,
+            max_log_likelihood: max_finite(&moved.log_likelihood).unwrap_or(f64::NEG_INFINITY),
+            covariance: Some(weighed.proposal.factor),
+            chains: chain_count,
+            proposals: counts.proposals,
+            accepted: counts.accepted,
+            proposal_scale: weighed.scale,
+            burn_in: counts.burn_in,
+            start_correlation: counts.start_correlation,
+            acceptance_rate: if counts.proposals > 0 {
+                counts.accepted as f64 / counts.proposals as f64
+            } else {
+                0.0
+            },
+            out_of_support: counts.out_of_support,
+            failures: counts.failures,
+            failure_reasons: counts.failure_reasons,
+            evaluations: counts.evaluations,
+            batches: counts.batches,
+            screenings: counts.screenings,
+            screened_out: counts.screened_out,
+            unique_fraction: unique_fraction(&moved.samples),
+            wall_seconds: start.elapsed().as_secs_f64(),
+        };
+        state.diagnostics.push(diagnostics);
+        state.stage = stage;
+        state.exponent = next.exponent;
+        state.log_evidence = log_evidence;
+        state.samples = moved.samples;
+        state.log_likelihood = moved.log_likelihood;
+        state.log_prior = moved.log_prior;
+        state.evaluations += counts.evaluations;
+        state.stop_reason = if next.final_pass {
+            Some(StopReason::Converged)
+        } else if next.exponent < 1.0 && stage >= self.settings.max_stages {
+            Some(StopReason::MaxStages {
+                max_stages: self.settings.max_stages,
+                exponent: next.exponent,
+            })
+        } else {
+            None
+        };
+        Ok(state)
+    }
 
-        // Step 3: evidence; step 4: weights and proposal.
-        let increment = log_evidence_increment(&state.log_likelihood, step, max_ll);
-        let raw_weights = incremental_weights(&state.log_likelihood, step, max_ll);
-        let cv = if cv_solved.is_nan() {
+    /// Step 2: the next exponent from the state's log-likelihoods, or why there is none.
+    fn next_exponent(
+        &self,
+        state: &BasisState,
+        max_ll: f64,
+    ) -> std::result::Result<NextExponent, StopReason> {
+        let settings = &self.settings;
+        let p = state.exponent;
+        if p >= 1.0 {
+            return Ok(NextExponent {
+                step: 0.0,
+                exponent: 1.0,
+                cv: 0.0,
+                clamped: false,
+                iterations: 0,
+                final_pass: true,
+            });
+        }
+        let solved = next_step(&state.log_likelihood, p, settings.cv_target, max_ll);
+        let next = |step, exponent, cv, clamped| NextExponent {
+            step,
+            exponent,
+            cv,
+            clamped,
+            iterations: solved.iterations,
+            final_pass: false,
+        };
+        if solved.reaches_one {
+            return Ok(next(solved.step, 1.0, solved.cv, false));
+        }
+        if solved.step >= settings.min_step {
+            return Ok(next(solved.step, p + solved.step, solved.cv, false));
+        }
+        match settings.on_min_step {
+            MinStepAction::Stop => Err(StopReason::StepBelowMinimum {
+                step: solved.step,
+                min_step: settings.min_step,
+                exponent: p,
+            }),
+            MinStepAction::Clamp => {
+                let step = settings.min_step.min(1.0 - p);
+                let exponent = if p + step >= 1.0 { 1.0 } else { p + step };
+                Ok(next(step, exponent, f64::NAN, true))
+            }
+        }
+    }
+
+    /// Steps 3 and 4: the evidence increment, the normalised weights and the proposal.
+    fn weigh(&self, state: &BasisState, next: &NextExponent, max_ll: f64) -> Result<Weighed> {
+        let settings = &self.settings;
+        let n = settings.samples;
+        let increment = log_evidence_increment(&state.log_likelihood, next.step, max_ll);
+        let raw_weights = incremental_weights(&state.log_likelihood, next.step, max_ll);
+        let cv = if next.cv.is_nan() {
             crate::annealing::coefficient_of_variation(&raw_weights)
         } else {
-            cv_solved
+            next.cv
         };
         let total: f64 = raw_weights.iter().sum();
         let weights: Vec<f64> = raw_weights.iter().map(|w| w / total).collect();
         let ess_fraction = 1.0 / (n as f64 * weights.iter().map(|w| w * w).sum::<f64>());
-        let dimension = self.space.dimension();
         let scale = match settings.mixing {
             Mixing::Fixed => settings.proposal_scale,
-            Mixing::Adaptive { .. } => adapted_scale(&state.diagnostics, dimension),
+            Mixing::Adaptive { .. } => adapted_scale(&state.diagnostics, self.space.dimension()),
         };
         let proposal = Proposal::new(&state.samples, &weights, scale, &self.widths)?;
+        Ok(Weighed {
+            increment,
+            cv,
+            weights,
+            ess_fraction,
+            scale,
+            proposal,
+        })
+    }
 
-        // Step 5: resampling.
+    /// Steps 5 and 6's seeds: the copy counts, and member i's ⌈n_i/l_max⌉ chains of near-equal
+    /// lengths, chain c drawing from stream (seed, stage, c).
+    fn seed_chains(&self, state: &BasisState, weights: &[f64], stage: usize) -> Vec<Chain> {
+        let settings = &self.settings;
+        let stage_key = SAMPLER_BASE + stage as u64;
         let mut resampling_rng = stream(settings.seed, stage_key, RESAMPLING_STREAM);
-        let counts = resample(&weights, n, settings.resampling, &mut resampling_rng);
-
-        // Step 6: chains.
+        let counts = resample(
+            weights,
+            settings.samples,
+            settings.resampling,
+            &mut resampling_rng,
+        );
         let mut chains = Vec::new();
         for (member, &count) in counts.iter().enumerate() {
             if count == 0 {
@@ -529,205 +632,61 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
             for piece in 0..pieces {
                 let length = base + usize::from(piece < extra);
                 let index = chains.len() as u64;
-                chains.push(Chain {
-                    theta: state.samples[member].clone(),
-                    log_likelihood: state.log_likelihood[member],
-                    log_prior: state.log_prior[member],
+                chains.push(Chain::new(
+                    state.samples[member].clone(),
+                    state.log_likelihood[member],
+                    state.log_prior[member],
                     length,
-                    rng: stream(settings.seed, stage_key, index),
-                    samples: Vec::with_capacity(length),
-                    proposed: None,
-                });
+                    stream(settings.seed, stage_key, index),
+                ));
             }
         }
-        let starts: Vec<Vec<f64>> = chains.iter().map(|c| c.theta.clone()).collect();
-        // The burn-in, once known: fixed, or (adaptive) when the chains have decorrelated.
-        let (mut burn, decorrelation) = match settings.mixing {
-            Mixing::Fixed => (Some(settings.burn_in), None),
-            Mixing::Adaptive {
-                correlation,
-                max_burn_in,
-            } => (None, Some((correlation, max_burn_in))),
-        };
-        let longest = chains.iter().map(|c| c.length).max().unwrap_or(0);
-        let mut reasons = BTreeMap::new();
-        let (mut failures, mut proposals, mut accepted, mut out_of_support) = (0, 0, 0, 0);
-        let (mut evaluations, mut batches) = (0, 0);
-        let mut step_index = 0;
-        loop {
-            if burn.is_some_and(|b| step_index >= b + longest) {
-                break;
-            }
-            let moving = |length: usize| burn.is_none_or(|b| b + length > step_index);
-            let active: Vec<usize> = (0..chains.len())
-                .filter(|&c| moving(chains[c].length))
-                .collect();
-            // Propose in parallel, each chain from its own stream.
-            let space = self.space;
-            chains.par_iter_mut().with_min_len(64).for_each(|chain| {
-                if moving(chain.length) {
-                    let z: Vec<f64> = (0..dimension)
-                        .map(|_| StandardNormal.sample(&mut chain.rng))
-                        .collect();
-                    let u: f64 = chain.rng.random::<f64>();
-                    let theta = proposal.step(&chain.theta, &z);
-                    let log_prior = if space.in_support(&theta) {
-                        space.log_prior(&theta).unwrap_or(f64::NEG_INFINITY)
-                    } else {
-                        f64::NEG_INFINITY
-                    };
-                    chain.proposed = Some(Proposed {
-                        theta,
-                        log_prior,
-                        ln_u: u.ln(),
-                    });
-                } else {
-                    chain.proposed = None;
-                }
-            });
-            let mut batch_chains = Vec::new();
-            let mut batch_points = Vec::new();
-            for &c in &active {
-                proposals += 1;
-                if let Some(proposed) = &chains[c].proposed {
-                    if proposed.log_prior.is_finite() {
-                        batch_chains.push(c);
-                        batch_points.push(proposed.theta.clone());
-                    } else {
-                        out_of_support += 1;
-                    }
-                }
-            }
-            if !batch_points.is_empty() {
-                batches += 1;
-                evaluations += batch_points.len();
-            }
-            let values = self.evaluate(stage, &batch_points, &mut reasons, &mut failures)?;
-            for (&c, ll_new) in batch_chains.iter().zip(values) {
-                let chain = &mut chains[c];
-                let Some(proposed) = chain.proposed.take() else {
-                    continue;
-                };
-                if !ll_new.is_finite() {
-                    continue;
-                }
-                let log_ratio = new_p * (ll_new - chain.log_likelihood)
-                    + (proposed.log_prior - chain.log_prior);
-                if proposed.ln_u < log_ratio {
-                    accepted += 1;
-                    chain.theta = proposed.theta;
-                    chain.log_likelihood = ll_new;
-                    chain.log_prior = proposed.log_prior;
-                }
-            }
-            match (burn, decorrelation) {
-                (Some(b), _) if step_index >= b => {
-                    for &c in &active {
-                        let chain = &mut chains[c];
-                        chain.samples.push((
-                            chain.theta.clone(),
-                            chain.log_likelihood,
-                            chain.log_prior,
-                        ));
-                    }
-                }
-                (None, Some((target, max_burn_in))) => {
-                    let taken = step_index + 1;
-                    if taken >= settings.burn_in.max(1)
-                        && (taken >= max_burn_in || start_correlation(&starts, &chains) <= target)
-                    {
-                        burn = Some(taken);
-                    }
-                }
-                _ => {}
-            }
-            step_index += 1;
-        }
-        let burn_in = burn.unwrap_or(0);
-        let correlation_left = start_correlation(&starts, &chains);
+        chains
+    }
 
-        let mut samples = Vec::with_capacity(n);
-        let mut log_likelihood = Vec::with_capacity(n);
-        let mut log_prior = Vec::with_capacity(n);
-        for chain in chains.iter_mut() {
-            for (theta, ll, lp) in chain.samples.drain(..) {
-                samples.push(theta);
-                log_likelihood.push(ll);
-                log_prior.push(lp);
-            }
-        }
-        let max_ll_new = max_finite(&log_likelihood).unwrap_or(f64::NEG_INFINITY);
-        let log_evidence = state.log_evidence + increment;
-        let diagnostics = StageDiagnostics {
-            stage,
-            exponent: new_p,
-            step,
-            cv,
-            ess_fraction,
-            step_clamped: clamped,
-            bisection_iterations: iterations,
-            log_evidence_increment: increment,
-            log_evidence,
-            max_log_likelihood: max_ll_new,
-            covariance: Some(proposal.factor),
-            chains: chains.len(),
-            proposals,
-            accepted,
-            proposal_scale: scale,
-            burn_in,
-            start_correlation: correlation_left,
-            acceptance_rate: if proposals > 0 {
-                accepted as f64 / proposals as f64
-            } else {
-                0.0
-            },
-            out_of_support,
-            failures,
-            failure_reasons: reasons,
-            evaluations,
-            batches,
-            unique_fraction: unique_fraction(&samples),
-            wall_seconds: start.elapsed().as_secs_f64(),
+    /// The parameter space sampled.
+    pub(crate) fn space(&self) -> &ParameterSpace {
+        self.space
+    }
+
+    /// The likelihood's screen of a batch ([`LogLikelihood::screening_log_likelihood_batch`]),
+    /// failures and non-finite values turned into −∞ with a counted reason; `None` when the
+    /// likelihood has none.
+    pub(crate) fn screen(
+        &self,
+        stage: usize,
+        points: &[Vec<f64>],
+        reasons: &mut BTreeMap<String, usize>,
+        failures: &mut usize,
+    ) -> Result<Option<Vec<f64>>> {
+        let Some(values) = self.likelihood.screening_log_likelihood_batch(points) else {
+            return Ok(None);
         };
-        state.diagnostics.push(diagnostics);
-        state.stage = stage;
-        state.exponent = new_p;
-        state.log_evidence = log_evidence;
-        state.samples = samples;
-        state.log_likelihood = log_likelihood;
-        state.log_prior = log_prior;
-        state.evaluations += evaluations;
-        state.stop_reason = if final_pass {
-            Some(StopReason::Converged)
-        } else if new_p < 1.0 && stage >= settings.max_stages {
-            Some(StopReason::MaxStages {
-                max_stages: settings.max_stages,
-                exponent: new_p,
-            })
-        } else {
-            None
-        };
-        Ok(state)
+        self.finite_or_failure(stage, points.len(), values, reasons, failures)
+            .map(Some)
     }
 }
 
-/// One Markov chain of a stage.
-struct Chain {
-    theta: Vec<f64>,
-    log_likelihood: f64,
-    log_prior: f64,
-    length: usize,
-    rng: StreamRng,
-    samples: Vec<(Vec<f64>, f64, f64)>,
-    proposed: Option<Proposed>,
+/// The exponent of the next stage (step 2).
+struct NextExponent {
+    step: f64,
+    exponent: f64,
+    /// NaN when the step was clamped (the weights' CV is computed then).
+    cv: f64,
+    clamped: bool,
+    iterations: usize,
+    /// The stage starts at p = 1: the final pass.
+    final_pass: bool,
 }
 
-/// A chain's proposal of the current step.
-struct Proposed {
-    theta: Vec<f64>,
-    /// −∞ outside the prior support.
-    log_prior: f64,
-    ln_u: f64,
+/// A stage's weights and proposal (steps 3 and 4).
+struct Weighed {
+    increment: f64,
+    cv: f64,
+    weights: Vec<f64>,
+    ess_fraction: f64,
+    scale: f64,
+    proposal: Proposal,
 }
 
 /// The acceptance rate the scale of [`Mixing::Adaptive`] aims at: optimal for a random walk
@@ -757,7 +716,7 @@ fn adapted_scale(diagnostics: &[StageDiagnostics], dimension: usize) -> f64 {
 /// current states (each chain counted once). A parameter whose states have not spread (zero
 /// variance) counts as correlation 1; one whose starts were all equal and whose states have
 /// spread, as 0.
-fn start_correlation(starts: &[Vec<f64>], chains: &[Chain]) -> f64 {
+pub(crate) fn start_correlation(starts: &[Vec<f64>], chains: &[Chain]) -> f64 {
     let m = chains.len();
     if m < 2 {
         return 1.0;

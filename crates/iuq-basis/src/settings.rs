@@ -130,6 +130,14 @@ pub struct BasisSettings {
     /// Seed of every random stream (default 0). Stream (seed, stage, chain) is independent of
     /// the number of threads.
     pub seed: u64,
+    /// Delayed acceptance (default true; a checkpoint without it ran without): where the
+    /// likelihood has a cheap screen ([`crate::LogLikelihood::screening_log_likelihood_batch`],
+    /// a surrogate's means without their predictive variances), every move is first accepted
+    /// or rejected on the screen and only the proposals it lets through are evaluated, then
+    /// accepted with the ratio of the likelihood to the screen (Christen & Fox 2005). The
+    /// chains' invariant law stays the exact tempered posterior; what changes is the cost.
+    #[serde(default)]
+    pub delayed_acceptance: bool,
 }
 
 impl Default for BasisSettings {
@@ -146,6 +154,7 @@ impl Default for BasisSettings {
             on_min_step: MinStepAction::Clamp,
             max_stages: 100,
             seed: 0,
+            delayed_acceptance: true,
         }
     }
 }

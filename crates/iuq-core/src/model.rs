@@ -85,6 +85,17 @@ pub trait Model: Send + Sync {
     /// Evaluate the model at every point of `points`.
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> Result<Vec<Outcome>>;
 
+    /// A cheap approximation of [`Model::evaluate_batch`]'s outcomes, where the model has one:
+    /// the screen of delayed-acceptance moves (Christen & Fox 2005), which evaluate the model
+    /// itself only at the proposals the screen lets through. A surrogate gives its means with
+    /// only the noise part of its predictive std (no triangular solve per point, which is most of
+    /// a prediction's cost); it must fail exactly where `evaluate_batch` fails, or the moves
+    /// that the screen rejects there are lost. `None` (the default): no screen.
+    fn screening_batch(&self, points: &[Vec<f64>]) -> Option<Result<Vec<Outcome>>> {
+        let _ = points;
+        None
+    }
+
     /// Number of inputs.
     fn input_dimension(&self) -> usize {
         self.input_names().len()

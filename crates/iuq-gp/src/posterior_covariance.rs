@@ -6,21 +6,24 @@
 //! the variance at x by −cov(x, s)²/(var(s) + σ²) whatever value is later observed at s, which
 //! is how a batch of new runs is kept diverse (the "kriging believer" of Ginsbourger et al. 2010).
 
-use faer::linalg::triangular_solve;
-use faer::{MatMut, MatRef, Par};
+use faer::linalg::{matmul, triangular_solve};
+use faer::{Accum, MatMut, MatRef, Par};
 
 use crate::data::validate_points;
 use crate::error::Result;
 use crate::gaussian_process::GaussianProcess;
 use crate::log_marginal_likelihood::{LmlWorkspace, rbf_column};
+use crate::vector_math::exp_in_place;
 
 impl GaussianProcess {
     /// The latent posterior covariance matrix between the points `a` and `b` (original input
     /// units, one row per point): row i, column j is cov[f(a_i), f(b_j)] in original output
     /// units. Its diagonal for `a == b` equals [`GaussianProcess::predict`]'s variances.
     ///
-    /// Cost: one O(n³) factorisation of the training kernel matrix and O((|a| + |b|)·n²)
-    /// triangular solves.
+    /// Cost: one O(n³) factorisation of the training kernel matrix, O((|a| + |b|)·n²)
+    /// triangular solves and one matrix product of O(|a|·|b|·n); for `a == b` (the covariance
+    /// over one set, e.g. the adaptive engine's candidates) the solves and the kernel terms are
+    /// made once per point and pair and the matrix is symmetric by construction.
     ///
     /// # Errors
     /// A point of the wrong dimension or with a non-finite coordinate.
@@ -28,6 +31,7 @@ impl GaussianProcess {
         let d = self.dimension();
         validate_points(a, "covariance point", Some(d))?;
         validate_points(b, "covariance point", Some(d))?;
+        let same = a == b;
         let n = self.x.n;
         let mut workspace = LmlWorkspace::new(n);
         workspace.factorize(&self.x, &self.hyperparameters, self.jitter)?;
@@ -39,9 +43,13 @@ impl GaussianProcess {
             (0..d).map(|k| self.input_scaling.apply(k, p[k])).collect()
         };
         let a_scaled: Vec<Vec<f64>> = a.iter().map(scaled).collect();
-        let b_scaled: Vec<Vec<f64>> = b.iter().map(scaled).collect();
-        // Columns L⁻¹k(X̃, p) for every point p of a, then of b.
-        let m = a.len() + b.len();
+        let b_scaled: Vec<Vec<f64>> = if same {
+            Vec::new()
+        } else {
+            b.iter().map(scaled).collect()
+        };
+        // Columns L⁻¹k(X̃, p) for every point p of a, then of b (unless b is a).
+        let m = a_scaled.len() + b_scaled.len();
         let mut columns = vec![0.0; n * m];
         for (j, p) in a_scaled.iter().chain(&b_scaled).enumerate() {
             rbf_column(
@@ -56,21 +64,50 @@ impl GaussianProcess {
         }
         let mut solved = MatMut::from_column_major_slice_mut(&mut columns, n, m);
         triangular_solve::solve_lower_triangular_in_place(l, solved.as_mut(), Par::Seq);
+        let (rows, cols) = (a.len(), b.len());
+        let va = MatRef::from_column_major_slice(&columns[..n * rows], n, rows);
+        let vb = if same {
+            va
+        } else {
+            MatRef::from_column_major_slice(&columns[n * rows..], n, cols)
+        };
+        // k(X̃, a)ᵀ K⁻¹ k(X̃, b) = (L⁻¹k_a)ᵀ (L⁻¹k_b), column-major rows × cols.
+        let mut explained = vec![0.0; rows * cols];
+        matmul::matmul(
+            MatMut::from_column_major_slice_mut(&mut explained, rows, cols),
+            Accum::Replace,
+            va.transpose(),
+            vb,
+            1.0,
+            Par::Seq,
+        );
+        let b_points = if same { &a_scaled } else { &b_scaled };
         let s2 = self.output_scaling.std * self.output_scaling.std;
-        let mut covariance = vec![vec![0.0; b.len()]; a.len()];
+        // Row i's prior kernel terms c·exp(−½ Σ_k w_k (a_ik − b_jk)²), the exponentials of a
+        // row at once (vectorised).
+        let mut covariance = vec![vec![0.0; cols]; rows];
         for (i, (pa, row)) in a_scaled.iter().zip(covariance.iter_mut()).enumerate() {
-            let va = &columns[i * n..(i + 1) * n];
-            for (j, (pb, out)) in b_scaled.iter().zip(row.iter_mut()).enumerate() {
-                let vb = &columns[(a.len() + j) * n..(a.len() + j + 1) * n];
+            let first = if same { i } else { 0 };
+            let terms = &mut row[first..];
+            for (out, pb) in terms.iter_mut().zip(&b_points[first..]) {
                 let squared: f64 = pa
                     .iter()
                     .zip(pb)
                     .zip(&weights)
                     .map(|((x, y), w)| w * (x - y) * (x - y))
                     .sum();
-                let prior = c * (-0.5 * squared).exp();
-                let explained: f64 = va.iter().zip(vb).map(|(x, y)| x * y).sum();
-                *out = s2 * (prior - explained);
+                *out = -0.5 * squared;
+            }
+            exp_in_place(terms);
+            for (j, out) in (first..).zip(terms.iter_mut()) {
+                *out = s2 * (c * *out - explained[j * rows + i]);
+            }
+        }
+        if same {
+            for i in 0..rows {
+                for j in 0..i {
+                    covariance[i][j] = covariance[j][i];
+                }
             }
         }
         Ok(covariance)

@@ -100,7 +100,6 @@ pub(crate) fn exp(x: f64) -> f64 {
 
 multiversion! {
     /// Replaces every value by its exponential ([`exp`]).
-    #[allow(dead_code)]
     pub(crate) fn exp_in_place(values: &mut [f64]) {
         for v in values.iter_mut() {
             *v = exp(*v);

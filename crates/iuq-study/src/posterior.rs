@@ -269,23 +269,45 @@ pub struct SampledPosterior {
     pub seconds: f64,
 }
 
-/// Sample `posterior` with BASIS and write every result file into `out` (checkpoint after each
-/// stage, `stages.json/csv`, `samples.csv`, `marginals.json`, `summary.json`); `checkpoint`
-/// resumes an earlier run (read from `resume_dir`, named in errors). `study_name`/`study_file`
-/// label the summary. After every stage, once its checkpoint is written, `on_stage` sees the
-/// state (for progress reports); the run stops (resumably) after stage `stop_after`.
-#[allow(clippy::too_many_arguments)]
+/// Where and how [`sample_posterior`] runs and writes.
+pub struct SamplingJob<'a> {
+    /// The study's name, labelling the summary.
+    pub study_name: &'a str,
+    /// The study file, labelling the summary and named in errors.
+    pub study_file: &'a Path,
+    /// The folder every result file is written into.
+    pub out: &'a Path,
+    /// An earlier run's state to resume (read from `resume_dir`, named in errors).
+    pub checkpoint: Option<BasisState>,
+    /// Where `checkpoint` was read from.
+    pub resume_dir: Option<&'a Path>,
+    /// Stop (resumably) after this stage.
+    pub stop_after: Option<usize>,
+    /// Write `marginals.json`, the KDE marginals (2,500 grid points × N samples per pair of
+    /// parameters: most of a small run's time; the adaptive rounds' replicates leave it out).
+    pub marginals: bool,
+}
+
+/// Sample `posterior` with BASIS and write every result file into the job's `out` (checkpoint
+/// after each stage, `stages.json/csv`, `samples.csv`, `marginals.json` unless the job leaves
+/// it out, `summary.json`), resuming the job's `checkpoint` where it has one. After every
+/// stage, once its checkpoint is written, `on_stage` sees the state (for progress reports); the
+/// run stops (resumably) after the job's `stop_after`.
 pub fn sample_posterior(
-    study_name: &str,
-    study_file: &Path,
+    job: SamplingJob<'_>,
     posterior: &StudyPosterior,
     settings: iuq_basis::CheckedSettings,
-    out: &Path,
-    checkpoint: Option<BasisState>,
-    resume_dir: Option<&Path>,
-    stop_after: Option<usize>,
     on_stage: &mut dyn FnMut(&BasisState) -> Control,
 ) -> Result<SampledPosterior> {
+    let SamplingJob {
+        study_name,
+        study_file,
+        out,
+        checkpoint,
+        resume_dir,
+        stop_after,
+        marginals: with_marginals,
+    } = job;
     let out = out.to_path_buf();
     std::fs::create_dir_all(&out)
         .map_err(|e| input_error(format!("cannot create {}: {e}", out.display())))?;
@@ -335,11 +357,13 @@ pub fn sample_posterior(
         })
         .collect();
     write_numeric_csv(&out.join("samples.csv"), &columns, &rows)?;
-    let marginals = marginals(state, &posterior.space);
-    write_atomically(
-        &out.join("marginals.json"),
-        serde_json::to_string(&marginals)?.as_bytes(),
-    )?;
+    if with_marginals {
+        let marginals = marginals(state, &posterior.space);
+        write_atomically(
+            &out.join("marginals.json"),
+            serde_json::to_string(&marginals)?.as_bytes(),
+        )?;
+    }
 
     let converged = run.stop_reason == StopReason::Converged;
     let quantiles: Map<String, Value> = names

@@ -15,6 +15,7 @@
 //! min_step = 1e-6            # smallest exponent step (default 1e-6)
 //! on_min_step = "clamp"      # | "stop"
 //! max_stages = 100           # annealing stages before p = 1 (default 100)
+//! delayed_acceptance = true  # screen moves on a surrogate's means first (default true)
 //! ```
 
 use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Mixing, Resampling};
@@ -163,6 +164,9 @@ fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Resul
         on_min_step,
         max_stages: s.count("max_stages", 0)?.unwrap_or(d.max_stages),
         seed: overrides.seed.or(s.seed("seed")?).unwrap_or(d.seed),
+        delayed_acceptance: s
+            .boolean("delayed_acceptance")?
+            .unwrap_or(d.delayed_acceptance),
     };
     s.finish()?;
     settings.check().map_err(|e| match e {

@@ -42,6 +42,7 @@
 use std::path::Path;
 use std::time::Instant;
 
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::engine::{
@@ -242,6 +243,9 @@ pub struct AdaptiveRound {
     /// sampling cost in model-free operations (0 for a round read back from a store that did
     /// not count them).
     pub surrogate_evaluations: usize,
+    /// Points the round's samplers sent to the surrogate's screen (delayed acceptance: means
+    /// without predictive variances, O(n) each against O(n²)), all replicates together.
+    pub surrogate_screenings: usize,
 }
 
 /// What the adaptive engine did.
@@ -584,6 +588,9 @@ struct RoundMeasurement {
     /// recorded before it was counted).
     #[serde(default)]
     surrogate_evaluations: usize,
+    /// Points sent to the surrogate's screen (0 in rounds recorded before delayed acceptance).
+    #[serde(default)]
+    surrogate_screenings: usize,
 }
 
 impl RoundMeasurement {
@@ -626,6 +633,27 @@ mod f64_bits {
     }
 }
 
+/// The `[sampler]` section without its `delayed_acceptance` key, and whether the moves are
+/// screened (the key, default [`iuq_basis::BasisSettings::default`]'s).
+fn sampler_without_delayed_acceptance(
+    sampler: &Option<toml::Table>,
+) -> (Option<toml::Table>, bool) {
+    let default = iuq_basis::BasisSettings::default().delayed_acceptance;
+    let Some(table) = sampler else {
+        return (None, default);
+    };
+    let mut table = table.clone();
+    let delayed = match table.remove("delayed_acceptance") {
+        Some(toml::Value::Boolean(b)) => b,
+        _ => default,
+    };
+    (Some(table), delayed)
+}
+
+/// The label of a round's replicates in the pipeline's events (their folders get no
+/// `marginals.json`).
+pub(super) const ROUND_LABEL: &str = "adaptive round";
+
 /// Version of a round's measurement: raise it whenever the engine computes a measurement
 /// differently, so that measurements recorded by an earlier version are not read back.
 const MEASUREMENT_VERSION: u32 = 2;
@@ -655,13 +683,20 @@ fn round_fingerprint(
         t.as_ref()
             .map_or(String::new(), |t| toml::Value::Table(t.clone()).to_string())
     };
+    // `delayed_acceptance` enters as what it does, not as text: a section that turns it off
+    // reads as the sections of the stores recorded before it existed, and moves screened on the
+    // surrogate add a line.
+    let (sampler, delayed_acceptance) = sampler_without_delayed_acceptance(&study.sampler);
     let mut text = format!(
         "iuq-study {} measurement {MEASUREMENT_VERSION}\nspace {:?}\nlikelihood {}\nsampler {}\n",
         env!("CARGO_PKG_VERSION"),
         study.space,
         table(&study.likelihood),
-        table(&study.sampler),
+        table(&sampler),
     );
+    if delayed_acceptance {
+        text.push_str("delayed acceptance\n");
+    }
     let _ = write!(
         text,
         "data x {:?} y {:?} std {:?} modelling {:?} measurement {} computational {:?}\n\
@@ -734,6 +769,8 @@ struct ReplicateSampling {
     carried_replicates: usize,
     /// Surrogate evaluations of all replicates' samplers.
     surrogate_evaluations: usize,
+    /// Points all replicates' samplers sent to the surrogate's screen.
+    surrogate_screenings: usize,
 }
 
 /// Sample the surrogate `posterior` with the round's replicates, each from its population
@@ -755,6 +792,7 @@ fn sample_replicates(
     let mut parameters = Vec::new();
     let mut replicate_moments = Vec::with_capacity(ctx.settings.replicates);
     let (mut carried_replicates, mut surrogate_evaluations) = (0usize, 0usize);
+    let mut surrogate_screenings = 0usize;
     // With two replicates or more, every second one mixes a level harder: the check of the
     // sampler (`iuq_adaptive::sampler_agreement`).
     let checked = ctx.settings.replicates >= 2;
@@ -807,7 +845,7 @@ fn sample_replicates(
             None => None,
         };
         let sampled = ctx.events.sample(
-            "adaptive round",
+            ROUND_LABEL,
             ctx.study,
             posterior,
             sampler,
@@ -819,6 +857,11 @@ fn sample_replicates(
         let state = sampled.run.state;
         // A carried state counts its reweighting's evaluations as well as its moves'.
         surrogate_evaluations += state.evaluations;
+        surrogate_screenings += state
+            .diagnostics
+            .iter()
+            .map(|d| d.screenings)
+            .sum::<usize>();
         if let Some(slot) = carried.get_mut(replicate) {
             *slot = Some(state.clone());
         }
@@ -859,6 +902,7 @@ fn sample_replicates(
         sampler_check,
         carried_replicates,
         surrogate_evaluations,
+        surrogate_screenings,
     })
 }
 
@@ -892,10 +936,15 @@ fn surrogate_errors(
     let mut residuals = Vec::with_capacity(outputs);
     let mut variances = Vec::with_capacity(outputs);
     let mut sampled_variances = Vec::with_capacity(outputs);
-    // Per output, its GP's covariance over the candidates; a reduced basis's outputs carry none
-    // (their errors are drawn through the components').
-    let mut covariances = Vec::with_capacity(outputs);
-    let per_output = emulator.per_output_gps();
+    // Per output, its GP's covariance over the candidates (the outputs in parallel); a reduced
+    // basis's outputs carry none (their errors are drawn through the components').
+    let covariances: Vec<Vec<Vec<f64>>> = match emulator.per_output_gps() {
+        Some(gps) => gps
+            .par_iter()
+            .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
+            .collect::<iuq_gp::Result<_>>()?,
+        None => vec![Vec::new(); outputs],
+    };
     for (j, p) in predictions.iter().enumerate() {
         let y = data.observations.values[j];
         residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
@@ -906,10 +955,6 @@ fn surrogate_errors(
                 .collect::<Vec<f64>>(),
         );
         sampled_variances.push(sampled_variance.iter().map(|v| v[j]).collect::<Vec<f64>>());
-        covariances.push(match per_output {
-            Some(gps) => gps[j].posterior_covariance(&c.theta, &c.theta)?,
-            None => Vec::new(),
-        });
     }
     let terms: Vec<MomentTerm<'_>> = (0..outputs)
         .map(|j| MomentTerm {
@@ -931,7 +976,7 @@ fn surrogate_errors(
         Some(basis) => {
             let component_covariances = basis
                 .component_gps()
-                .iter()
+                .par_iter()
                 .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
                 .collect::<iuq_gp::Result<Vec<_>>>()?;
             let loadings: Vec<Vec<f64>> = (0..outputs)
@@ -1070,6 +1115,7 @@ fn measure_round(
         sampler_check,
         carried_replicates,
         surrogate_evaluations,
+        surrogate_screenings,
     } = sample_replicates(&context, &posterior, carried)?;
     let moments = pooled.moments.clone();
     let state = &pooled;
@@ -1156,6 +1202,7 @@ fn measure_round(
         sampler_agreement: sampler_check,
         carried_replicates,
         surrogate_evaluations,
+        surrogate_screenings,
     };
     Ok((
         measurement,
@@ -1357,6 +1404,7 @@ impl AdaptiveRound {
             seconds: 0.0,
             carried_replicates: m.carried_replicates,
             surrogate_evaluations: m.surrogate_evaluations,
+            surrogate_screenings: m.surrogate_screenings,
         }
     }
 }

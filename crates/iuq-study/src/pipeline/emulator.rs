@@ -190,4 +190,11 @@ impl Model for Emulator {
             Emulator::ReducedBasis(rb) => rb.evaluate_batch(points),
         }
     }
+
+    fn screening_batch(&self, points: &[Vec<f64>]) -> Option<iuq_core::Result<Vec<Outcome>>> {
+        match self {
+            Emulator::PerOutput(bank) => bank.screening_batch(points),
+            Emulator::ReducedBasis(rb) => rb.screening_batch(points),
+        }
+    }
 }

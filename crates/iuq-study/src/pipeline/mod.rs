@@ -382,24 +382,24 @@ impl Events {
         checkpoint: Option<BasisState>,
     ) -> Result<SampledPosterior> {
         self.send(OwnedEvent::BasisStarted { label });
-        let sampled = sample_posterior(
-            &study.name,
-            &study.path,
-            posterior,
-            settings,
-            dir,
+        let job = crate::posterior::SamplingJob {
+            study_name: &study.name,
+            study_file: &study.path,
+            out: dir,
             checkpoint,
-            Some(dir),
-            None,
-            &mut |state| {
-                self.send(OwnedEvent::BasisStage(Box::new(state.clone())));
-                if self.interrupt.is_raised() {
-                    iuq_basis::Control::Stop
-                } else {
-                    iuq_basis::Control::Continue
-                }
-            },
-        );
+            resume_dir: Some(dir),
+            stop_after: None,
+            // A round's replicates are read for their moments and populations only.
+            marginals: label != adaptive::ROUND_LABEL,
+        };
+        let sampled = sample_posterior(job, posterior, settings, &mut |state| {
+            self.send(OwnedEvent::BasisStage(Box::new(state.clone())));
+            if self.interrupt.is_raised() {
+                iuq_basis::Control::Stop
+            } else {
+                iuq_basis::Control::Continue
+            }
+        });
         self.send(OwnedEvent::BasisFinished);
         self.check_interrupt()?;
         sampled

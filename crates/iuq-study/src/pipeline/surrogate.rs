@@ -234,7 +234,25 @@ impl Model for Surrogate {
     }
 
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
-        let mut outcomes = self.emulator.evaluate_batch(points)?;
+        let outcomes = self.emulator.evaluate_batch(points)?;
+        self.classify(points, outcomes)
+    }
+
+    /// The emulator's screen with the same failure classifiers, so that it fails exactly where
+    /// [`Surrogate::evaluate_batch`] does.
+    fn screening_batch(&self, points: &[Vec<f64>]) -> Option<iuq_core::Result<Vec<Outcome>>> {
+        let outcomes = self.emulator.screening_batch(points)?;
+        Some(outcomes.and_then(|o| self.classify(points, o)))
+    }
+}
+
+impl Surrogate {
+    /// `outcomes` with a failure wherever a run group's classifier predicts no answer.
+    fn classify(
+        &self,
+        points: &[Vec<f64>],
+        mut outcomes: Vec<Outcome>,
+    ) -> iuq_core::Result<Vec<Outcome>> {
         for (g, classifier) in self.classifiers.iter().enumerate() {
             let Some(c) = classifier else { continue };
             let valid: Vec<usize> = (0..points.len()).filter(|&i| outcomes[i].is_ok()).collect();

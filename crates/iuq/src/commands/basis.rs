@@ -30,7 +30,7 @@ use iuq_basis::checkpoint::from_json;
 use iuq_basis::summary::DEFAULT_PROBABILITIES;
 use iuq_basis::{BasisState, StopReason};
 use iuq_study::Study;
-use iuq_study::posterior::{build_posterior, by_name, sample_posterior};
+use iuq_study::posterior::{SamplingJob, build_posterior, by_name, sample_posterior};
 use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 
 use crate::input_error::{BadInput, input_error};
@@ -169,20 +169,19 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
         .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
 
     let progress = StageProgress::start();
-    let sampled = sample_posterior(
-        &study.name,
-        &study.path,
-        &posterior,
-        settings,
-        &out,
+    let job = SamplingJob {
+        study_name: &study.name,
+        study_file: &study.path,
+        out: &out,
         checkpoint,
-        args.resume.as_deref(),
-        args.stop_after,
-        &mut |state| {
-            progress.report(state);
-            iuq_basis::Control::Continue
-        },
-    );
+        resume_dir: args.resume.as_deref(),
+        stop_after: args.stop_after,
+        marginals: true,
+    };
+    let sampled = sample_posterior(job, &posterior, settings, &mut |state| {
+        progress.report(state);
+        iuq_basis::Control::Continue
+    });
     progress.finish();
     let sampled = sampled?;
     let (run, summary) = (&sampled.run, &sampled.summary);
