@@ -17,6 +17,8 @@
 //! - [`ReducedBasis`]: GPs on the leading principal components of a curve-valued model's runs
 //!   (Higdon et al. 2008), with the truncation error as variance; an [`iuq_core::Model`].
 //! - [`GaussianProcess::posterior_covariance`]: cov[f(a), f(b) | data], for sequential designs.
+//! - [`MultiFidelityGp`]: an expensive model's output as ρ·(a cheap model's) + a GP discrepancy
+//!   (recursive co-kriging), used only where it predicts the expensive runs better.
 //! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
 //! The crate does no I/O.
@@ -50,6 +52,7 @@ pub mod gaussian_process;
 pub mod kernel;
 pub mod log_marginal_likelihood;
 pub mod mean_gradient;
+pub mod multi_fidelity;
 mod multi_start;
 pub mod optimizer;
 pub mod output_predictor;
@@ -73,6 +76,7 @@ pub use fit::{CheckedFitOptions, FitOptions, MAX_RESTARTS, fit};
 pub use gaussian_process::GaussianProcess;
 pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};
+pub use multi_fidelity::MultiFidelityGp;
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };
