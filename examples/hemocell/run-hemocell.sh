@@ -79,10 +79,20 @@ cp "$position" RBC_HO.pos
 # an existing tmp/ and the decoder would read the old output.
 rm -rf tmp tmp_[0-9]* output hemocell.log
 read -r -a launcher <<< "${HEMOCELL_LAUNCHER:-}"
-set +e
-${launcher[@]+"${launcher[@]}"} "$simulator" config.xml 2>&1 | tee hemocell.log
-status=${PIPESTATUS[0]}
-set -e
+# An MPI start-up failure (MPI_Init, before HemoCell reads anything: a clash of two Open MPI
+# singletons starting at once) is not the model's answer: tried again, up to twice.
+for attempt in 1 2 3; do
+    set +e
+    ${launcher[@]+"${launcher[@]}"} "$simulator" config.xml 2>&1 | tee hemocell.log
+    status=${PIPESTATUS[0]}
+    set -e
+    if [ "$status" -eq 0 ] || ! grep -q 'An error occurred in MPI_Init' hemocell.log || [ "$attempt" -eq 3 ]; then
+        break
+    fi
+    echo "run-hemocell.sh: MPI_Init failed (attempt $attempt); starting oneCellShear again" >&2
+    sleep $((5 * attempt))
+    rm -rf tmp tmp_[0-9]* output
+done
 if [ "$status" -ne 0 ]; then
     deleted=$(grep -m1 -A2 'Particle deleted\|(Delete Cells)' hemocell.log | tr -s ' \t\n' ' ' | sed 's/^ //; s/ $//' | cut -c1-300 || true)
     # HemoCell's last error-like line, leaving out its start-up force-cap warning and the
