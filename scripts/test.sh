@@ -26,8 +26,11 @@ else
 fi
 "$py" -m pip install --quiet "maturin>=1.5,<2" pytest numpy scikit-learn SALib scipy \
     arviz pandas nbclient nbformat ipykernel
-# --no-build-isolation (in the venv): build with the maturin just installed.
-"$py" -m pip install --quiet "${build_flags[@]}" --no-deps --force-reinstall ./python
+# --no-build-isolation (in the venv): build with the maturin just installed. The extension is
+# built in the dev profile (optimised, opt-level 2), reusing what `cargo test` just compiled
+# instead of a second, release build of every crate; its results equal the release build's.
+MATURIN_PEP517_ARGS="--profile dev" \
+    "$py" -m pip install --quiet "${build_flags[@]}" --no-deps --force-reinstall ./python
 # The command line the Python tests compare with: the binary `cargo test` built (the test
 # profile is optimised, and its results equal the release build's bit for bit).
 IUQ_BIN="$PWD/target/debug/iuq" IUQ_REQUIRE_CLI=1 "$py" -m pytest python/tests -q ${PYTEST_ARGS:-}
