@@ -131,7 +131,11 @@ def test_the_model_posterior_from_python_equals_the_cli(tmp_path, cli):
     result = study.run(tmp_path / "py", model_posterior=True)
     m = result.model_posterior
     assert m is not None and m["samples"] == 100
-    assert m["pareto_k"] <= m["pareto_k_threshold"] and m["certified"]
+    # Certified as the method defines it: k̂ under its threshold, or weights so nearly equal
+    # (CV <= 0.1, i.e. ESS/N >= 1/1.01) that k̂ of their flat tail says nothing.
+    assert m["certified"]
+    nearly_equal = m["effective_sample_size"] >= m["samples"] / (1 + 0.1**2)
+    assert m["pareto_k"] <= m["pareto_k_threshold"] or nearly_equal, m
     assert set(m["mean"]) == {"k", "T0"}
     expected = cli("pipeline", study_file, "--model-posterior", "--out", tmp_path / "cli")
     assert without_timings(result.raw["model_posterior"]) == without_timings(expected["model_posterior"])
