@@ -375,7 +375,15 @@ impl CampaignStore {
             .optional()
             .map_err(|e| store.err(e))?;
         if let Some((hash, name)) = existing {
-            if hash != model_hash {
+            if hash != model_hash && hash == study.legacy_model_hash() {
+                store
+                    .connection
+                    .execute(
+                        "UPDATE studies SET model_hash = ?1 WHERE model_hash = ?2",
+                        params![model_hash, hash],
+                    )
+                    .map_err(|e| store.err(e))?;
+            } else if hash != model_hash {
                 return Err(CampaignError::study(
                     study.path.display().to_string(),
                     "model",
@@ -1250,6 +1258,62 @@ output = { file = "r.json", format = "json" }
             store.derived_result("round-1", "def").unwrap().as_deref(),
             Some("{\"u\":2}")
         );
+    }
+
+    #[test]
+    fn a_store_moved_with_its_study_and_its_program_keeps_its_runs() {
+        let (dir, _) = fresh("moved");
+        let text = STUDY.replace(r#"["true"]"#, r#"["./sim.sh", "{{x}}"]"#);
+        let here = dir.join("here");
+        let there = dir.join("elsewhere/deeper");
+        let study = CampaignStudy::parse(&text, &here.join("study.toml")).unwrap();
+        let moved = CampaignStudy::parse(&text, &there.join("study.toml")).unwrap();
+        assert_ne!(study.legacy_model_hash(), moved.legacy_model_hash());
+        assert_eq!(study.model_hash(), moved.model_hash());
+        let path = dir.join("c.sqlite");
+        drop(CampaignStore::open(&path, &study).unwrap());
+        assert!(CampaignStore::open(&path, &moved).is_ok());
+        // Another program is another model.
+        let other = CampaignStudy::parse(
+            &text.replace("./sim.sh", "./other.sh"),
+            &there.join("study.toml"),
+        )
+        .unwrap();
+        assert!(CampaignStore::open(&path, &other).is_err());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn a_store_hashed_with_the_program_s_absolute_path_is_rewritten_once_opened_where_it_was_made()
+    {
+        let (dir, _) = fresh("legacy");
+        let text = STUDY.replace(r#"["true"]"#, r#"["./sim.sh"]"#);
+        let here = dir.join("here");
+        let study = CampaignStudy::parse(&text, &here.join("study.toml")).unwrap();
+        let path = dir.join("c.sqlite");
+        let store = CampaignStore::open(&path, &study).unwrap();
+        store
+            .connection
+            .execute(
+                "UPDATE studies SET model_hash = ?1",
+                params![study.legacy_model_hash()],
+            )
+            .unwrap();
+        drop(store);
+        let elsewhere = CampaignStudy::parse(&text, &dir.join("b/study.toml")).unwrap();
+        assert!(
+            CampaignStore::open(&path, &elsewhere).is_err(),
+            "an old hash holds the folder it was made in"
+        );
+        let store = CampaignStore::open(&path, &study).unwrap();
+        let stored: String = store
+            .connection
+            .query_row("SELECT model_hash FROM studies", [], |r| r.get(0))
+            .unwrap();
+        assert_eq!(stored, study.model_hash());
+        drop(store);
+        assert!(CampaignStore::open(&path, &elsewhere).is_ok());
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -50,7 +50,7 @@ use crate::error::{CampaignError, Result};
 use crate::outcome::OutcomeKind;
 use crate::retry_policy::RetryPolicy;
 use crate::study_section::StudySection;
-use crate::template::Template;
+use crate::template::{Segment, Template};
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
 pub const TOP_LEVEL_KEYS: [&str; 12] = [
@@ -393,16 +393,43 @@ impl CampaignStudy {
     /// The study's folder is left out, so a campaign directory moved or cloned with its study
     /// (e.g. results shipped in a repository) keeps its results.
     pub fn model_hash(&self) -> String {
-        let mut model = serde_json::to_value(&self.model).unwrap_or_default();
+        let mut model = self.model.clone();
+        if let Some(program) = model.command.first_mut() {
+            if let Some(relative) = program_in_study_dir(program, &self.model.study_dir) {
+                *program = relative;
+            }
+        }
+        Self::hash_of(&self.space, &model)
+    }
+
+    /// The model hash of stores written before [`Self::model_hash`] left the study's folder out
+    /// of a program path: a program `./x` resolved against the folder the study is in now.
+    /// [`crate::CampaignStore::open`] accepts it and rewrites the store's hash to the new one.
+    pub fn legacy_model_hash(&self) -> String {
+        Self::hash_of(&self.space, &self.model)
+    }
+
+    fn hash_of(space: &ParameterSpace, model: &CommandSpec) -> String {
+        let mut model = serde_json::to_value(model).unwrap_or_default();
         if let Some(m) = model.as_object_mut() {
             m.remove("study_dir");
         }
         let json = serde_json::json!({
-            "parameters": self.space.names(),
+            "parameters": space.names(),
             "model": model,
         });
         hex_sha256(json.to_string().as_bytes())
     }
+}
+
+/// The program of a command, `./x` again where the study file's relative path was resolved
+/// against `study_dir` (so the hash does not depend on where the study lies).
+fn program_in_study_dir(program: &Template, study_dir: &Path) -> Option<Template> {
+    let [Segment::Literal(text)] = program.segments() else {
+        return None;
+    };
+    let relative = Path::new(text).strip_prefix(study_dir).ok()?;
+    Template::parse(&format!("./{}", relative.display())).ok()
 }
 
 fn parse_parameters(table: &toml::Table, file: &str) -> Result<ParameterSpace> {

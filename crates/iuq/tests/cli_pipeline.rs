@@ -369,6 +369,15 @@ fn replay_study_with(
         std::fs::create_dir_all(target.parent().unwrap()).unwrap();
         std::fs::copy(root.join(source), &target).unwrap();
     }
+    // The files beside the study (a command model's script and templates, read when the study
+    // is loaded).
+    let folder = Path::new(&study).parent().unwrap();
+    for entry in std::fs::read_dir(root.join(folder)).unwrap() {
+        let entry = entry.unwrap();
+        if entry.file_type().unwrap().is_file() {
+            std::fs::copy(entry.path(), dir.join(folder).join(entry.file_name())).unwrap();
+        }
+    }
     let text = std::fs::read_to_string(root.join(&study)).unwrap();
     std::fs::write(dir.join(&study), edit(&text)).unwrap();
     let out = dir.join("report");
@@ -840,6 +849,32 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
         );
     }
     summary
+}
+
+/// The HemoCell 2.7-only calibration (the reference of the two-fidelity study) replays from its
+/// shipped store, from wherever the checkout lies, without a HemoCell run: 20 points (one failed:
+/// HemoCell lost the softest cell at 9.04 Pa), converged after 7 rounds. As with HemoCell 2.1,
+/// kLink is identified and kBend is not (its posterior std near the prior's, 350/√12 = 101).
+#[test]
+fn the_hemocell27_reference_calibration_replays_from_its_store() {
+    let (summary, _) = replay_shipped_study("hemocell/hemocell27-healthy");
+    assert_eq!(summary["runs"], 20, "{summary}");
+    assert_eq!(summary["failed"], 1, "{summary}");
+    assert_eq!(summary["rounds"], 7, "{summary}");
+    assert_eq!(summary["converged"], true, "{summary}");
+    let parameter = |name: &str| {
+        summary["posterior"][0]["parameters"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|p| p["parameter"] == name)
+            .unwrap()
+            .clone()
+    };
+    let k_link = parameter("kLink");
+    assert_eq!(format!("{:.1}", k_link["mean"].as_f64().unwrap()), "90.7");
+    assert_eq!(format!("{:.1}", k_link["std"].as_f64().unwrap()), "13.3");
+    assert!(parameter("kBend")["std"].as_f64().unwrap() > 0.9 * 101.0);
 }
 
 #[test]
