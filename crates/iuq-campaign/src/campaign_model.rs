@@ -78,6 +78,16 @@ impl CampaignModel {
         guard.0.store().design_points(label)
     }
 
+    /// The median wall time of the campaign's succeeded runs (see
+    /// [`crate::CampaignStore::median_run_seconds`]).
+    pub fn median_run_seconds(&self) -> crate::Result<Option<f64>> {
+        let guard = self
+            .state
+            .lock()
+            .map_err(|_| CampaignError::BadInput("the campaign's lock is poisoned".into()))?;
+        guard.0.store().median_run_seconds()
+    }
+
     /// The result derived from the runs recorded under `key` with `fingerprint`, if any (see
     /// [`crate::CampaignStore::derived_result`]).
     pub fn derived_result(&self, key: &str, fingerprint: &str) -> crate::Result<Option<String>> {

@@ -350,6 +350,34 @@ impl CampaignStore {
         }
     }
 
+    /// The median wall time, in seconds, of the succeeded attempts that record when they
+    /// started and finished (`None` when none does): what a run of the model costs, for
+    /// allocating runs between models of different costs.
+    pub fn median_run_seconds(&self) -> Result<Option<f64>> {
+        let mut statement = self
+            .connection
+            .prepare(
+                "SELECT finished_at - started_at FROM attempts WHERE outcome_kind = 'succeeded' AND started_at IS NOT NULL AND finished_at IS NOT NULL",
+            )
+            .map_err(|e| self.err(e))?;
+        let mut seconds: Vec<f64> = statement
+            .query_map([], |r| r.get::<_, f64>(0))
+            .map_err(|e| self.err(e))?
+            .collect::<std::result::Result<_, _>>()
+            .map_err(|e| self.err(e))?;
+        seconds.retain(|s| s.is_finite() && *s >= 0.0);
+        if seconds.is_empty() {
+            return Ok(None);
+        }
+        seconds.sort_by(f64::total_cmp);
+        let m = seconds.len();
+        Ok(Some(if m % 2 == 1 {
+            seconds[m / 2]
+        } else {
+            0.5 * (seconds[m / 2 - 1] + seconds[m / 2])
+        }))
+    }
+
     /// The database file.
     pub fn path(&self) -> &Path {
         &self.path

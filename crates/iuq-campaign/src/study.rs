@@ -53,7 +53,7 @@ use crate::study_section::StudySection;
 use crate::template::{Segment, Template};
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
-pub const TOP_LEVEL_KEYS: [&str; 12] = [
+pub const TOP_LEVEL_KEYS: [&str; 13] = [
     "name",
     "description",
     "parameters",
@@ -66,6 +66,7 @@ pub const TOP_LEVEL_KEYS: [&str; 12] = [
     "model_posterior",
     "executor",
     "design",
+    "low_fidelity",
 ];
 
 /// A template file of the command model: where it goes in the run directory and its parsed text.

@@ -19,6 +19,7 @@
 //! - [`GaussianProcess::posterior_covariance`]: cov[f(a), f(b) | data], for sequential designs.
 //! - [`MultiFidelityGp`]: an expensive model's output as ρ·(a cheap model's) + a GP discrepancy
 //!   (recursive co-kriging), used only where it predicts the expensive runs better.
+//! - [`MultiFidelityBank`]: one [`MultiFidelityGp`] per output, an [`iuq_core::Model`].
 //! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
 //! The crate does no I/O.
@@ -53,6 +54,7 @@ pub mod kernel;
 pub mod log_marginal_likelihood;
 pub mod mean_gradient;
 pub mod multi_fidelity;
+pub mod multi_fidelity_bank;
 mod multi_start;
 pub mod optimizer;
 pub mod output_predictor;
@@ -77,6 +79,7 @@ pub use gaussian_process::GaussianProcess;
 pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};
 pub use multi_fidelity::MultiFidelityGp;
+pub use multi_fidelity_bank::MultiFidelityBank;
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };

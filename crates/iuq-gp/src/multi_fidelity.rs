@@ -5,10 +5,12 @@
 //! f_H(x) = ρ·f_L(x) + δ(x),  f_L ~ GP fitted on the low-fidelity runs, δ ~ GP independent of it.
 //!
 //! 1. f_L is a [`GaussianProcess`] on the low-fidelity runs (x_L, y_L).
-//! 2. At every high-fidelity run x_H the low fidelity's value l(x_H) is the low run there when
-//!    the designs are nested (a low run at the same point), else f_L's posterior mean (the
-//!    recursive formulation's plug-in for non-nested designs; its variance there is left out of
-//!    δ's fit).
+//! 2. At every high-fidelity run x_H the low fidelity's value l(x_H) is f_L's posterior mean
+//!    there (the recursive formulation's plug-in; its variance there is left out of δ's fit).
+//!    The mean, not a low run at the same point, also where the designs are nested: δ is then
+//!    fitted on exactly what the prediction ρ·μ_L + μ_δ adds it to. (Where the low GP smooths
+//!    its runs — a noisy or erratic cheap model — a raw run would teach δ the cheap model's
+//!    noise, and the predictions off the runs would be biased by it.)
 //! 3. ρ maximises the two-fidelity model's leave-one-out log predictive density of the high
 //!    runs (below), with δ a [`GaussianProcess`] fitted on the residuals y_H − ρ·l(x_H) for each
 //!    ρ tried: a grid of 9 values from 0 to twice the least-squares slope of y_H on l(x_H), then
@@ -24,7 +26,8 @@
 //! y_H,i from the other high runs (for the two-fidelity model, δ's at the chosen ρ). ρ = 0 is the
 //! single-fidelity GP itself, so the two-fidelity density is never lower; the emulator predicts
 //! with both fidelities only where it is higher by more than [`RHO_PRICE`] (one nat, Akaike's
-//! price of the parameter ρ; [`MultiFidelityGp::uses_low_fidelity`]). A low fidelity that does
+//! price of the parameter ρ; [`MultiFidelityGp::uses_low_fidelity`]) and the scaled low
+//! fidelity explains at least half of the high runs' variance ([`MIN_EXPLAINED`]). A low fidelity that does
 //! not correlate with the high one (its trend wrong, or noise) leaves the single-fidelity GP in
 //! charge, so that it does not make the emulator worse than the high-fidelity runs alone.
 //!
@@ -60,6 +63,12 @@ use crate::validation::LeaveOneOut;
 /// the high-fidelity runs alone to be used: 1, Akaike's price of the one parameter ρ they add.
 pub const RHO_PRICE: f64 = 1.0;
 
+/// The share of the high-fidelity runs' variance that ρ·l(x_H) must explain for the low
+/// fidelity to be used: 1 − var(y_H − ρ·l)/var(y_H) ≥ ½. Below it the discrepancy carries most
+/// of the output, and a gain in leave-one-out density comes from fitting a GP to nearly the
+/// same numbers again (a different optimum of its hyperparameters), not from the cheap model.
+pub const MIN_EXPLAINED: f64 = 0.5;
+
 /// A two-fidelity emulator of one output (module docs).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MultiFidelityGp {
@@ -69,6 +78,7 @@ pub struct MultiFidelityGp {
     rho: f64,
     two_fidelity_loo_log_density: f64,
     single_fidelity_loo_log_density: f64,
+    explained: f64,
 }
 
 impl MultiFidelityGp {
@@ -95,7 +105,7 @@ impl MultiFidelityGp {
             });
         }
         let low = GaussianProcess::fit(low_x, low_y, options)?;
-        let at_high = low_fidelity_at(&low, low_x, low_y, high_x)?;
+        let at_high = low.predict_mean(high_x)?;
         let single = GaussianProcess::fit(high_x, high_y, options)?;
         let discrepancy_at = |rho: f64| -> Result<(f64, GaussianProcess)> {
             let residuals: Vec<f64> = high_y
@@ -117,7 +127,19 @@ impl MultiFidelityGp {
         if density_fine > density {
             (rho, density, discrepancy) = (rho_fine, density_fine, discrepancy_fine);
         }
+        let residuals: Vec<f64> = high_y
+            .iter()
+            .zip(&at_high)
+            .map(|(y, l)| y - rho * l)
+            .collect();
+        let total = variance(high_y);
+        let explained = if total > 0.0 {
+            1.0 - variance(&residuals) / total
+        } else {
+            0.0
+        };
         Ok(Self {
+            explained,
             two_fidelity_loo_log_density: density,
             single_fidelity_loo_log_density: loo_log_density(single.leave_one_out()),
             low,
@@ -136,7 +158,14 @@ impl MultiFidelityGp {
     /// density over the high-fidelity runs is above the single-fidelity GP's by more than
     /// [`RHO_PRICE`].
     pub fn uses_low_fidelity(&self) -> bool {
-        self.two_fidelity_loo_log_density > self.single_fidelity_loo_log_density + RHO_PRICE
+        self.explained >= MIN_EXPLAINED
+            && self.two_fidelity_loo_log_density > self.single_fidelity_loo_log_density + RHO_PRICE
+    }
+
+    /// 1 − var(y_H − ρ·l(x_H))/var(y_H): the share of the high-fidelity runs' variance the
+    /// scaled low fidelity explains ([`MIN_EXPLAINED`]).
+    pub fn explained_share(&self) -> f64 {
+        self.explained
     }
 
     /// The leave-one-out log predictive densities of the high-fidelity runs, (two fidelities,
@@ -193,20 +222,62 @@ impl MultiFidelityGp {
     }
 }
 
-/// The low fidelity at the high-fidelity points: its run where one lies at the same point (a
-/// nested design), else its GP's posterior mean.
-fn low_fidelity_at(
-    low: &GaussianProcess,
-    low_x: &[Vec<f64>],
-    low_y: &[f64],
-    high_x: &[Vec<f64>],
-) -> Result<Vec<f64>> {
-    let predicted = low.predict_mean(high_x)?;
-    Ok(high_x
-        .iter()
-        .zip(predicted)
-        .map(|(x, mean)| low_x.iter().position(|l| l == x).map_or(mean, |i| low_y[i]))
-        .collect())
+impl MultiFidelityGp {
+    /// The two parts of the latent variance at `points`: (ρ²·σ²_L, what a low-fidelity run
+    /// there would remove; σ²_δ, what only a high-fidelity run removes). Where the emulator
+    /// uses the high-fidelity runs alone, the first part is 0 and the second their GP's
+    /// variance. The adaptive engine weighs them against the fidelities' costs.
+    ///
+    /// # Errors
+    /// A point of the wrong dimension or with a non-finite coordinate.
+    pub fn fidelity_variances(&self, points: &[Vec<f64>]) -> Result<(Vec<f64>, Vec<f64>)> {
+        if !self.uses_low_fidelity() {
+            return Ok((
+                vec![0.0; points.len()],
+                self.single.predict(points)?.variance,
+            ));
+        }
+        let rho2 = self.rho * self.rho;
+        let low = self.low.predict(points)?.variance;
+        Ok((
+            low.into_iter().map(|v| rho2 * v).collect(),
+            self.discrepancy.predict(points)?.variance,
+        ))
+    }
+}
+
+impl crate::output_predictor::OutputPredictor for MultiFidelityGp {
+    fn predict(&self, points: &[Vec<f64>]) -> Result<Prediction> {
+        MultiFidelityGp::predict(self, points)
+    }
+
+    /// ρ²·cov_L(a, b) + cov_δ(a, b) (f_L and δ independent), or the single-fidelity GP's.
+    fn posterior_covariance(&self, a: &[Vec<f64>], b: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+        if !self.uses_low_fidelity() {
+            return self.single.posterior_covariance(a, b);
+        }
+        let rho2 = self.rho * self.rho;
+        let mut covariance = self.discrepancy.posterior_covariance(a, b)?;
+        for (row, low) in covariance
+            .iter_mut()
+            .zip(self.low.posterior_covariance(a, b)?)
+        {
+            for (c, l) in row.iter_mut().zip(low) {
+                *c += rho2 * l;
+            }
+        }
+        Ok(covariance)
+    }
+
+    /// A new high-fidelity run's noise: δ's (or the single-fidelity GP's).
+    fn run_noise_variance(&self, prediction: &Prediction) -> f64 {
+        let gp = if self.uses_low_fidelity() {
+            &self.discrepancy
+        } else {
+            &self.single
+        };
+        crate::output_predictor::OutputPredictor::run_noise_variance(gp, prediction)
+    }
 }
 
 /// The value of `values` whose `score` (a density, and the GP that gave it) is highest; the
@@ -226,6 +297,13 @@ fn best_of(
         what: "ρ grid",
         reason: "no value to try".into(),
     })
+}
+
+/// The sample variance (divisor n) of `values`.
+fn variance(values: &[f64]) -> f64 {
+    let n = values.len() as f64;
+    let mean = values.iter().sum::<f64>() / n;
+    values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n
 }
 
 /// The least-squares slope of `y` on `x` with an intercept (0 when `x` is constant).
@@ -306,19 +384,6 @@ mod tests {
             gp.predict(&test).unwrap(),
             gp.single_fidelity().predict(&test).unwrap()
         );
-    }
-
-    /// Nested designs take the low run itself at a high point; non-nested ones the low GP's
-    /// mean there.
-    #[test]
-    fn the_low_fidelity_at_the_high_runs_is_the_run_where_nested() {
-        let low_x = grid(10, 0.0, 1.0);
-        let low_y: Vec<f64> = low_x.iter().map(|p| p[0] * p[0]).collect();
-        let options = FitOptions::default().check().unwrap();
-        let low = GaussianProcess::fit(&low_x, &low_y, &options).unwrap();
-        let at = low_fidelity_at(&low, &low_x, &low_y, &[low_x[3].clone(), vec![0.55]]).unwrap();
-        assert_eq!(at[0], low_y[3]);
-        assert_eq!(at[1], low.predict_mean(&[vec![0.55]]).unwrap()[0]);
     }
 
     #[test]

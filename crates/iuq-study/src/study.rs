@@ -221,6 +221,9 @@ pub struct Study {
     pub model_posterior: Option<toml::Table>,
     /// The `[executor]` section as written (campaigns of model runs).
     pub executor: Option<toml::Table>,
+    /// The `[low_fidelity]` section as written: a cheaper model of the same outputs that helps
+    /// the pipeline's surrogate (read by `iuq pipeline`, `pipeline::low_fidelity`).
+    pub low_fidelity: Option<toml::Table>,
 }
 
 impl Study {
@@ -286,6 +289,7 @@ impl Study {
         let model_sampler = top.sub_table("model_sampler")?.cloned();
         let model_posterior = top.sub_table("model_posterior")?.cloned();
         let executor = top.sub_table("executor")?.cloned();
+        let low_fidelity = top.sub_table("low_fidelity")?.cloned();
         top.sub_table("design")?;
         top.finish()?;
         let study = Self {
@@ -301,6 +305,7 @@ impl Study {
             model_sampler,
             model_posterior,
             executor,
+            low_fidelity,
         };
         if let ModelSection::Expression { .. } = study.model {
             study.expression_model()?;

@@ -62,6 +62,7 @@ use iuq_basis::{Basis, BasisState, MAX_MIXING_LEVEL};
 use iuq_core::{Control, Observer};
 
 use super::Events;
+use super::low_fidelity::{Allocation, LowFidelity, allocation_key};
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
@@ -246,6 +247,9 @@ pub struct AdaptiveRound {
     /// Points the round's samplers sent to the surrogate's screen (delayed acceptance: means
     /// without predictive variances, O(n) each against O(n²)), all replicates together.
     pub surrogate_screenings: usize,
+    /// New runs of the cheap model of `[low_fidelity]` (absent without one).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub new_low_fidelity_runs: Option<usize>,
 }
 
 /// What the adaptive engine did.
@@ -668,7 +672,7 @@ fn round_fingerprint(
     sampling: &RoundSampling,
     groups: &[GroupRuns],
     carried_from: Option<&str>,
-) -> String {
+) -> Result<String> {
     let RoundInputs {
         study,
         data,
@@ -737,7 +741,10 @@ fn round_fingerprint(
             group.points, group.outcomes
         );
     }
-    iuq_campaign::study::hex_sha256(text.as_bytes())
+    if let Some(low) = inputs.low_fidelity {
+        text.push_str(&low.fingerprint_text()?);
+    }
+    Ok(iuq_campaign::study::hex_sha256(text.as_bytes()))
 }
 
 /// What a freshly measured round keeps for choosing its new runs.
@@ -938,13 +945,9 @@ fn surrogate_errors(
     let mut sampled_variances = Vec::with_capacity(outputs);
     // Per output, its GP's covariance over the candidates (the outputs in parallel); a reduced
     // basis's outputs carry none (their errors are drawn through the components').
-    let covariances: Vec<Vec<Vec<f64>>> = match emulator.per_output_gps() {
-        Some(gps) => gps
-            .par_iter()
-            .map(|gp| gp.posterior_covariance(&c.theta, &c.theta))
-            .collect::<iuq_gp::Result<_>>()?,
-        None => vec![Vec::new(); outputs],
-    };
+    let covariances: Vec<Vec<Vec<f64>>> = emulator
+        .output_covariances(&c.theta)?
+        .unwrap_or_else(|| vec![Vec::new(); outputs]);
     for (j, p) in predictions.iter().enumerate() {
         let y = data.observations.values[j];
         residuals.push(p.mean.iter().map(|m| y - m).collect::<Vec<f64>>());
@@ -1094,6 +1097,7 @@ fn measure_round(
     let surrogate = Surrogate::fit(
         groups,
         runs,
+        inputs.low_fidelity,
         &study.space,
         training_seed,
         emulation,
@@ -1227,6 +1231,8 @@ pub(super) struct RoundInputs<'a> {
     /// The `[sampler]` seed, from which every round's replicates are seeded.
     pub(super) base_seed: u64,
     pub(super) runs: &'a ModelRuns,
+    /// The cheap model of `[low_fidelity]`, if any.
+    pub(super) low_fidelity: Option<&'a LowFidelity>,
     /// `adaptive/` of the report folder.
     pub(super) dir: &'a Path,
     pub(super) events: &'a Events,
@@ -1291,7 +1297,7 @@ fn measure_or_read_round(
     let round = state.round;
     let label = format!("adaptive-round-{round}");
     let made: usize = groups.iter().map(GroupRuns::len).sum();
-    let fingerprint = round_fingerprint(inputs, &state.sampling, groups, carried_from);
+    let fingerprint = round_fingerprint(inputs, &state.sampling, groups, carried_from)?;
     let key = format!("{label}/assessment");
     let population_key = format!("{label}/population");
     let runs = inputs.runs;
@@ -1405,6 +1411,7 @@ impl AdaptiveRound {
             carried_replicates: m.carried_replicates,
             surrogate_evaluations: m.surrogate_evaluations,
             surrogate_screenings: m.surrogate_screenings,
+            new_low_fidelity_runs: None,
         }
     }
 }
@@ -1496,6 +1503,62 @@ fn make_round_runs(
     Ok(())
 }
 
+/// The runs an earlier pipeline chose in round `round`, if the stores have them: the design
+/// `adaptive-round-<round>` of the study's store, or with a `[low_fidelity]` the allocation
+/// recorded for the round (both fidelities' runs).
+fn recorded_allocation(inputs: &RoundInputs<'_>, round: usize) -> Result<Option<Allocation>> {
+    if inputs.low_fidelity.is_none() {
+        let recorded = inputs
+            .runs
+            .recorded_requests(&format!("adaptive-round-{round}"))?;
+        return Ok(recorded.map(|high| Allocation {
+            high,
+            low: Vec::new(),
+        }));
+    }
+    let Some(text) = inputs
+        .runs
+        .derived_result(&allocation_key(round), ALLOCATION_FINGERPRINT)?
+    else {
+        return Ok(None);
+    };
+    serde_json::from_str(&text).map(Some).map_err(|e| {
+        StudyError::Failure(format!(
+            "adaptive round {round}: the allocation recorded in the store cannot be read: {e}"
+        ))
+    })
+}
+
+/// The fingerprint under which a round's allocation is recorded: the round's runs are replayed
+/// as chosen, whatever the measurement computes now (as the design of a one-fidelity round is).
+const ALLOCATION_FINGERPRINT: &str = "allocation";
+
+/// The runs `wanted` of the study's model, split between the fidelities where there is a
+/// `[low_fidelity]` (`low_fidelity::LowFidelity::allocate`) and that split recorded before any
+/// of them runs (a rerun after kill -9 makes the same runs).
+fn allocate(
+    inputs: &RoundInputs<'_>,
+    surrogate: &Surrogate,
+    round: usize,
+    wanted: Vec<(usize, Vec<f64>)>,
+) -> Result<Allocation> {
+    let (Some(low), Some(bank)) = (inputs.low_fidelity, surrogate.emulator.two_fidelity()) else {
+        return Ok(Allocation {
+            high: wanted,
+            low: Vec::new(),
+        });
+    };
+    let ratio = low.cost_ratio(inputs.runs)?;
+    let variance = |j: usize| total_variance(inputs.data, j, None).max(f64::MIN_POSITIVE);
+    let allocation = low.allocate(bank, inputs.runs, &variance, wanted, ratio)?;
+    let text = serde_json::to_string(&allocation)
+        .map_err(|e| StudyError::Failure(format!("cannot record the allocation: {e}")))?;
+    inputs
+        .runs
+        .record_derived_result(&allocation_key(round), ALLOCATION_FINGERPRINT, &text)?;
+    Ok(allocation)
+}
+
 /// The engine's settings from the study's `[surrogate] adaptive`.
 fn engine_settings(settings: &AdaptiveSettings) -> EngineSettings {
     EngineSettings {
@@ -1575,7 +1638,7 @@ pub(super) fn refine(
         // A round an earlier pipeline already chose (the same study, a rerun after a stop) is
         // replayed from the store as it was chosen, bit for bit, even where recomputing the
         // choice would differ in the last bits (another processor, another library version).
-        let recorded = runs.recorded_requests(&format!("adaptive-round-{round}"))?;
+        let recorded = recorded_allocation(inputs, round)?;
         let MeasuredRound {
             measurement: measured,
             scoring,
@@ -1614,8 +1677,8 @@ pub(super) fn refine(
             settings,
             groups.len(),
         );
-        let requests = match (&judgement.stop, recorded, &scoring) {
-            (Some(_), _, _) => Vec::new(),
+        let allocation = match (&judgement.stop, recorded, &scoring) {
+            (Some(_), _, _) => Allocation::default(),
             (None, Some(recorded), _) => recorded,
             (None, None, scoring) => {
                 let scoring = scoring.as_ref().ok_or_else(|| {
@@ -1625,24 +1688,40 @@ pub(super) fn refine(
                 })?;
                 let remaining = settings.max_runs - made;
                 let errors = &measured.group_surrogate_error;
-                choose_runs(&choice, scoring, errors, judgement.boundary_due, remaining)?
+                let wanted =
+                    choose_runs(&choice, scoring, errors, judgement.boundary_due, remaining)?;
+                allocate(inputs, &scoring.surrogate, round, wanted)?
             }
         };
+        let Allocation {
+            high: requests,
+            low: low_requests,
+        } = allocation;
         for (g, _) in &requests {
             record.new_runs_per_group[*g] += 1;
         }
         record.new_runs = requests.len();
-        events.message(round_message(
+        let mut message = round_message(
             round,
             made,
             &measured,
             &judgement,
             requests.len(),
             state.sampling.candidates,
-        ));
+        );
+        if let Some(low) = inputs.low_fidelity {
+            record.new_low_fidelity_runs = Some(low_requests.len());
+            message.push_str(&format!(
+                " ({} low-fidelity runs so far, {} new)",
+                low.runs_made()?,
+                low_requests.len()
+            ));
+            low.run_round(round, low_requests.clone())?;
+        }
+        events.message(message);
         make_round_runs(inputs, round, requests, groups, &mut new_rows)?;
         record.seconds = started.elapsed().as_secs_f64();
-        let new_runs = record.new_runs;
+        let new_runs = record.new_runs + low_requests.len();
         rounds.push(record);
         write_rounds(dir, &rounds)?;
         engine.step(&mut state, reading, &judgement, new_runs);

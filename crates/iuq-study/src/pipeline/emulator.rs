@@ -10,8 +10,8 @@
 
 use iuq_core::{Model, Outcome};
 use iuq_gp::{
-    GaussianProcess, GpBank, OutputPredictor, Prediction, PredictiveStd, ReducedBasis,
-    ReducedBasisOutput,
+    GaussianProcess, GpBank, MultiFidelityBank, MultiFidelityGp, OutputPredictor, Prediction,
+    PredictiveStd, ReducedBasis, ReducedBasisOutput,
 };
 
 use crate::error::Result;
@@ -42,6 +42,9 @@ pub enum Emulator {
     PerOutput(GpBank),
     /// GPs on principal components of the whole curve.
     ReducedBasis(ReducedBasis),
+    /// One two-fidelity GP per data point (`[low_fidelity]`): the expensive model's output as
+    /// ρ·(the cheap model's GP) + a GP discrepancy.
+    TwoFidelity(MultiFidelityBank),
 }
 
 /// One output's emulator as the adaptive engine uses it.
@@ -51,6 +54,8 @@ pub enum OutputView<'a> {
     Gp(&'a GaussianProcess),
     /// An output of a reduced basis.
     Basis(ReducedBasisOutput<'a>),
+    /// The output's two-fidelity GP.
+    TwoFidelity(&'a MultiFidelityGp),
 }
 
 impl OutputPredictor for OutputView<'_> {
@@ -58,6 +63,7 @@ impl OutputPredictor for OutputView<'_> {
         match self {
             OutputView::Gp(gp) => OutputPredictor::predict(*gp, points),
             OutputView::Basis(b) => b.predict(points),
+            OutputView::TwoFidelity(gp) => OutputPredictor::predict(*gp, points),
         }
     }
 
@@ -69,6 +75,7 @@ impl OutputPredictor for OutputView<'_> {
         match self {
             OutputView::Gp(gp) => OutputPredictor::posterior_covariance(*gp, a, b),
             OutputView::Basis(v) => v.posterior_covariance(a, b),
+            OutputView::TwoFidelity(gp) => OutputPredictor::posterior_covariance(*gp, a, b),
         }
     }
 
@@ -76,6 +83,7 @@ impl OutputPredictor for OutputView<'_> {
         match self {
             OutputView::Gp(gp) => gp.run_noise_variance(prediction),
             OutputView::Basis(v) => v.run_noise_variance(prediction),
+            OutputView::TwoFidelity(gp) => gp.run_noise_variance(prediction),
         }
     }
 }
@@ -86,6 +94,7 @@ impl Emulator {
         match self {
             Emulator::PerOutput(bank) => bank.output_names(),
             Emulator::ReducedBasis(rb) => rb.output_names(),
+            Emulator::TwoFidelity(bank) => bank.output_names(),
         }
     }
 
@@ -94,6 +103,7 @@ impl Emulator {
         Ok(match self {
             Emulator::PerOutput(bank) => bank.predict(points)?,
             Emulator::ReducedBasis(rb) => rb.predict(points)?,
+            Emulator::TwoFidelity(bank) => bank.predict(points)?,
         })
     }
 
@@ -106,6 +116,9 @@ impl Emulator {
                 .map(|gp| gp.predict_mean(points))
                 .collect::<iuq_gp::Result<_>>()?,
             Emulator::ReducedBasis(rb) => rb.predict(points)?.into_iter().map(|p| p.mean).collect(),
+            Emulator::TwoFidelity(bank) => {
+                bank.predict(points)?.into_iter().map(|p| p.mean).collect()
+            }
         })
     }
 
@@ -113,7 +126,7 @@ impl Emulator {
     /// error (0 for a GP per output).
     pub fn unresolved_variance(&self, j: usize) -> f64 {
         match self {
-            Emulator::PerOutput(_) => 0.0,
+            Emulator::PerOutput(_) | Emulator::TwoFidelity(_) => 0.0,
             Emulator::ReducedBasis(rb) => rb.truncation_variance()[j],
         }
     }
@@ -123,6 +136,7 @@ impl Emulator {
         match self {
             Emulator::PerOutput(bank) => bank.predictive_std(),
             Emulator::ReducedBasis(_) => PredictiveStd::default(),
+            Emulator::TwoFidelity(bank) => bank.predictive_std(),
         }
     }
 
@@ -144,14 +158,51 @@ impl Emulator {
             Emulator::ReducedBasis(rb) => (0..rb.output_names().len())
                 .map(|output| OutputView::Basis(ReducedBasisOutput { basis: rb, output }))
                 .collect(),
+            Emulator::TwoFidelity(bank) => bank.gps().iter().map(OutputView::TwoFidelity).collect(),
         }
     }
 
-    /// The GPs fitted to runs: one per output, or one per component.
-    pub fn fitted_gps(&self) -> &[GaussianProcess] {
+    /// The GPs fitted to the (high-fidelity) runs: one per output, or one per component; of a
+    /// two-fidelity emulator, per output the GP in charge at the high-fidelity runs (δ's, or
+    /// that of the high-fidelity runs alone).
+    pub fn fitted_gps(&self) -> Vec<&GaussianProcess> {
         match self {
-            Emulator::PerOutput(bank) => bank.gps(),
-            Emulator::ReducedBasis(rb) => rb.component_gps(),
+            Emulator::PerOutput(bank) => bank.gps().iter().collect(),
+            Emulator::ReducedBasis(rb) => rb.component_gps().iter().collect(),
+            Emulator::TwoFidelity(bank) => bank
+                .gps()
+                .iter()
+                .map(|gp| {
+                    if gp.uses_low_fidelity() {
+                        gp.discrepancy()
+                    } else {
+                        gp.single_fidelity()
+                    }
+                })
+                .collect(),
+        }
+    }
+
+    /// Every output's latent posterior covariance over `points`, where each output has an
+    /// emulator of its own (`None` for a reduced basis, whose outputs share its components').
+    pub fn output_covariances(&self, points: &[Vec<f64>]) -> Result<Option<Vec<Vec<Vec<f64>>>>> {
+        use rayon::prelude::*;
+        Ok(match self {
+            Emulator::ReducedBasis(_) => None,
+            Emulator::PerOutput(_) | Emulator::TwoFidelity(_) => Some(
+                self.output_views()
+                    .par_iter()
+                    .map(|view| view.posterior_covariance(points, points))
+                    .collect::<iuq_gp::Result<_>>()?,
+            ),
+        })
+    }
+
+    /// The two-fidelity bank, where the emulator is one.
+    pub fn two_fidelity(&self) -> Option<&MultiFidelityBank> {
+        match self {
+            Emulator::TwoFidelity(bank) => Some(bank),
+            _ => None,
         }
     }
 
@@ -159,14 +210,14 @@ impl Emulator {
     pub fn per_output_gps(&self) -> Option<&[GaussianProcess]> {
         match self {
             Emulator::PerOutput(bank) => Some(bank.gps()),
-            Emulator::ReducedBasis(_) => None,
+            Emulator::ReducedBasis(_) | Emulator::TwoFidelity(_) => None,
         }
     }
 
     /// The reduced basis, where the emulator is one.
     pub fn reduced_basis(&self) -> Option<&ReducedBasis> {
         match self {
-            Emulator::PerOutput(_) => None,
+            Emulator::PerOutput(_) | Emulator::TwoFidelity(_) => None,
             Emulator::ReducedBasis(rb) => Some(rb),
         }
     }
@@ -177,6 +228,7 @@ impl Model for Emulator {
         match self {
             Emulator::PerOutput(bank) => bank.input_names(),
             Emulator::ReducedBasis(rb) => rb.input_names(),
+            Emulator::TwoFidelity(bank) => bank.input_names(),
         }
     }
 
@@ -188,6 +240,7 @@ impl Model for Emulator {
         match self {
             Emulator::PerOutput(bank) => bank.evaluate_batch(points),
             Emulator::ReducedBasis(rb) => rb.evaluate_batch(points),
+            Emulator::TwoFidelity(bank) => bank.evaluate_batch(points),
         }
     }
 
@@ -195,6 +248,7 @@ impl Model for Emulator {
         match self {
             Emulator::PerOutput(bank) => bank.screening_batch(points),
             Emulator::ReducedBasis(rb) => rb.screening_batch(points),
+            Emulator::TwoFidelity(_) => None,
         }
     }
 }

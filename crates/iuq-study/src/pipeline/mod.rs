@@ -36,6 +36,7 @@ mod array_outputs;
 pub mod cell_model_campaign;
 pub mod cell_portraits;
 pub mod emulator;
+pub mod low_fidelity;
 pub mod model_posterior;
 pub mod model_runs;
 pub mod posterior_check;

@@ -12,6 +12,7 @@ use iuq_sensitivity::{SensitivityReport, analyse};
 
 use super::adaptive::{self, AdaptiveOutcome};
 use super::cell_model_campaign::campaign_directory;
+use super::low_fidelity::{LowFidelity, low_fidelity_study};
 use super::model_runs::{ModelRuns, RunShape};
 use super::posterior_check::{self, PosteriorCheck};
 use super::report_data::{PipelineResults, PointRuns, write_pipeline_report};
@@ -50,6 +51,8 @@ struct PipelineRun<'a> {
     model_sampler_settings: Option<iuq_basis::CheckedSettings>,
     out: PathBuf,
     model_runs: ModelRuns,
+    /// The cheap model of `[low_fidelity]`, if any.
+    low_fidelity: Option<LowFidelity>,
     emulation: Emulation,
 }
 
@@ -211,6 +214,19 @@ impl<'a> PipelineRun<'a> {
                 ));
             }
         }
+        // `[low_fidelity]`'s keys are checked before the study's campaign is opened.
+        let low_fidelity_section = low_fidelity_study(
+            study,
+            settings.training_runs,
+            settings.adaptive.as_ref().map_or(0, |a| a.max_runs),
+            settings.training_seed,
+        )?;
+        if low_fidelity_section.is_some() && settings.reduced_basis.is_some() {
+            return Err(input_error(format!(
+                "{}: key `low_fidelity`: a second fidelity is emulated with a GP per data point; remove `[surrogate] reduced_basis`",
+                study.path.display()
+            )));
+        }
         let model_runs = ModelRuns::open(
             study,
             &data,
@@ -219,6 +235,16 @@ impl<'a> PipelineRun<'a> {
             events,
             events.campaign_progress("model runs"),
         )?;
+        let low_fidelity = match low_fidelity_section {
+            Some((low_study, low_settings)) => Some(LowFidelity::open(
+                &low_study,
+                low_settings,
+                &data,
+                options.max_parallel,
+                events,
+            )?),
+            None => None,
+        };
         let emulation = Emulation::of(settings.reduced_basis, &data);
         Ok(Self {
             study,
@@ -231,6 +257,7 @@ impl<'a> PipelineRun<'a> {
             model_sampler_settings,
             out,
             model_runs,
+            low_fidelity,
             emulation,
         })
     }
@@ -272,6 +299,19 @@ impl<'a> PipelineRun<'a> {
             group.extend(RunOrigin::Initial, points, train_out.to_vec());
             group.extend(RunOrigin::Test, test.clone(), test_out.to_vec());
             groups.push(group);
+        }
+        if let Some(low) = &self.low_fidelity {
+            low.initial_runs(
+                study,
+                &self.model_runs,
+                &groups,
+                settings.maximin_candidates,
+            )?;
+            self.events.message(format!(
+                "{} low-fidelity runs (the initial points and a Latin hypercube of {})",
+                low.runs_made()?,
+                low.settings.design_runs
+            ));
         }
         Ok(groups)
     }
@@ -325,6 +365,7 @@ impl<'a> PipelineRun<'a> {
             training_seed: self.settings.training_seed,
             base_seed: parse_sampler(self.study, &SamplerOverrides::default())?.seed,
             runs: &self.model_runs,
+            low_fidelity: self.low_fidelity.as_ref(),
             dir: &adaptive_dir,
             events: self.events,
             describe: &describe,
@@ -400,6 +441,7 @@ impl<'a> PipelineRun<'a> {
         let surrogate = Surrogate::fit(
             groups,
             &self.model_runs,
+            self.low_fidelity.as_ref(),
             &self.study.space,
             self.settings.training_seed,
             &self.emulation,
@@ -585,6 +627,24 @@ impl<'a> PipelineRun<'a> {
                         .iter()
                         .fold(0.0f64, |a, v| a.max(v.sqrt()))
                 ));
+            }
+            emulator::Emulator::TwoFidelity(bank) => {
+                let means = |x: &[Vec<f64>]| emulator.predict_means(x);
+                for (j, r) in point_runs.iter().enumerate() {
+                    let q2 = if r.test_y.len() >= 2 {
+                        iuq_gp::q2(&r.test_y, &means(&r.test_x)?[j]).unwrap_or(f64::NAN)
+                    } else {
+                        f64::NAN
+                    };
+                    gp_checks.push((q2, f64::NAN));
+                }
+                let summary = super::low_fidelity::two_fidelity_summary(bank);
+                write_atomically(
+                    &self.out.join("two-fidelity.json"),
+                    serde_json::to_string_pretty(&summary)?.as_bytes(),
+                )?;
+                self.events
+                    .message(super::low_fidelity::two_fidelity_message(bank));
             }
         }
         Ok(gp_checks)

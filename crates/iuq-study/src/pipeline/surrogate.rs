@@ -10,11 +10,12 @@
 
 use iuq_core::{EvaluationFailure, Model, Outcome, ParameterSpace};
 use iuq_gp::{
-    ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank, ReducedBasis,
-    ReducedBasisOptions,
+    ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank, MultiFidelityBank,
+    MultiFidelityGp, ReducedBasis, ReducedBasisOptions,
 };
 
 use super::emulator::{Emulator, ReducedBasisSettings};
+use super::low_fidelity::LowFidelity;
 use super::model_runs::ModelRuns;
 use super::run_groups::GroupRuns;
 use crate::error::{Context, Result, StudyError};
@@ -93,9 +94,13 @@ impl Surrogate {
     ///
     /// # Errors
     /// A data point with fewer than 3 successful training runs, or a fit that fails.
+    ///
+    /// With a cheap model (`low`), every data point's emulator is a two-fidelity GP on its runs
+    /// and the study model's (`iuq_gp::MultiFidelityGp`).
     pub fn fit(
         groups: &[GroupRuns],
         runs: &ModelRuns,
+        low: Option<&LowFidelity>,
         space: &ParameterSpace,
         seed: u64,
         emulation: &Emulation,
@@ -104,6 +109,7 @@ impl Surrogate {
         if let Emulation::ReducedBasis { settings, scale } = emulation {
             return Self::fit_reduced_basis(groups, runs, space, seed, settings, scale, describe);
         }
+        let mut two_fidelity = Vec::new();
         let mut gps = Vec::with_capacity(runs.output_names().len());
         let mut classifiers = Vec::with_capacity(groups.len());
         for (g, group) in groups.iter().enumerate() {
@@ -124,6 +130,19 @@ impl Surrogate {
                     seed: seed.wrapping_add(j as u64),
                     ..Default::default()
                 };
+                if let Some(low) = low {
+                    let cheap = low.training(j)?;
+                    let gp = MultiFidelityGp::fit(
+                        &cheap.x,
+                        &cheap.y,
+                        &training.x,
+                        &training.y,
+                        &options.check()?,
+                    )
+                    .with_context(|| format!("two-fidelity GP fit {}", describe(j)))?;
+                    two_fidelity.push(gp);
+                    continue;
+                }
                 let gp = GaussianProcess::fit(&training.x, &training.y, &options.check()?)
                     .with_context(|| format!("GP fit {}", describe(j)))?;
                 gps.push(gp);
@@ -138,6 +157,17 @@ impl Surrogate {
             )
             .with_context(|| format!("failure classifier of run group {}", g + 1))?;
             classifiers.push(classifier);
+        }
+        if low.is_some() {
+            let bank = MultiFidelityBank::new(
+                runs.parameters().to_vec(),
+                runs.output_names().to_vec(),
+                two_fidelity,
+            )?;
+            return Ok(Self {
+                emulator: Emulator::TwoFidelity(bank),
+                classifiers,
+            });
         }
         let bank = GpBank::new(
             runs.parameters().to_vec(),
