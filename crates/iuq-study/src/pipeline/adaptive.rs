@@ -1482,7 +1482,14 @@ fn make_round_runs(
     if requests.is_empty() {
         return Ok(());
     }
-    let label = format!("adaptive-round-{round}");
+    // A two-fidelity round's expensive runs get a label of their own, so that a store shared
+    // with a one-fidelity calibration of the same model (its runs reused) keeps that one's
+    // rounds as they were.
+    let label = if inputs.low_fidelity.is_some() {
+        format!("two-fidelity-round-{round}")
+    } else {
+        format!("adaptive-round-{round}")
+    };
     let outcomes = inputs.runs.run(Some(&label), &requests)?;
     for ((g, theta), outcome) in requests.iter().zip(&outcomes) {
         let mut row = vec![round as f64, *g as f64];
