@@ -382,6 +382,8 @@ def calibrate(
     batch_size: int = 16,
     description: Optional[str] = None,
     progress: Any = True,
+    low_fidelity: Optional[Callable[..., Any]] = None,
+    cost_ratio: Optional[float] = None,
 ) -> CalibrationResult:
     """Calibrate the Python function ``model`` on data with iuq's adaptive engine.
 
@@ -468,6 +470,15 @@ def calibrate(
     progress : bool or callable, default True
         ``True``: a progress bar (tqdm, where installed) or lines on stderr; ``False``: quiet;
         a callable receives each line.
+    low_fidelity : callable, optional
+        A cheaper model of the same outputs, called as ``model`` is (the book's how-to on two
+        fidelities): the surrogate of ``model`` becomes ρ·(a GP of ``low_fidelity``) + a GP
+        discrepancy, and each round runs ``low_fidelity`` instead of ``model`` where that
+        removes more of the surrogate's variance per unit cost. ``model_runs`` and ``runs``
+        count ``model``'s runs; ``low_fidelity``'s are stored beside them.
+    cost_ratio : float, optional
+        A run of ``model`` costs this many runs of ``low_fidelity`` (default: the ratio of
+        their measured median run times).
 
     Returns
     -------
@@ -506,6 +517,14 @@ def calibrate(
     """
     if not callable(model):
         raise TypeError("model: expected a callable taking an (n, d) array")
+    if low_fidelity is not None and not callable(low_fidelity):
+        raise TypeError("low_fidelity: expected a callable taking an (n, d) array, as model")
+    if cost_ratio is not None:
+        cost_ratio = real("cost_ratio", cost_ratio)
+        if not cost_ratio > 0:
+            raise ValueError(f"cost_ratio: must be > 0, got {cost_ratio}")
+        if low_fidelity is None:
+            raise ValueError("cost_ratio: only with a low_fidelity model")
     names, priors = parameter_priors(parameters, "parameters")
     d = len(names)
     values = vector("y", y)
@@ -589,18 +608,29 @@ def calibrate(
             study += ["[sensitivity]", f"n = {sensitivity}", f"seed = {seed}"]
         study += ["[sampler]", f"samples = {samples}", f"seed = {seed}"]
         study += ["[model_posterior]", *_model_posterior_lines(model_posterior, seed)]
+        if low_fidelity is not None:
+            study += ["[low_fidelity]", 'kind = "callable"', f"description = {_toml_string(_describe(low_fidelity, None))}"]
+            if per_point:
+                study.append('abscissa = "x"')
+            if cost_ratio is not None:
+                study.append(f"cost_ratio = {_toml_number(cost_ratio)}")
         study += ["[executor]", 'kind = "local"']
         path = directory / STUDY_FILE
         _write_atomically(path, "\n".join(study) + "\n")
 
-        function = model
-        if per_point:
-
-            def function(a: np.ndarray) -> Any:
-                result = model(a[:, :d], a[:, d])
+        def per_point_call(f: Callable[..., Any]) -> Callable[[np.ndarray], Any]:
+            def call(a: np.ndarray) -> Any:
+                result = f(a[:, :d], a[:, d])
                 if isinstance(result, tuple) and len(result) == 2:
                     return np.asarray(result[0], dtype=np.float64), np.asarray(result[1], dtype=np.float64)
                 return np.asarray(result, dtype=np.float64)
+
+            return call
+
+        function = per_point_call(model) if per_point else model
+        cheap = None
+        if low_fidelity is not None:
+            cheap = per_point_call(low_fidelity) if per_point else low_fidelity
 
         native = _native.Study.load(os.fspath(path))
         printer = _progress_printer(progress)
@@ -613,6 +643,7 @@ def calibrate(
                 batch_size,
                 bool(model_posterior) or isinstance(model_posterior, dict),
                 printer,
+                cheap,
             )
         finally:
             close = getattr(printer, "close", None)

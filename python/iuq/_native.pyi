@@ -125,6 +125,7 @@ class Study:
         max_parallel: int,
         model_posterior: bool,
         progress: Optional[Callable[[str], Any]],
+        low_fidelity: Optional[Callable[[Any], Any]] = None,
     ) -> str: ...
     def sobol(
         self,

@@ -55,28 +55,32 @@ impl InProcessModel for ForwardedModel {
     }
 }
 
-/// The caller's side: progress lines, and the Python model evaluated for the waiting runs.
+/// The caller's side: progress lines, and the Python models (the study's, and the cheap one of
+/// `[low_fidelity]` where there is one) evaluated for the waiting runs.
 pub struct CalibrationObserver {
     progress: ProgressObserver,
-    requests: mpsc::Receiver<Request>,
-    model: PyModel,
+    models: Vec<(mpsc::Receiver<Request>, PyModel)>,
     stopped: bool,
     error: Option<PyErr>,
 }
 
 /// The model the pipeline is given and the observer that evaluates it on the caller's thread.
-pub fn forwarded_model(
-    model: PyModel,
+pub fn forwarded_models(
+    models: Vec<PyModel>,
     progress: Option<Py<PyAny>>,
-) -> (SharedModel, CalibrationObserver) {
-    let (sender, requests) = mpsc::channel();
-    let shared = SharedModel(Arc::new(ForwardedModel {
-        requests: Mutex::new(sender),
-    }));
+) -> (Vec<SharedModel>, CalibrationObserver) {
+    let mut shared = Vec::with_capacity(models.len());
+    let mut served = Vec::with_capacity(models.len());
+    for model in models {
+        let (sender, requests) = mpsc::channel();
+        shared.push(SharedModel(Arc::new(ForwardedModel {
+            requests: Mutex::new(sender),
+        })));
+        served.push((requests, model));
+    }
     let observer = CalibrationObserver {
         progress: ProgressObserver::new(progress),
-        requests,
-        model,
+        models: served,
         stopped: false,
         error: None,
     };
@@ -98,7 +102,14 @@ impl CalibrationObserver {
     }
 
     fn evaluate_waiting(&mut self) {
-        let batch: Vec<Request> = self.requests.try_iter().collect();
+        for k in 0..self.models.len() {
+            self.evaluate_waiting_of(k);
+        }
+    }
+
+    /// The waiting runs of model `k`, in one call of it.
+    fn evaluate_waiting_of(&mut self, k: usize) {
+        let batch: Vec<Request> = self.models[k].0.try_iter().collect();
         if batch.is_empty() {
             return;
         }
@@ -109,7 +120,7 @@ impl CalibrationObserver {
             return;
         }
         let points: Vec<Vec<f64>> = batch.iter().map(|r| r.parameters.clone()).collect();
-        match self.model.evaluate_batch(&points) {
+        match self.models[k].1.evaluate_batch(&points) {
             Ok(outcomes) => {
                 for (request, outcome) in batch.into_iter().zip(outcomes) {
                     let answer = match outcome {
@@ -120,7 +131,7 @@ impl CalibrationObserver {
                 }
             }
             Err(_) => {
-                let error = self.model.take_error();
+                let error = self.models[k].1.take_error();
                 self.stop(error);
                 for request in batch {
                     let _ = request.reply.send(Err(InProcessError::Interrupted));

@@ -20,7 +20,7 @@ use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
 use iuq_study::{Study, StudyError};
 
-use crate::calibrate::forwarded_model;
+use crate::calibrate::forwarded_models;
 use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure, study_error};
 
@@ -173,6 +173,7 @@ impl NativeStudy {
             runs_only,
             recompute_rounds,
             callable: None,
+            low_fidelity_callable: None,
             interrupt_grace: Some(INTERRUPT_GRACE),
         };
         let mut observer = ProgressObserver::new(progress);
@@ -189,8 +190,9 @@ impl NativeStudy {
     /// Run the pipeline of a study whose model is of kind `callable`, the Python `model` (a
     /// callable (n, inputs) → (n, outputs), or a pair of such arrays, values and stds),
     /// evaluated on this thread in batches of up to `max_parallel` runs (see
-    /// [`crate::calibrate`]); the outcome as `run` gives it.
-    #[pyo3(signature = (out, model, outputs, on_error, max_parallel, model_posterior, progress))]
+    /// [`crate::calibrate`]); the outcome as `run` gives it. `low_fidelity`, a callable of the
+    /// same signature, is the cheap model of a `[low_fidelity] kind = "callable"`.
+    #[pyo3(signature = (out, model, outputs, on_error, max_parallel, model_posterior, progress, low_fidelity=None))]
     #[allow(clippy::too_many_arguments)]
     fn calibrate(
         &self,
@@ -202,11 +204,26 @@ impl NativeStudy {
         max_parallel: usize,
         model_posterior: bool,
         progress: Option<Py<PyAny>>,
+        low_fidelity: Option<Py<PyAny>>,
     ) -> PyResult<String> {
         let on_error = OnError::parse(on_error)?;
         let output_names: Vec<String> = (0..outputs).map(|j| format!("y[{j}]")).collect();
-        let model = PyModel::new(model, self.study.model_inputs(), output_names, on_error);
-        let (shared, mut observer) = forwarded_model(model, progress);
+        let inputs = self.study.model_inputs();
+        let mut models = vec![PyModel::new(
+            model,
+            inputs.clone(),
+            output_names.clone(),
+            on_error,
+        )];
+        let cheap = low_fidelity.is_some();
+        if let Some(low) = low_fidelity {
+            models.push(PyModel::new(low, inputs, output_names, on_error));
+        }
+        let (mut shared, mut observer) = forwarded_models(models, progress);
+        let low_fidelity_callable = if cheap { shared.pop() } else { None };
+        let shared = shared
+            .pop()
+            .ok_or_else(|| pyo3::exceptions::PyRuntimeError::new_err("no model to calibrate"))?;
         let options = PipelineOptions {
             out,
             max_parallel: Some(max_parallel),
@@ -215,6 +232,7 @@ impl NativeStudy {
             runs_only: false,
             recompute_rounds: false,
             callable: Some(shared),
+            low_fidelity_callable,
             interrupt_grace: Some(INTERRUPT_GRACE),
         };
         let result =

@@ -66,6 +66,7 @@ fn options(dir: &Path, model: &Arc<SlowDecay>, grace: Option<Duration>) -> Pipel
         runs_only: true,
         recompute_rounds: false,
         callable: Some(SharedModel(model.clone())),
+        low_fidelity_callable: None,
         interrupt_grace: grace,
     }
 }

@@ -179,13 +179,14 @@ impl LowFidelity {
         settings: LowFidelitySettings,
         data: &DataLikelihood,
         max_parallel: Option<usize>,
+        callable: Option<iuq_campaign::SharedModel>,
         events: &Events,
     ) -> Result<Self> {
         let runs = ModelRuns::open(
             low_study,
             data,
             max_parallel,
-            None,
+            callable,
             events,
             events.campaign_progress("low-fidelity runs"),
         )

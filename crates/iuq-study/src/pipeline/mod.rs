@@ -97,6 +97,8 @@ pub struct PipelineOptions {
     /// The model of a study whose `[model]` is of kind `callable`: supplied by the program that
     /// runs the study (the Python package's `iuq.calibrate`), evaluated in this process.
     pub callable: Option<SharedModel>,
+    /// The cheap model of a `[low_fidelity]` of kind `callable`, supplied as `callable` is.
+    pub low_fidelity_callable: Option<SharedModel>,
     /// How long [`run`] waits, once its observer asked it to stop, for the pipeline to reach its
     /// next check (between model runs, sampler stages, adaptive rounds). Past it, `run` returns
     /// [`StudyError::Interrupted`] at once and leaves the pipeline's thread to stop on its own

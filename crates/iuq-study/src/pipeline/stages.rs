@@ -241,6 +241,7 @@ impl<'a> PipelineRun<'a> {
                 low_settings,
                 &data,
                 options.max_parallel,
+                options.low_fidelity_callable.clone(),
                 events,
             )?),
             None => None,

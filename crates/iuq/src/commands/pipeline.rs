@@ -95,6 +95,7 @@ pub fn run(args: &PipelineArgs, json_output: bool) -> Result<()> {
         runs_only: args.runs_only,
         recompute_rounds: args.recompute_rounds,
         callable: None,
+        low_fidelity_callable: None,
         // The process ends on a Ctrl-C anyway; a stop asked otherwise waits for the pipeline.
         interrupt_grace: None,
     };
