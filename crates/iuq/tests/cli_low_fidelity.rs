@@ -217,3 +217,90 @@ fn bad_low_fidelity_keys_exit_2_naming_file_and_key() {
         );
     }
 }
+
+/// The cooling study per time with the program (`cooling_model.py`, each run 0.2 s, every
+/// finished run logged) as the cheap fidelity and the same Newton curve with a small sine as the
+/// expensive expression, its cheap runs favoured (cost ratio 1,000).
+fn mixed_cooling_study(dir: &Path, log: &Path) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(dir.join("cooling-per-time.toml")).unwrap();
+    let program = "kind = \"command\"\ncommand = [\"./cooling_model.py\"]\nabscissa = \"t\"\noutputs = [\"T\"]\noutput = { file = \"result.json\", format = \"json\" }";
+    assert!(text.contains(program));
+    let expensive = "kind = \"expression\"\nabscissa = \"t\"\noutputs = { T = \"20 + (T0 - 20) * exp(-k * t) + 0.4 * sin(3 * k)\" }";
+    let cheap = format!(
+        "\n[low_fidelity]\n{program}\nenv = {{ COOLING_SLEEP = \"0.2\", COOLING_RUN_LOG = \"{}\" }}\ndesign = {{ n = 2, seed = 2 }}\ncost_ratio = 1000\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n",
+        log.display()
+    );
+    let path = dir.join("mixed.toml");
+    std::fs::write(&path, text.replace(program, expensive) + &cheap).unwrap();
+    path
+}
+
+/// kill -9 while a round's cheap runs are under way (60 ms into the first one's 0.2 s: a run
+/// that the campaign had not seen finish is lost and made again, by the local executor's
+/// design), then rerun: every finished run is kept
+/// (none run twice: the log of finished runs has no repeated line, and the killed pipeline's log
+/// is a prefix of the whole) and the result is that of an uninterrupted pipeline (the same
+/// runs, rounds and posterior moments, bit for bit).
+#[test]
+fn a_pipeline_killed_during_a_mixed_round_continues_without_losing_or_repeating_runs() {
+    use std::process::{Command, Stdio};
+    use std::time::{Duration, Instant};
+    // The initial runs alone (`--runs-only`) in the pipeline that is not killed: how many cheap
+    // runs (run directories) there are before the first round.
+    let clean_dir = common::cooling_example("low-fidelity", "clean");
+    let clean_log = clean_dir.join("finished.jsonl");
+    let clean_study = mixed_cooling_study(&clean_dir, &clean_log);
+    pipeline(&clean_study, &clean_dir.join("report"), &["--runs-only"]);
+    let run_directories = |d: &Path| {
+        std::fs::read_dir(d.join("mixed.campaign/low-fidelity/runs")).map_or(0, |r| r.count())
+    };
+    let initial = run_directories(&clean_dir);
+    let dir = common::cooling_example("low-fidelity", "killed");
+    let log = dir.join("finished.jsonl");
+    let study = mixed_cooling_study(&dir, &log);
+    let out = dir.join("report");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_iuq"))
+        .args(["pipeline", study.to_str().unwrap(), "--out"])
+        .arg(&out)
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .spawn()
+        .unwrap();
+    let started = Instant::now();
+    while run_directories(&dir) <= initial {
+        assert!(
+            started.elapsed() < Duration::from_secs(300),
+            "no round's cheap run"
+        );
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "finished before a round's cheap run"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    std::thread::sleep(Duration::from_millis(60));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let before = std::fs::read_to_string(&log).unwrap();
+    let (resumed, _) = pipeline(&study, &out, &[]);
+    assert_eq!(resumed["converged"], true, "{resumed}");
+    let text = std::fs::read_to_string(&log).unwrap();
+    let all: Vec<&str> = text.lines().collect();
+    let mut unique = all.clone();
+    unique.sort_unstable();
+    unique.dedup();
+    assert_eq!(unique.len(), all.len(), "a finished cheap run was repeated");
+    assert!(text.starts_with(&before));
+    let (clean, _) = pipeline(&clean_study, &clean_dir.join("report"), &[]);
+    assert_eq!(resumed["runs"], clean["runs"]);
+    assert_eq!(resumed["rounds"], clean["rounds"]);
+    assert_eq!(resumed["posterior"], clean["posterior"]);
+    let cheap_runs = |d: &Path| {
+        std::fs::read_to_string(d.join("finished.jsonl"))
+            .unwrap()
+            .lines()
+            .count()
+    };
+    assert_eq!(cheap_runs(&dir), cheap_runs(&clean_dir));
+    assert!(run_directories(&dir) > initial);
+}
