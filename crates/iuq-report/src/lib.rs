@@ -42,7 +42,7 @@ pub use model::{
     ConvergenceRound, DataSeries, ElongationTrace, FailureMapPanel, GpDiagnostic, MapRunsAtPoint,
     MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
     PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport, TwoFidelityPoint,
 };
 pub use report::{REPORT_FORMAT, ReportDocument, ReportFiles, write_report};
 pub use tables::TableInfo;

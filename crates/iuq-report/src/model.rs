@@ -49,6 +49,29 @@ pub struct StudyReport {
     /// The cell at a MAP at every stress, in pictures (cell-model studies); `None` omits them.
     #[serde(default)]
     pub cell_portraits: Option<CellPortraits>,
+    /// Per data point, how the cheap model of a two-fidelity study helps the surrogate; empty
+    /// (one fidelity) omits the section.
+    #[serde(default)]
+    pub two_fidelity: Vec<TwoFidelityPoint>,
+}
+
+/// One data point's two-fidelity emulator: f_H = ρ·f_L + δ.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TwoFidelityPoint {
+    /// The data point's control value.
+    pub x: f64,
+    /// ρ, the scale of the cheap model in the expensive one.
+    pub rho: f64,
+    /// Whether the emulator uses the cheap model here (else the expensive runs alone).
+    pub uses_low_fidelity: bool,
+    /// The share of the expensive runs' variance ρ·(cheap model) explains.
+    pub explained_share: f64,
+    /// The discrepancy δ's output scale (its training residuals' std).
+    pub discrepancy_std: f64,
+    /// Successful expensive runs informing the point.
+    pub expensive_runs: usize,
+    /// Successful cheap runs informing it.
+    pub cheap_runs: usize,
 }
 
 /// The cell model run at a MAP at every stress, told in pictures: its final shape in the shear

@@ -526,6 +526,43 @@ pub(crate) fn runs_per_point(report: &StudyReport) -> Table {
     }
 }
 
+/// The two-fidelity emulator per data point: ρ, whether the cheap model is used, the share of
+/// the expensive runs it explains, the discrepancy's scale, and the runs of each fidelity.
+pub(crate) fn two_fidelity(report: &StudyReport) -> Table {
+    let columns = vec![
+        Column::plain(report.data.x_label.clone()),
+        Column::plain("ρ"),
+        Column::plain("cheap model used"),
+        Column::plain("explained share"),
+        Column::plain("discrepancy std"),
+        Column::plain("expensive runs"),
+        Column::plain("cheap runs"),
+    ];
+    let rows = report
+        .two_fidelity
+        .iter()
+        .enumerate()
+        .map(|(i, point)| {
+            let at = |field: &str| format!("/report/two_fidelity/{i}/{field}");
+            vec![
+                Cell::number(point.x, at("x")),
+                Cell::number(point.rho, at("rho")),
+                Cell::text(if point.uses_low_fidelity { "yes" } else { "no" }),
+                Cell::number(point.explained_share, at("explained_share")),
+                Cell::number(point.discrepancy_std, at("discrepancy_std")),
+                Cell::count(point.expensive_runs, at("expensive_runs")),
+                Cell::count(point.cheap_runs, at("cheap_runs")),
+            ]
+        })
+        .collect();
+    Table {
+        name: "two_fidelity".into(),
+        title: "Two fidelities per data point".into(),
+        columns,
+        rows,
+    }
+}
+
 /// The posterior check per data point: the model and the surrogate at the MAP, the RMSE and
 /// coverage over the checked runs, failures, and the model's diagnostic.
 pub(crate) fn posterior_check(report: &StudyReport, check: &PosteriorCheckReport) -> Table {

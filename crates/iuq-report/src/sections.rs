@@ -155,6 +155,15 @@ pub(crate) fn build_sections(
     if let Some(portraits) = &report.cell_portraits {
         sections.push(cell_shapes_section(&c, portraits)?);
     }
+    if !report.two_fidelity.is_empty() {
+        let mut section = Section::new(
+            "two-fidelity",
+            "Two fidelities",
+            "The surrogate of the expensive model as ρ·(a GP of the cheap model) + a GP discrepancy δ per data point, the cheap model used where it explains at least half of the expensive runs' variance and predicts them better (leave-one-out) than their own GP; and the runs of each model.",
+        );
+        section.tables.push(build::two_fidelity(report));
+        sections.push(section);
+    }
     // Shown with the failure map, or else with the run statistics.
     let mut runs_per_point =
         (!report.runs_per_point.is_empty()).then(|| build::runs_per_point(report));

@@ -149,6 +149,11 @@ fn a_correlated_cheap_model_reaches_the_exact_posterior_with_fewer_expensive_run
         two_runs < alone_runs,
         "two fidelities took {two_runs} expensive runs, the expensive model alone {alone_runs}"
     );
+    // The report shows both fidelities per data point.
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    assert!(html.contains("Two fidelities per data point"));
+    let table = std::fs::read_to_string(dir.join("out/tables/two_fidelity.csv")).unwrap();
+    assert_eq!(table.lines().count(), 1 + TIMES, "{table}");
     let cheap_store = dir.join("two.campaign/low-fidelity/campaign.sqlite");
     assert!(cheap_store.is_file(), "{}", cheap_store.display());
     let summary: serde_json::Value =

@@ -274,6 +274,7 @@ pub fn synthetic_report(
             .collect(),
     };
     StudyReport {
+        two_fidelity: Vec::new(),
         title: "RBC calibration — healthy cells (synthetic)".to_string(),
         study_name: "rbc-healthy-synthetic".to_string(),
         provenance: vec![

@@ -97,6 +97,8 @@ pub struct PipelineResults<'a> {
     pub model_runs: &'a ModelRuns,
     /// The surrogate (its failure classifiers draw the failure map).
     pub surrogate: &'a Surrogate,
+    /// The cheap model of `[low_fidelity]`, if any.
+    pub low_fidelity: Option<&'a super::low_fidelity::LowFidelity>,
 }
 
 /// How the report names the data and the model: the cell model's physical labels, or the data
@@ -606,6 +608,7 @@ pub fn write_pipeline_report(
         last.1 = started.elapsed().as_secs_f64();
     }
     let report = StudyReport {
+        two_fidelity: two_fidelity_points(results)?,
         title: format!("Calibration study `{}`", study.name),
         study_name: study.name.clone(),
         provenance,
@@ -811,6 +814,34 @@ fn check_test_sentence(check: &PosteriorCheck) -> String {
             v.largest_z
         )
     }
+}
+
+/// Per data point, the two-fidelity emulator's ρ, its use of the cheap model and the runs of
+/// each fidelity (empty with one fidelity).
+fn two_fidelity_points(results: &PipelineResults<'_>) -> Result<Vec<iuq_report::TwoFidelityPoint>> {
+    let (Some(bank), Some(low)) = (results.emulator.two_fidelity(), results.low_fidelity) else {
+        return Ok(Vec::new());
+    };
+    let runs = results.model_runs;
+    let mut points = Vec::with_capacity(bank.gps().len());
+    for (j, gp) in bank.gps().iter().enumerate() {
+        let (g, k) = (0..runs.groups())
+            .find_map(|g| {
+                let r = runs.group_outputs(g);
+                r.contains(&j).then(|| (g, j - r.start))
+            })
+            .unwrap_or((0, j));
+        points.push(iuq_report::TwoFidelityPoint {
+            x: results.data.x[j],
+            rho: gp.rho(),
+            uses_low_fidelity: gp.uses_low_fidelity(),
+            explained_share: gp.explained_share(),
+            discrepancy_std: gp.discrepancy().output_scaling().std,
+            expensive_runs: results.groups[g].training(k).y.len(),
+            cheap_runs: low.training(j)?.y.len(),
+        });
+    }
+    Ok(points)
 }
 
 #[cfg(test)]

@@ -127,6 +127,7 @@ pub(super) fn run_stages(
         groups: &groups,
         model_runs: &run.model_runs,
         surrogate: &calibration.surrogate,
+        low_fidelity: run.low_fidelity.as_ref(),
     };
     times.push(("propagation and report".into(), 0.0));
     let summary = write_pipeline_report(&results, &run.out, &mut times, stage)?;
