@@ -265,7 +265,8 @@ impl AdaptiveEngine {
     }
 
     /// The state before round `round`: from scratch, or going on after an earlier loop with its
-    /// last round's moments and sampling (a failed posterior check trained on).
+    /// last round's moments and sampling (a failed posterior check trained on). A round past
+    /// `max_rounds` starts stopped.
     pub fn start(
         &self,
         round: usize,
@@ -282,13 +283,14 @@ impl AdaptiveEngine {
                 },
             ),
         };
+        let max_rounds = self.settings.max_rounds;
         EngineState {
             round,
             sampling,
             previous,
             previous_populations: None,
             converged: false,
-            stop_reason: None,
+            stop_reason: (round > max_rounds).then(|| format!("reached max_rounds = {max_rounds}")),
         }
     }
 

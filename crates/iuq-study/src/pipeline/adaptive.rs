@@ -253,7 +253,7 @@ pub struct AdaptiveRound {
 }
 
 /// What the adaptive engine did.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct AdaptiveOutcome {
     /// Every round.
     pub rounds: Vec<AdaptiveRound>,
@@ -1354,6 +1354,14 @@ fn measure_or_read_round(
 }
 
 impl AdaptiveRound {
+    /// Count the round's new runs of the study's model, in all and per run group.
+    fn count_new_runs(&mut self, requests: &[(usize, Vec<f64>)]) {
+        for (g, _) in requests {
+            self.new_runs_per_group[*g] += 1;
+        }
+        self.new_runs = requests.len();
+    }
+
     /// The round's moments and sampling, for an engine that goes on after it.
     fn resumed(&self, settings: &AdaptiveSettings) -> (PosteriorMoments, RoundSampling) {
         (
@@ -1536,6 +1544,27 @@ fn recorded_allocation(inputs: &RoundInputs<'_>, round: usize) -> Result<Option<
     })
 }
 
+/// Run round `round`'s cheap runs (`[low_fidelity]`), their count in the round's record and
+/// its log line.
+fn run_cheap_round(
+    inputs: &RoundInputs<'_>,
+    round: usize,
+    record: &mut AdaptiveRound,
+    message: &mut String,
+    requests: Vec<(usize, Vec<f64>)>,
+) -> Result<()> {
+    let Some(low) = inputs.low_fidelity else {
+        return Ok(());
+    };
+    record.new_low_fidelity_runs = Some(requests.len());
+    message.push_str(&format!(
+        " ({} low-fidelity runs so far, {} new)",
+        low.runs_made()?,
+        requests.len()
+    ));
+    low.run_round(round, requests)
+}
+
 /// The fingerprint under which a round's allocation is recorded: the round's runs are replayed
 /// as chosen, whatever the measurement computes now (as the design of a one-fidelity round is).
 const ALLOCATION_FINGERPRINT: &str = "allocation";
@@ -1603,26 +1632,22 @@ pub(super) fn refine(
         events,
         ..
     } = *inputs;
-    let file = study.path.display().to_string();
     let engine = AdaptiveEngine::new(engine_settings(settings))
-        .bad_input(|| format!("{file}: key `surrogate.adaptive`"))?;
+        .bad_input(|| format!("{}: key `surrogate.adaptive`", study.path.display()))?;
     std::fs::create_dir_all(dir)
         .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
     let choice = RunChoice::new(data, settings, runs, groups.len());
     // Going on after a failed check: from the round after the last, its moments the previous
     // ones (the shift then measures what the check's runs changed).
     let first_round = earlier.as_ref().map_or(1, |e| e.last_round() + 1);
-    let (mut rounds, retrained_checks, mut new_rows, mut parameters, last_populations) =
-        match earlier {
-            Some(e) => (
-                e.rounds,
-                e.retrained_checks,
-                e.run_rows,
-                e.parameters,
-                e.populations,
-            ),
-            None => (Vec::new(), Vec::new(), Vec::new(), Vec::new(), None),
-        };
+    let AdaptiveOutcome {
+        mut rounds,
+        retrained_checks,
+        run_rows: mut new_rows,
+        mut parameters,
+        populations: last_populations,
+        ..
+    } = earlier.unwrap_or_default();
     if !new_rows.is_empty() {
         write_runs_table(study, dir, &new_rows)?;
     }
@@ -1634,9 +1659,6 @@ pub(super) fn refine(
     let sequential = settings.sampling == PosteriorSampling::Sequential;
     let mut carried: Vec<Option<BasisState>> = vec![None; settings.replicates];
     let mut carried_from: Option<String> = None;
-    if state.round > settings.max_rounds {
-        state.stop_reason = Some(format!("reached max_rounds = {}", settings.max_rounds));
-    }
     while state.stop_reason.is_none() {
         events.check_interrupt()?;
         let round = state.round;
@@ -1684,7 +1706,10 @@ pub(super) fn refine(
             settings,
             groups.len(),
         );
-        let allocation = match (&judgement.stop, recorded, &scoring) {
+        let Allocation {
+            high: requests,
+            low: low_requests,
+        } = match (&judgement.stop, recorded, &scoring) {
             (Some(_), _, _) => Allocation::default(),
             (None, Some(recorded), _) => recorded,
             (None, None, scoring) => {
@@ -1700,35 +1725,22 @@ pub(super) fn refine(
                 allocate(inputs, &scoring.surrogate, round, wanted)?
             }
         };
-        let Allocation {
-            high: requests,
-            low: low_requests,
-        } = allocation;
-        for (g, _) in &requests {
-            record.new_runs_per_group[*g] += 1;
-        }
-        record.new_runs = requests.len();
+        record.count_new_runs(&requests);
+        let candidates = state.sampling.candidates;
         let mut message = round_message(
             round,
             made,
             &measured,
             &judgement,
             requests.len(),
-            state.sampling.candidates,
+            candidates,
         );
-        if let Some(low) = inputs.low_fidelity {
-            record.new_low_fidelity_runs = Some(low_requests.len());
-            message.push_str(&format!(
-                " ({} low-fidelity runs so far, {} new)",
-                low.runs_made()?,
-                low_requests.len()
-            ));
-            low.run_round(round, low_requests.clone())?;
-        }
+        let cheap_runs = low_requests.len();
+        run_cheap_round(inputs, round, &mut record, &mut message, low_requests)?;
         events.message(message);
         make_round_runs(inputs, round, requests, groups, &mut new_rows)?;
         record.seconds = started.elapsed().as_secs_f64();
-        let new_runs = record.new_runs + low_requests.len();
+        let new_runs = record.new_runs + cheap_runs;
         rounds.push(record);
         write_rounds(dir, &rounds)?;
         engine.step(&mut state, reading, &judgement, new_runs);
