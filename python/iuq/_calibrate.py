@@ -88,7 +88,7 @@ class CalibrationResult:
     ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
     ...                        sensitivity=0, seed=1, progress=False)
     >>> result
-    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00855)
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3008 ± 0.00846)
     >>> result.samples.shape, result.converged
     ((1000, 1), True)
     """
@@ -511,7 +511,7 @@ def calibrate(
     ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
     ...                        sensitivity=0, seed=1, progress=False)
     >>> result
-    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00855)
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3008 ± 0.00846)
     >>> bool(abs(result.mean[0] - 0.3) < 3 * result.std[0])
     True
     """

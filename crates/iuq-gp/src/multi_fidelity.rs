@@ -16,8 +16,9 @@
 //!    ρ tried: a grid of 9 values from 0 to twice the least-squares slope of y_H on l(x_H), then
 //!    a grid 8 times finer around the best. (The least-squares slope alone is biased wherever δ
 //!    correlates with f_L on the few high runs.)
-//! 4. Prediction: mean ρ·μ_L(x) + μ_δ(x), latent variance ρ²·σ²_L(x) + σ²_δ(x), the noise
-//!    variance δ's (that of a new high-fidelity run).
+//! 4. Prediction: mean ρ·μ_L(x) + μ_δ(x), latent variance ρ²·σ²_L(x) + c·σ²_δ(x), the noise
+//!    variance δ's (that of a new high-fidelity run), with c ≥ 1 δ's mean squared standardised
+//!    leave-one-out residual (a GP on few runs is overconfident; `variance_scale`).
 //!
 //! **When it beats a single-fidelity GP, and when not.** A single-fidelity GP is fitted on the
 //! high-fidelity runs too, and the two are compared by their leave-one-out log predictive
@@ -26,8 +27,9 @@
 //! y_H,i from the other high runs (for the two-fidelity model, δ's at the chosen ρ). ρ = 0 is the
 //! single-fidelity GP itself, so the two-fidelity density is never lower; the emulator predicts
 //! with both fidelities only where it is higher by more than [`RHO_PRICE`] (one nat, Akaike's
-//! price of the parameter ρ; [`MultiFidelityGp::uses_low_fidelity`]) and the scaled low
-//! fidelity explains at least half of the high runs' variance ([`MIN_EXPLAINED`]). A low fidelity that does
+//! price of the parameter ρ; [`MultiFidelityGp::uses_low_fidelity`]), the scaled low
+//! fidelity explains at least half of the high runs' variance ([`MIN_EXPLAINED`]), and there
+//! are at least 2·(d + 1) high runs ([`min_high_fidelity_runs`]). A low fidelity that does
 //! not correlate with the high one (its trend wrong, or noise) leaves the single-fidelity GP in
 //! charge, so that it does not make the emulator worse than the high-fidelity runs alone.
 //!
@@ -69,6 +71,15 @@ pub const RHO_PRICE: f64 = 1.0;
 /// same numbers again (a different optimum of its hyperparameters), not from the cheap model.
 pub const MIN_EXPLAINED: f64 = 0.5;
 
+/// The fewest high-fidelity runs, per input dimension d, with which the low fidelity is used:
+/// 2·(d + 1), twice the d + 2 numbers (ρ, δ's length scales and variance) fitted to them less
+/// one. With fewer, ρ and δ fitted to a handful of points can agree with each other and with
+/// the leave-one-out test and still be off where the posterior lies (a calibration with 4
+/// successful expensive runs per data point ended 3 posterior stds off; with 8, exact).
+pub fn min_high_fidelity_runs(dimension: usize) -> usize {
+    2 * (dimension + 1)
+}
+
 /// A two-fidelity emulator of one output (module docs).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MultiFidelityGp {
@@ -79,6 +90,14 @@ pub struct MultiFidelityGp {
     two_fidelity_loo_log_density: f64,
     single_fidelity_loo_log_density: f64,
     explained: f64,
+    #[serde(default = "one")]
+    discrepancy_variance_scale: f64,
+    #[serde(default)]
+    enough_high_runs: bool,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl MultiFidelityGp {
@@ -138,7 +157,10 @@ impl MultiFidelityGp {
         } else {
             0.0
         };
+        let discrepancy_variance_scale = variance_scale(&discrepancy.leave_one_out());
         Ok(Self {
+            enough_high_runs: high_x.len() >= min_high_fidelity_runs(d.unwrap_or(0)),
+            discrepancy_variance_scale,
             explained,
             two_fidelity_loo_log_density: density,
             single_fidelity_loo_log_density: loo_log_density(single.leave_one_out()),
@@ -158,8 +180,15 @@ impl MultiFidelityGp {
     /// density over the high-fidelity runs is above the single-fidelity GP's by more than
     /// [`RHO_PRICE`].
     pub fn uses_low_fidelity(&self) -> bool {
-        self.explained >= MIN_EXPLAINED
+        self.enough_high_runs
+            && self.explained >= MIN_EXPLAINED
             && self.two_fidelity_loo_log_density > self.single_fidelity_loo_log_density + RHO_PRICE
+    }
+
+    /// c ≥ 1, the factor on δ's latent variance: the mean squared standardised leave-one-out
+    /// residual of δ at the high-fidelity runs, where above 1 ([`variance_scale`]).
+    pub fn discrepancy_variance_scale(&self) -> f64 {
+        self.discrepancy_variance_scale
     }
 
     /// 1 − var(y_H − ρ·l(x_H))/var(y_H): the share of the high-fidelity runs' variance the
@@ -204,6 +233,7 @@ impl MultiFidelityGp {
         let low = self.low.predict(points)?;
         let delta = self.discrepancy.predict(points)?;
         let rho2 = self.rho * self.rho;
+        let c = self.discrepancy_variance_scale;
         Ok(Prediction {
             mean: low
                 .mean
@@ -215,7 +245,7 @@ impl MultiFidelityGp {
                 .variance
                 .iter()
                 .zip(&delta.variance)
-                .map(|(l, e)| rho2 * l + e)
+                .map(|(l, e)| rho2 * l + c * e)
                 .collect(),
             noise_variance: delta.noise_variance,
         })
@@ -239,9 +269,15 @@ impl MultiFidelityGp {
         }
         let rho2 = self.rho * self.rho;
         let low = self.low.predict(points)?.variance;
+        let c = self.discrepancy_variance_scale;
         Ok((
             low.into_iter().map(|v| rho2 * v).collect(),
-            self.discrepancy.predict(points)?.variance,
+            self.discrepancy
+                .predict(points)?
+                .variance
+                .into_iter()
+                .map(|v| c * v)
+                .collect(),
         ))
     }
 }
@@ -257,13 +293,14 @@ impl crate::output_predictor::OutputPredictor for MultiFidelityGp {
             return self.single.posterior_covariance(a, b);
         }
         let rho2 = self.rho * self.rho;
+        let scale = self.discrepancy_variance_scale;
         let mut covariance = self.discrepancy.posterior_covariance(a, b)?;
         for (row, low) in covariance
             .iter_mut()
             .zip(self.low.posterior_covariance(a, b)?)
         {
             for (c, l) in row.iter_mut().zip(low) {
-                *c += rho2 * l;
+                *c = scale * *c + rho2 * l;
             }
         }
         Ok(covariance)
@@ -313,6 +350,27 @@ fn least_squares_slope(x: &[f64], y: &[f64]) -> f64 {
     let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
     let sxx: f64 = x.iter().map(|a| (a - mx) * (a - mx)).sum();
     if sxx > 0.0 { sxy / sxx } else { 0.0 }
+}
+
+/// max(1, mean_i r_i²/v_i) over δ's leave-one-out residuals r_i and predictive variances v_i:
+/// a GP fitted on the few high-fidelity runs tends to be overconfident (its hyperparameters
+/// fitted to the same points), and its standardised leave-one-out residuals say by how much; the
+/// cross-validation estimate of the variance's scale (Bachoc 2013, "Cross validation and
+/// maximum likelihood estimations of hyper-parameters of Gaussian processes with model
+/// misspecification"). Never below 1: a GP that looks too cautious keeps its variance.
+fn variance_scale(loo: &LeaveOneOut) -> f64 {
+    let n = loo.residuals.len();
+    if n == 0 {
+        return 1.0;
+    }
+    let mean = loo
+        .residuals
+        .iter()
+        .zip(&loo.variances)
+        .map(|(r, v)| r * r / v)
+        .sum::<f64>()
+        / n as f64;
+    if mean.is_finite() { mean.max(1.0) } else { 1.0 }
 }
 
 /// Σ_i −½[ln 2πv_i + r_i²/v_i] over the leave-one-out residuals and variances.
@@ -384,6 +442,32 @@ mod tests {
             gp.predict(&test).unwrap(),
             gp.single_fidelity().predict(&test).unwrap()
         );
+    }
+
+    /// The same correlated pair as above with 3 high runs, fewer than 2·(d + 1) = 4: the low
+    /// fidelity is not used, however well ρ fits them; with 4 it is. The discrepancy's variance
+    /// scale is never below 1, and equals δ's mean squared standardised leave-one-out residual.
+    #[test]
+    fn too_few_high_runs_leave_the_high_runs_in_charge() {
+        let low_x = grid(30, 0.0, 2.0);
+        let low_y: Vec<f64> = low_x.iter().map(|p| (6.0 * p[0]).sin()).collect();
+        let options = FitOptions::default().check().unwrap();
+        assert_eq!(min_high_fidelity_runs(1), 4);
+        for (n, used) in [(3, false), (4, true)] {
+            let high_x = grid(n, 0.1, 1.9);
+            let high_y: Vec<f64> = high_x.iter().map(|p| 2.0 * (6.0 * p[0]).sin()).collect();
+            let gp = MultiFidelityGp::fit(&low_x, &low_y, &high_x, &high_y, &options).unwrap();
+            assert_eq!(gp.uses_low_fidelity(), used, "{n} high runs");
+            let loo = gp.discrepancy.leave_one_out();
+            let mean = loo
+                .residuals
+                .iter()
+                .zip(&loo.variances)
+                .map(|(r, v)| r * r / v)
+                .sum::<f64>()
+                / n as f64;
+            assert_eq!(gp.discrepancy_variance_scale(), mean.max(1.0));
+        }
     }
 
     #[test]
