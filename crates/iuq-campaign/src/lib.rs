@@ -28,6 +28,43 @@
 //! | [`export`] | tidy CSV/JSON of parameters and outputs |
 //! | [`atomic_file`] | atomic file writes |
 //! | [`error`] | the crate's error type [`CampaignError`] |
+//!
+//! # Example
+//!
+//! A study's store keeps one run per distinct parameter vector: a design that repeats a point,
+//! or a second design that shares points with the first, adds no run for them, and recording
+//! the same design again (a rerun of the study) leaves the store as it was.
+//!
+//! ```
+//! use iuq_campaign::{CampaignStore, CampaignStudy};
+//!
+//! let dir = std::env::temp_dir().join(format!("iuq-campaign-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(&dir)?;
+//! let study = CampaignStudy::parse(
+//!     r#"
+//! name = "decay"
+//! [parameters]
+//! k = { uniform = [0.1, 1] }
+//! [model]
+//! kind = "command"
+//! command = ["./decay.sh", "{{ k }}"]
+//! outputs = ["y"]
+//! output = { file = "result.json", format = "json" }
+//! "#,
+//!     &dir.join("decay.toml"),
+//! )?;
+//! let mut store = CampaignStore::open(&dir.join("campaign.sqlite"), &study)?;
+//! let first = store.add_design("initial", &[vec![0.2], vec![0.5], vec![0.2]])?;
+//! assert_eq!(first[0], first[2]);
+//! let second = store.add_design("round-1", &[vec![0.5], vec![0.9]])?;
+//! assert_eq!(second[0], first[1]);
+//! assert_eq!(store.add_design("initial", &[vec![0.2], vec![0.5], vec![0.2]])?, first);
+//! let counts = store.counts(None)?;
+//! assert_eq!((counts.pending, counts.total()), (3, 3));
+//! # drop(store);
+//! # std::fs::remove_dir_all(&dir)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

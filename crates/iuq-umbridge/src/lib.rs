@@ -34,6 +34,34 @@
 //! aborts the process). Both speak plain HTTP only.
 //!
 //! The crate does no other I/O than its sockets and never panics on network input.
+//!
+//! # Example
+//!
+//! Serve a formula on a free local port and evaluate it through the client: the client is an
+//! [`iuq_core::Model`] whose answers equal the model's own, bit for bit.
+//!
+//! ```
+//! use std::sync::Arc;
+//! use iuq_core::{ExpressionModel, Model};
+//! use iuq_umbridge::{ClientOptions, ServedModel, Server, ServerOptions, UmBridgeModel};
+//!
+//! let names = |v: &[&str]| v.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+//! let decay = ExpressionModel::new(names(&["a", "k"]), &[("y".into(), "a * exp(-k)".into())])?;
+//! let server = Server::bind(
+//!     vec![ServedModel::new("decay", Arc::new(decay.clone()))],
+//!     "127.0.0.1:0",
+//!     ServerOptions::default(),
+//! )?
+//! .spawn()?;
+//! let client = UmBridgeModel::connect(&server.url(), "decay", names(&["a", "k"]),
+//!                                     ClientOptions::default())?;
+//! let points = vec![vec![2.0, 0.5], vec![1.0, 0.0]];
+//! let remote = client.evaluate_batch(&points)?;
+//! assert_eq!(remote, decay.evaluate_batch(&points)?);
+//! assert_eq!(remote[1].as_ref().map(|e| e.outputs[0]).ok(), Some(1.0));
+//! server.shutdown();
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 
