@@ -80,7 +80,8 @@
 mod bridge;
 mod correction;
 
-use bridge::{MethodInputs, StageWeights};
+pub(crate) use bridge::MethodInputs;
+use bridge::StageWeights;
 use correction::{CorrectedBatch, FirstBatch, correct_first_batch};
 use serde::{Deserialize, Serialize};
 
@@ -691,9 +692,14 @@ pub fn model_posterior(
             model: std::mem::take(&mut lm),
             prior: std::mem::take(&mut lp),
         };
-        let estimate = noisy_estimate(
-            space, population, surrogate, model, settings, first, failures, &mut best, on_event,
-        )?;
+        let inputs = MethodInputs {
+            space,
+            surrogate,
+            model,
+            settings,
+            widths: &widths,
+        };
+        let estimate = noisy_estimate(&inputs, population, first, failures, &mut best, on_event)?;
         on_event(ModelPosteriorEvent::Stage(&estimate.stage));
         stages.push(estimate.stage);
         Members {
