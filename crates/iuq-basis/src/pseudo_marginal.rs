@@ -70,10 +70,10 @@ use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
 use crate::model_posterior::{
-    Best, CorrectedLikelihood, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
-    ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection, SurrogatePopulation,
-    coefficient_of_variation, evaluate, largest_finite, log_ratios, outside_batch,
-    recorded_spread_ratio,
+    Best, CorrectedLikelihood, MethodInputs, ModelPosteriorEvent, ModelPosteriorSettings,
+    ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection,
+    SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite, log_ratios,
+    outside_batch, recorded_spread_ratio,
 };
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
@@ -254,20 +254,17 @@ fn corrected_proposal(
     })
 }
 
-/// The pseudo-marginal estimate from the `first` batch (drawn from `population`; `failures` of
-/// its runs failed), see the module documentation.
-#[allow(clippy::too_many_arguments)]
+/// The pseudo-marginal estimate from the `first` batch (drawn from `population`; `first_failures`
+/// of its runs failed), see the module documentation.
 pub(crate) fn noisy_estimate(
-    space: &ParameterSpace,
+    inputs: &MethodInputs<'_>,
     population: SurrogatePopulation<'_>,
-    surrogate: &dyn LogLikelihood,
-    model: &dyn LogLikelihood,
-    settings: &ModelPosteriorSettings,
     first: Members,
     first_failures: usize,
     best: &mut Best,
     on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
 ) -> Result<NoisyEstimate> {
+    let settings = inputs.settings;
     let s = first.theta.len();
     let r = log_ratios(&first.model, &first.surrogate);
     if !largest_finite(&r).is_finite() {
@@ -291,49 +288,18 @@ pub(crate) fn noisy_estimate(
     let narrow = !within_proposal_spread(&first.theta, &first_smoothing.log_weights, 1);
     let correct = settings.corrections > 0
         && (tail || narrow || mismatch.as_ref().is_some_and(ProposalMismatch::significant));
-    // The candidates in order: the moment-matched correction, then the defensive batch from
-    // the tempered surrogate posterior, which needs no fit and is not held to the batch (its
-    // tails are the surrogate's own, raised).
     let mut refused = Vec::new();
-    let mut candidates = Vec::new();
-    if correct {
-        match GaussianLogRatio::fit(
+    let candidates = if correct {
+        second_batch_candidates(
             &first.theta,
             &first_smoothing.log_weights,
-            DEFENSIVE_WIDENING,
             settings.seed,
-        ) {
-            Some(g) => candidates.push(Candidate::MomentMatched(g)),
-            None => refused.push(
-                "the moment-matched correction: the first batch's weights have too few effective members to estimate a covariance".to_string(),
-            ),
-        }
-        if let Some(normal) = DefensiveNormal::fit(&first.theta, &first_smoothing.log_weights) {
-            candidates.push(Candidate::Normal(normal));
-        }
-        candidates.push(Candidate::Tempered(defensive_tempering(
-            &first.theta,
-            &first_smoothing.log_weights,
-        )));
-    }
-    let mut accepted = None;
-    for candidate in candidates {
-        match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
-            Ok(proposal) => {
-                let held = matches!(candidate, Candidate::MomentMatched(_));
-                if let Some(why) = held
-                    .then(|| outside_batch(space, &proposal.population, &first.theta))
-                    .flatten()
-                {
-                    refused.push(format!("{}: its posterior {why}", candidate.name()));
-                    continue;
-                }
-                accepted = Some((candidate, proposal));
-                break;
-            }
-            Err(why) => refused.push(format!("{}: {why}", candidate.name())),
-        }
-    }
+            &mut refused,
+        )
+    } else {
+        Vec::new()
+    };
+    let accepted = first_accepted(inputs, population, candidates, &first.theta, &mut refused);
     let not_corrected = (correct && accepted.is_none()).then(|| {
         format!(
             "every candidate was refused ({}; a correction was wanted because {})",
@@ -371,24 +337,8 @@ pub(crate) fn noisy_estimate(
                 refused,
             };
             on_event(ModelPosteriorEvent::Correction(&correction));
-            let second = Members {
-                model: evaluate(
-                    model,
-                    &proposal.theta,
-                    "the model at the second batch's samples (the corrected or tempered surrogate's posterior)",
-                )?,
-                theta: proposal.theta,
-                surrogate: proposal.surrogate,
-                prior: proposal.prior,
-            };
-            let second_failures = second.model.iter().filter(|v| !v.is_finite()).count();
-            best.offer(&second.theta, &second.model, &second.prior);
-            let (members, raw) = mixture_of_batches(
-                first,
-                second,
-                &|x: &[f64], ls: f64, lp: f64| candidate.log_ratio(x, ls, lp),
-                proposal.log_normalising_ratio,
-            );
+            let (members, raw, second_failures) =
+                second_batch(inputs.model, first, &candidate, proposal, best)?;
             (members, raw, Some(correction), s, second_failures)
         }
         None => (first, r, None, 0, 0),
@@ -430,4 +380,95 @@ pub(crate) fn noisy_estimate(
         evaluations,
         failures,
     })
+}
+
+/// The candidates for the second batch's proposal, in the order they are tried: the
+/// moment-matched correction (where the batch's weights can estimate a covariance; else the
+/// reason goes to `refused`), then the defensive normal, then the tempered surrogate posterior,
+/// which needs no fit and is not held to the batch (its tails are the surrogate's own, raised).
+fn second_batch_candidates(
+    theta: &[Vec<f64>],
+    log_weights: &[f64],
+    seed: u64,
+    refused: &mut Vec<String>,
+) -> Vec<Candidate> {
+    let mut candidates = Vec::new();
+    match GaussianLogRatio::fit(theta, log_weights, DEFENSIVE_WIDENING, seed) {
+        Some(g) => candidates.push(Candidate::MomentMatched(g)),
+        None => refused.push(
+            "the moment-matched correction: the first batch's weights have too few effective members to estimate a covariance".to_string(),
+        ),
+    }
+    if let Some(normal) = DefensiveNormal::fit(theta, log_weights) {
+        candidates.push(Candidate::Normal(normal));
+    }
+    candidates.push(Candidate::Tempered(defensive_tempering(theta, log_weights)));
+    candidates
+}
+
+/// The first of `candidates` whose proposal can be drawn (and, for the moment-matched
+/// correction, whose posterior stays within the `first_theta` batch), with that proposal; the
+/// reasons the others were refused go to `refused`.
+fn first_accepted(
+    inputs: &MethodInputs<'_>,
+    population: SurrogatePopulation<'_>,
+    candidates: Vec<Candidate>,
+    first_theta: &[Vec<f64>],
+    refused: &mut Vec<String>,
+) -> Option<(Candidate, CorrectedProposal)> {
+    let MethodInputs {
+        space,
+        surrogate,
+        settings,
+        ..
+    } = *inputs;
+    let s = first_theta.len();
+    for candidate in candidates {
+        match corrected_proposal(space, population, surrogate, &candidate, settings, s) {
+            Ok(proposal) => {
+                let held = matches!(candidate, Candidate::MomentMatched(_));
+                if let Some(why) = held
+                    .then(|| outside_batch(space, &proposal.population, first_theta))
+                    .flatten()
+                {
+                    refused.push(format!("{}: its posterior {why}", candidate.name()));
+                    continue;
+                }
+                return Some((candidate, proposal));
+            }
+            Err(why) => refused.push(format!("{}: {why}", candidate.name())),
+        }
+    }
+    None
+}
+
+/// Runs the model at the second batch drawn from `candidate`'s `proposal` and weighs it with
+/// the `first` as one sample of their even mixture: the members, their raw log-weights and the
+/// second batch's failed runs.
+fn second_batch(
+    model: &dyn LogLikelihood,
+    first: Members,
+    candidate: &Candidate,
+    proposal: CorrectedProposal,
+    best: &mut Best,
+) -> Result<(Members, Vec<f64>, usize)> {
+    let second = Members {
+        model: evaluate(
+            model,
+            &proposal.theta,
+            "the model at the second batch's samples (the corrected or tempered surrogate's posterior)",
+        )?,
+        theta: proposal.theta,
+        surrogate: proposal.surrogate,
+        prior: proposal.prior,
+    };
+    let second_failures = second.model.iter().filter(|v| !v.is_finite()).count();
+    best.offer(&second.theta, &second.model, &second.prior);
+    let (members, raw) = mixture_of_batches(
+        first,
+        second,
+        &|x: &[f64], ls: f64, lp: f64| candidate.log_ratio(x, ls, lp),
+        proposal.log_normalising_ratio,
+    );
+    Ok((members, raw, second_failures))
 }

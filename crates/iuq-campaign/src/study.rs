@@ -459,148 +459,21 @@ fn parse_model(
     study_dir: &Path,
 ) -> Result<CommandSpec> {
     let mut s = StudySection::new(table, "model", file);
-    let kind_name = s
-        .string("kind")?
-        .ok_or_else(|| s.error("kind", "missing (\"command\" or \"batch-command\")"))?;
-    let batch = match kind_name.as_str() {
-        "command" => false,
-        "batch-command" => true,
-        "expression" | "rbc-shear" | "umbridge" => {
-            return Err(s.error(
-                "kind",
-                format!("a campaign runs a model of kind \"command\" or \"batch-command\", not `{kind_name}`"),
-            ));
-        }
-        other => {
-            return Err(s.error(
-                "kind",
-                format!("unknown kind `{other}` (\"command\" or \"batch-command\")"),
-            ));
-        }
-    };
+    let batch = parse_model_kind(&mut s)?;
     let parameters = space.names();
-    let mut command_text = s.strings("command")?.ok_or_else(|| {
-        s.error(
-            "command",
-            "missing: the program and its arguments, e.g. [\"./sim.sh\"]",
-        )
-    })?;
-    if command_text.is_empty() || command_text[0].trim().is_empty() {
-        return Err(s.error("command", "must name a program"));
-    }
-    if command_text[0].contains('/') && !Path::new(&command_text[0]).is_absolute() {
-        command_text[0] = study_dir.join(&command_text[0]).display().to_string();
-    }
-    // Derived values, in file order.
-    let mut derived = Vec::new();
+    let command_text = parse_command_text(&mut s, study_dir)?;
     let mut known = parameters.clone();
-    if let Some(t) = s.sub_table("derived")? {
-        for (name, v) in t {
-            let key = format!("derived.{name}");
-            let formula = v
-                .as_str()
-                .ok_or_else(|| s.error(&key, "expected a formula string"))?;
-            if known.contains(name) || name == "run_id" {
-                return Err(s.error(
-                    &key,
-                    "the name is already taken by a parameter or derived value",
-                ));
-            }
-            Expression::parse(formula, &known).map_err(|e| s.error(&key, e.to_string()))?;
-            known.push(name.clone());
-            derived.push((name.clone(), formula.to_string()));
-        }
-    }
+    let derived = parse_derived(&mut s, &mut known)?;
     known.push("run_id".into());
-    let is_known = |n: &str| known.iter().any(|k| k == n);
-    let mut command = Vec::with_capacity(command_text.len());
-    for (i, arg) in command_text.iter().enumerate() {
-        let key = format!("command[{i}]");
-        let t = Template::parse(arg).map_err(|e| s.error(&key, e.reason))?;
-        if let Some((name, _)) = t.unknown_names(is_known).into_iter().next() {
-            return Err(s.error(
-                &key,
-                format!("unknown name `{name}` (known: {})", known.join(", ")),
-            ));
-        }
-        command.push(t);
-    }
-    let mut templates = Vec::new();
-    for (i, source) in s
-        .strings("templates")?
-        .unwrap_or_default()
-        .iter()
-        .enumerate()
-    {
-        let key = format!("templates[{i}]");
-        let source_path = relative_to(study_dir, source);
-        let text = std::fs::read_to_string(&source_path)
-            .map_err(|e| s.error(&key, format!("cannot read {}: {e}", source_path.display())))?;
-        let template = Template::parse(&text)
-            .map_err(|e| s.error(&key, format!("{}: {e}", source_path.display())))?;
-        if let Some((name, line)) = template.unknown_names(is_known).into_iter().next() {
-            return Err(s.error(
-                &key,
-                format!(
-                    "{} line {line}: unknown name `{name}` (known: {})",
-                    source_path.display(),
-                    known.join(", ")
-                ),
-            ));
-        }
-        let target = if Path::new(source).is_absolute() {
-            source_path
-                .file_name()
-                .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned())
-        } else {
-            source.clone()
-        };
-        if Path::new(&target)
-            .components()
-            .any(|c| matches!(c, std::path::Component::ParentDir))
-        {
-            return Err(s.error(
-                &key,
-                "a template must lie in or below the study's folder (no `..`)",
-            ));
-        }
-        templates.push(TemplateFile { target, template });
-    }
-    let outputs = s.strings("outputs")?.ok_or_else(|| {
-        s.error(
-            "outputs",
-            "missing: the names of the model's outputs, e.g. [\"f\"]",
-        )
-    })?;
-    if outputs.is_empty() {
-        return Err(s.error("outputs", "at least one output is needed"));
-    }
-    for (i, o) in outputs.iter().enumerate() {
-        if o.trim().is_empty() || outputs[..i].contains(o) {
-            return Err(s.error(
-                &format!("outputs[{i}]"),
-                "output names must be non-empty and distinct",
-            ));
-        }
-    }
+    let command = parse_command(&s, &command_text, &known)?;
+    let templates = parse_templates(&mut s, study_dir, &known)?;
+    let outputs = parse_output_names(&mut s)?;
     let timeout = s.duration("timeout")?;
     if timeout == Some(0.0) {
         return Err(s.error("timeout", "must be positive"));
     }
     let kill_grace = s.duration("kill_grace")?.unwrap_or(10.0);
-    let mut env = Vec::new();
-    if let Some(t) = s.sub_table("env")? {
-        for (k, v) in t {
-            let value = match v {
-                toml::Value::String(x) => x.clone(),
-                toml::Value::Integer(x) => x.to_string(),
-                toml::Value::Float(x) => x.to_string(),
-                toml::Value::Boolean(x) => x.to_string(),
-                _ => return Err(s.error(&format!("env.{k}"), "expected a string or number")),
-            };
-            env.push((k.clone(), value));
-        }
-    }
+    let env = parse_env(&mut s)?;
     let (kind, decoder) = if batch {
         let batch_size = s.count("batch_size", 1)?.unwrap_or(100);
         let input = s.string("input")?.unwrap_or_else(|| "inputs.csv".into());
@@ -647,6 +520,182 @@ fn parse_model(
     spec.output_decoder()
         .map_err(|r| CampaignError::study(file, "model.output", r))?;
     Ok(spec)
+}
+
+/// `model.kind`: true for `batch-command`, false for `command`; the other model kinds are
+/// not run by a campaign.
+fn parse_model_kind(s: &mut StudySection) -> Result<bool> {
+    let kind_name = s
+        .string("kind")?
+        .ok_or_else(|| s.error("kind", "missing (\"command\" or \"batch-command\")"))?;
+    match kind_name.as_str() {
+        "command" => Ok(false),
+        "batch-command" => Ok(true),
+        "expression" | "rbc-shear" | "umbridge" => Err(s.error(
+            "kind",
+            format!("a campaign runs a model of kind \"command\" or \"batch-command\", not `{kind_name}`"),
+        )),
+        other => Err(s.error(
+            "kind",
+            format!("unknown kind `{other}` (\"command\" or \"batch-command\")"),
+        )),
+    }
+}
+
+/// `model.command` as written, its program resolved against the study's folder where it is a
+/// relative path.
+fn parse_command_text(s: &mut StudySection, study_dir: &Path) -> Result<Vec<String>> {
+    let mut command_text = s.strings("command")?.ok_or_else(|| {
+        s.error(
+            "command",
+            "missing: the program and its arguments, e.g. [\"./sim.sh\"]",
+        )
+    })?;
+    if command_text.is_empty() || command_text[0].trim().is_empty() {
+        return Err(s.error("command", "must name a program"));
+    }
+    if command_text[0].contains('/') && !Path::new(&command_text[0]).is_absolute() {
+        command_text[0] = study_dir.join(&command_text[0]).display().to_string();
+    }
+    Ok(command_text)
+}
+
+/// `model.derived`: (name, formula) in file order, each formula over the parameters and the
+/// values derived before it; their names are added to `known`.
+fn parse_derived(s: &mut StudySection, known: &mut Vec<String>) -> Result<Vec<(String, String)>> {
+    let mut derived = Vec::new();
+    if let Some(t) = s.sub_table("derived")? {
+        for (name, v) in t {
+            let key = format!("derived.{name}");
+            let formula = v
+                .as_str()
+                .ok_or_else(|| s.error(&key, "expected a formula string"))?;
+            if known.contains(name) || name == "run_id" {
+                return Err(s.error(
+                    &key,
+                    "the name is already taken by a parameter or derived value",
+                ));
+            }
+            Expression::parse(formula, known).map_err(|e| s.error(&key, e.to_string()))?;
+            known.push(name.clone());
+            derived.push((name.clone(), formula.to_string()));
+        }
+    }
+    Ok(derived)
+}
+
+/// The command's arguments as templates, which may name only `known` values.
+fn parse_command(
+    s: &StudySection,
+    command_text: &[String],
+    known: &[String],
+) -> Result<Vec<Template>> {
+    let is_known = |n: &str| known.iter().any(|k| k == n);
+    let mut command = Vec::with_capacity(command_text.len());
+    for (i, arg) in command_text.iter().enumerate() {
+        let key = format!("command[{i}]");
+        let t = Template::parse(arg).map_err(|e| s.error(&key, e.reason))?;
+        if let Some((name, _)) = t.unknown_names(is_known).into_iter().next() {
+            return Err(s.error(
+                &key,
+                format!("unknown name `{name}` (known: {})", known.join(", ")),
+            ));
+        }
+        command.push(t);
+    }
+    Ok(command)
+}
+
+/// `model.templates`: the files read (relative to the study's folder) and parsed, naming only
+/// `known` values, each with the path it is written to in a run's folder.
+fn parse_templates(
+    s: &mut StudySection,
+    study_dir: &Path,
+    known: &[String],
+) -> Result<Vec<TemplateFile>> {
+    let is_known = |n: &str| known.iter().any(|k| k == n);
+    let mut templates = Vec::new();
+    for (i, source) in s
+        .strings("templates")?
+        .unwrap_or_default()
+        .iter()
+        .enumerate()
+    {
+        let key = format!("templates[{i}]");
+        let source_path = relative_to(study_dir, source);
+        let text = std::fs::read_to_string(&source_path)
+            .map_err(|e| s.error(&key, format!("cannot read {}: {e}", source_path.display())))?;
+        let template = Template::parse(&text)
+            .map_err(|e| s.error(&key, format!("{}: {e}", source_path.display())))?;
+        if let Some((name, line)) = template.unknown_names(is_known).into_iter().next() {
+            return Err(s.error(
+                &key,
+                format!(
+                    "{} line {line}: unknown name `{name}` (known: {})",
+                    source_path.display(),
+                    known.join(", ")
+                ),
+            ));
+        }
+        let target = if Path::new(source).is_absolute() {
+            source_path
+                .file_name()
+                .map_or_else(|| source.clone(), |n| n.to_string_lossy().into_owned())
+        } else {
+            source.clone()
+        };
+        if Path::new(&target)
+            .components()
+            .any(|c| matches!(c, std::path::Component::ParentDir))
+        {
+            return Err(s.error(
+                &key,
+                "a template must lie in or below the study's folder (no `..`)",
+            ));
+        }
+        templates.push(TemplateFile { target, template });
+    }
+    Ok(templates)
+}
+
+/// `model.outputs`: at least one name, all non-empty and distinct.
+fn parse_output_names(s: &mut StudySection) -> Result<Vec<String>> {
+    let outputs = s.strings("outputs")?.ok_or_else(|| {
+        s.error(
+            "outputs",
+            "missing: the names of the model's outputs, e.g. [\"f\"]",
+        )
+    })?;
+    if outputs.is_empty() {
+        return Err(s.error("outputs", "at least one output is needed"));
+    }
+    for (i, o) in outputs.iter().enumerate() {
+        if o.trim().is_empty() || outputs[..i].contains(o) {
+            return Err(s.error(
+                &format!("outputs[{i}]"),
+                "output names must be non-empty and distinct",
+            ));
+        }
+    }
+    Ok(outputs)
+}
+
+/// `model.env`: the environment variables set for the model, numbers and booleans as text.
+fn parse_env(s: &mut StudySection) -> Result<Vec<(String, String)>> {
+    let mut env = Vec::new();
+    if let Some(t) = s.sub_table("env")? {
+        for (k, v) in t {
+            let value = match v {
+                toml::Value::String(x) => x.clone(),
+                toml::Value::Integer(x) => x.to_string(),
+                toml::Value::Float(x) => x.to_string(),
+                toml::Value::Boolean(x) => x.to_string(),
+                _ => return Err(s.error(&format!("env.{k}"), "expected a string or number")),
+            };
+            env.push((k.clone(), value));
+        }
+    }
+    Ok(env)
 }
 
 fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<DecoderSpec> {

@@ -249,7 +249,6 @@ pub fn run_supervised(
     logs: &OutputLogs,
     on_start: impl FnOnce(u32),
 ) -> std::io::Result<Supervised> {
-    use std::io::Read;
     command
         .process_group(0)
         .stdout(std::process::Stdio::piped())
@@ -260,38 +259,127 @@ pub fn run_supervised(
     let pid = child.id();
     let slot = register_group(pid);
     on_start(pid);
-    let mut pipes = [
+    let pipes = [
         child.stdout.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
         child.stderr.take().map(|p| Box::new(p) as Box<dyn ReadFd>),
     ];
-    let mut out_log = LazyLog {
-        path: &logs.stdout,
-        file: None,
-        failed: false,
+    let mut supervision = Supervision {
+        pid,
+        grace,
+        logs,
+        pipes,
+        out_log: LazyLog {
+            path: &logs.stdout,
+            file: None,
+            failed: false,
+        },
+        err_log: LazyLog {
+            path: &logs.stderr,
+            file: None,
+            failed: false,
+        },
+        tail: Vec::new(),
+        waiter: ExitWaiter::new(pid),
+        timed_out: false,
+        deadline: timeout.map(|t| start + t),
+        killed: false,
+        exited: false,
+        drain_until: None,
+        buf: vec![0u8; 64 * 1024],
     };
-    let mut err_log = LazyLog {
-        path: &logs.stderr,
-        file: None,
-        failed: false,
-    };
-    let mut tail: Vec<u8> = Vec::new();
-    let waiter = ExitWaiter::new(pid);
-    let mut timed_out = false;
-    let mut deadline = timeout.map(|t| start + t);
-    let mut killed = false;
-    let mut exited = false;
-    let mut drain_until: Option<Instant> = None;
-    let mut buf = vec![0u8; 64 * 1024];
-    loop {
-        if exited && pipes.iter().all(Option::is_none) {
-            break;
+    while !supervision.finished() {
+        supervision.poll_once();
+    }
+    drop(supervision.pipes);
+    signal_group(pid, libc::SIGKILL);
+    drop(supervision.waiter);
+    // Before the reap: the group id cannot be reused while the handler may still signal it.
+    if let Some(slot) = slot {
+        SUPERVISED_GROUPS[slot].store(0, Ordering::SeqCst);
+    }
+    let status = child.wait()?;
+    let mut tail = supervision.tail;
+    if tail.len() > logs.tail_bytes {
+        tail.drain(..tail.len() - logs.tail_bytes);
+    }
+    Ok(Supervised {
+        exit: ProcessExit {
+            pid,
+            exit_code: status.code(),
+            signal: status.signal(),
+            timed_out: supervision.timed_out,
+            started_at,
+            finished_at: unix_now(),
+        },
+        stderr_tail: String::from_utf8_lossy(&tail).into_owned(),
+    })
+}
+
+/// The descriptors of one `poll`: the open pipes, then the pidfd while the child runs.
+struct PollSet {
+    fds: Vec<libc::pollfd>,
+    /// The pipe (0 stdout, 1 stderr) of each of the first entries of `fds`.
+    which: Vec<usize>,
+    /// The entry of the pidfd, if it is polled.
+    pidfd_slot: Option<usize>,
+}
+
+/// The state of [`run_supervised`] while it waits for a spawned child: its pipes and logs, its
+/// deadline, and how far its end has come.
+struct Supervision<'a> {
+    pid: u32,
+    grace: Duration,
+    logs: &'a OutputLogs,
+    pipes: [Option<Box<dyn ReadFd>>; 2],
+    out_log: LazyLog<'a>,
+    err_log: LazyLog<'a>,
+    /// The last bytes of standard error (up to twice `logs.tail_bytes` between trims).
+    tail: Vec<u8>,
+    waiter: ExitWaiter,
+    timed_out: bool,
+    /// When the timeout, then the grace period after SIGTERM, runs out.
+    deadline: Option<Instant>,
+    killed: bool,
+    exited: bool,
+    /// After the exit: how long the pipes are still read.
+    drain_until: Option<Instant>,
+    buf: Vec<u8>,
+}
+
+impl Supervision<'_> {
+    /// The child has exited and its pipes are closed, or the drain time after its exit is up.
+    fn finished(&self) -> bool {
+        (self.exited && self.pipes.iter().all(Option::is_none))
+            || self.drain_until.is_some_and(|d| Instant::now() >= d)
+    }
+
+    /// One `poll` and what follows it: output copied, the exit noticed, the timeout enforced.
+    fn poll_once(&mut self) {
+        let mut set = self.poll_set();
+        let wait_ms = self.wait_ms(Instant::now());
+        // SAFETY: poll on pollfds we own; every descriptor stays open during the call.
+        let r = unsafe {
+            libc::poll(
+                set.fds.as_mut_ptr(),
+                set.fds.len() as libc::nfds_t,
+                wait_ms.clamp(-1, i32::MAX as i64) as i32,
+            )
+        };
+        if r < 0 && std::io::Error::last_os_error().kind() != std::io::ErrorKind::Interrupted {
+            std::thread::sleep(Duration::from_millis(5));
         }
-        if drain_until.is_some_and(|d| Instant::now() >= d) {
-            break;
-        }
+        self.read_ready_pipes(&set, r);
+        let pidfd_ready = set
+            .pidfd_slot
+            .is_some_and(|i| r > 0 && set.fds[i].revents != 0);
+        self.notice_exit(pidfd_ready);
+        self.enforce_deadline();
+    }
+
+    fn poll_set(&self) -> PollSet {
         let mut fds: Vec<libc::pollfd> = Vec::with_capacity(3);
         let mut which: Vec<usize> = Vec::with_capacity(3);
-        for (k, p) in pipes.iter().enumerate() {
+        for (k, p) in self.pipes.iter().enumerate() {
             if let Some(p) = p {
                 fds.push(libc::pollfd {
                     fd: p.raw_fd(),
@@ -301,7 +389,7 @@ pub fn run_supervised(
                 which.push(k);
             }
         }
-        let pidfd_slot = match (exited, waiter.pidfd) {
+        let pidfd_slot = match (self.exited, self.waiter.pidfd) {
             (false, Some(fd)) => {
                 fds.push(libc::pollfd {
                     fd,
@@ -312,92 +400,83 @@ pub fn run_supervised(
             }
             _ => None,
         };
-        let now = Instant::now();
+        PollSet {
+            fds,
+            which,
+            pidfd_slot,
+        }
+    }
+
+    /// The poll timeout in milliseconds (−1: none): up to the deadline, a few milliseconds
+    /// without a pidfd, and no later than the end of the drain.
+    fn wait_ms(&self, now: Instant) -> i64 {
         let mut wait_ms: i64 = -1;
-        if let Some(d) = deadline.filter(|_| !exited) {
+        if let Some(d) = self.deadline.filter(|_| !self.exited) {
             let left = d.saturating_duration_since(now);
             wait_ms = left.as_millis() as i64 + 1;
         }
-        if !exited && waiter.pidfd.is_none() {
+        if !self.exited && self.waiter.pidfd.is_none() {
             wait_ms = if wait_ms < 0 { 5 } else { wait_ms.min(5) };
         }
-        if let Some(d) = drain_until {
+        if let Some(d) = self.drain_until {
             let left = d.saturating_duration_since(now).as_millis() as i64 + 1;
             wait_ms = if wait_ms < 0 { left } else { wait_ms.min(left) };
         }
-        // SAFETY: poll on pollfds we own; every descriptor stays open during the call.
-        let r = unsafe {
-            libc::poll(
-                fds.as_mut_ptr(),
-                fds.len() as libc::nfds_t,
-                wait_ms.clamp(-1, i32::MAX as i64) as i32,
-            )
-        };
-        if r < 0 && std::io::Error::last_os_error().kind() != std::io::ErrorKind::Interrupted {
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        for (slot, &k) in which.iter().enumerate() {
-            if r > 0 && fds[slot].revents != 0 {
-                let n = match pipes[k].as_mut().map(|p| p.read(&mut buf)) {
+        wait_ms
+    }
+
+    /// Copies what the pipes `poll` found readable into the logs (and standard error's tail);
+    /// a pipe at its end is closed.
+    fn read_ready_pipes(&mut self, set: &PollSet, r: libc::c_int) {
+        use std::io::Read;
+        for (slot, &k) in set.which.iter().enumerate() {
+            if r > 0 && set.fds[slot].revents != 0 {
+                let n = match self.pipes[k].as_mut().map(|p| p.read(&mut self.buf)) {
                     Some(Ok(n)) => n,
                     Some(Err(e)) if e.kind() == std::io::ErrorKind::Interrupted => continue,
                     _ => 0,
                 };
                 if n == 0 {
-                    pipes[k] = None;
+                    self.pipes[k] = None;
                 } else if k == 0 {
-                    out_log.write(&buf[..n]);
+                    self.out_log.write(&self.buf[..n]);
                 } else {
-                    err_log.write(&buf[..n]);
-                    tail.extend_from_slice(&buf[..n]);
-                    if tail.len() > 2 * logs.tail_bytes.max(1) {
-                        tail.drain(..tail.len() - logs.tail_bytes);
+                    self.err_log.write(&self.buf[..n]);
+                    self.tail.extend_from_slice(&self.buf[..n]);
+                    let tail_bytes = self.logs.tail_bytes;
+                    if self.tail.len() > 2 * tail_bytes.max(1) {
+                        self.tail.drain(..self.tail.len() - tail_bytes);
                     }
                 }
             }
         }
-        let pidfd_ready = pidfd_slot.is_some_and(|i| r > 0 && fds[i].revents != 0);
-        if !exited && (pidfd_ready || waiter.pidfd.is_none()) && has_exited(pid) {
-            exited = true;
+    }
+
+    fn notice_exit(&mut self, pidfd_ready: bool) {
+        if !self.exited && (pidfd_ready || self.waiter.pidfd.is_none()) && has_exited(self.pid) {
+            self.exited = true;
             // The leader is a zombie: its pid still names the group, so stragglers (which may
             // hold the pipes open) can be killed safely.
-            signal_group(pid, libc::SIGKILL);
-            drain_until = Some(Instant::now() + Duration::from_secs(2));
+            signal_group(self.pid, libc::SIGKILL);
+            self.drain_until = Some(Instant::now() + Duration::from_secs(2));
         }
-        if !exited && deadline.is_some_and(|d| Instant::now() >= d) {
-            if !timed_out {
-                timed_out = true;
-                signal_group(pid, libc::SIGTERM);
-                deadline = Some(Instant::now() + grace);
-            } else if !killed {
-                killed = true;
-                signal_group(pid, libc::SIGKILL);
-                deadline = None;
+    }
+
+    /// Past the deadline of a running child: SIGTERM to its group, and SIGKILL once the grace
+    /// period has run out too.
+    fn enforce_deadline(&mut self) {
+        if !self.exited && self.deadline.is_some_and(|d| Instant::now() >= d) {
+            if !self.timed_out {
+                self.timed_out = true;
+                signal_group(self.pid, libc::SIGTERM);
+                self.deadline = Some(Instant::now() + self.grace);
+            } else if !self.killed {
+                self.killed = true;
+                signal_group(self.pid, libc::SIGKILL);
+                self.deadline = None;
             }
         }
     }
-    drop(pipes);
-    signal_group(pid, libc::SIGKILL);
-    drop(waiter);
-    // Before the reap: the group id cannot be reused while the handler may still signal it.
-    if let Some(slot) = slot {
-        SUPERVISED_GROUPS[slot].store(0, Ordering::SeqCst);
-    }
-    let status = child.wait()?;
-    if tail.len() > logs.tail_bytes {
-        tail.drain(..tail.len() - logs.tail_bytes);
-    }
-    Ok(Supervised {
-        exit: ProcessExit {
-            pid,
-            exit_code: status.code(),
-            signal: status.signal(),
-            timed_out,
-            started_at,
-            finished_at: unix_now(),
-        },
-        stderr_tail: String::from_utf8_lossy(&tail).into_owned(),
-    })
 }
 
 /// A readable pipe with its descriptor.

@@ -20,7 +20,7 @@ use iuq_core::random::{stages::GP_MULTI_START, stream};
 use crate::bounds::Bounds;
 use crate::diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
 use crate::error::{GpError, Result};
-use crate::gaussian_process::{GaussianProcess, Prepared, bound_warnings, prepare};
+use crate::gaussian_process::{Covariance, GaussianProcess, Prepared, bound_warnings, prepare};
 use crate::kernel::{Hyperparameters, Kernel};
 use crate::log_marginal_likelihood::{LmlWorkspace, validate_jitter};
 use crate::multi_start::{data_driven_start, latin_hypercube};
@@ -242,9 +242,11 @@ pub(crate) fn fit_with_stream(
         x,
         y,
         prepared,
-        kernel,
-        h,
-        options.jitter,
+        Covariance {
+            kernel,
+            hyperparameters: h,
+            jitter: options.jitter,
+        },
         options.min_leave_one_out_q2,
         diagnostics,
     )

@@ -48,6 +48,14 @@ pub(crate) struct Prepared {
     pub warnings: Vec<FitWarning>,
 }
 
+/// The covariance a GP is assembled with: the kernel variant, its hyper-parameters and the
+/// jitter added to K's diagonal.
+pub(crate) struct Covariance {
+    pub kernel: Kernel,
+    pub hyperparameters: Hyperparameters,
+    pub jitter: f64,
+}
+
 /// Validates the training set and applies the scalings chosen in `options`.
 pub(crate) fn prepare(
     x: &[Vec<f64>],
@@ -168,26 +176,31 @@ impl GaussianProcess {
             x,
             y,
             prepared,
-            options.kernel,
-            hyperparameters,
-            options.jitter,
+            Covariance {
+                kernel: options.kernel,
+                hyperparameters,
+                jitter: options.jitter,
+            },
             options.min_leave_one_out_q2,
             FitDiagnostics::default(),
         )
     }
 
-    /// Factorises K at `h` and builds the GP with its leave-one-out diagnostics.
-    #[allow(clippy::too_many_arguments)]
+    /// Factorises K for `covariance` and builds the GP with its leave-one-out diagnostics
+    /// (a Q² at or below `min_leave_one_out_q2` adds a warning).
     pub(crate) fn assemble(
         x: &[Vec<f64>],
         y: &[f64],
         prepared: Prepared,
-        kernel: Kernel,
-        h: Hyperparameters,
-        jitter: f64,
+        covariance: Covariance,
         min_leave_one_out_q2: f64,
         mut diagnostics: FitDiagnostics,
     ) -> Result<Self> {
+        let Covariance {
+            kernel,
+            hyperparameters: h,
+            jitter,
+        } = covariance;
         let n = prepared.x.n;
         let mut ws = LmlWorkspace::new(n);
         ws.factorize(&prepared.x, &h, jitter)?;

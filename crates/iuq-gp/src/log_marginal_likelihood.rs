@@ -185,8 +185,7 @@ multiversion! {
     /// Adds column j's share of the gradient sums: with w_i = (α_iα_j − K⁻¹_ij)·cR_ij over the
     /// rows i > j, acc[0] += Σ_i w_i and acc[1 + k] += Σ_i w_i (x_ik − x_jk)².
     fn gradient_column(
-        x: &[f64],
-        n: usize,
+        points: &ColumnMajor,
         j: usize,
         alpha: &[f64],
         kinv_col: &[f64],
@@ -194,6 +193,7 @@ multiversion! {
         w: &mut [f64],
         acc: &mut [f64],
     ) {
+        let (x, n) = (&points.values, points.n);
         let m = n - j - 1;
         let (kinv_col, kr_col, w) = (&kinv_col[..m], &kr_col[..m], &mut w[..m]);
         let a = &alpha[j + 1..j + 1 + m];
@@ -318,8 +318,7 @@ impl LmlWorkspace {
             let lo = j * n + j + 1;
             let hi = (j + 1) * n;
             gradient_column(
-                &x.values,
-                n,
+                x,
                 j,
                 &self.alpha,
                 &self.kinv[lo..hi],

@@ -157,7 +157,7 @@ impl MultiFidelityGp {
         } else {
             0.0
         };
-        let discrepancy_variance_scale = variance_scale(&discrepancy.leave_one_out());
+        let discrepancy_variance_scale = variance_scale(discrepancy.leave_one_out());
         Ok(Self {
             enough_high_runs: high_x.len() >= min_high_fidelity_runs(d.unwrap_or(0)),
             discrepancy_variance_scale,

@@ -212,6 +212,39 @@ pub fn minimize_bounded_objective<O: Objective + ?Sized>(
     options: &OptimizerOptions,
 ) -> Result<Minimum> {
     options.validate()?;
+    check_bounds(x0, lower, upper)?;
+    let mut search = ProjectedLbfgs::start(objective, x0, lower, upper, options)?;
+    let termination = loop {
+        if let Some(termination) = search.stopping_criterion() {
+            break termination;
+        }
+        search.iterations += 1;
+        search.freeze_variables_pushed_out();
+        let Some(first_step) = search.search_direction() else {
+            break Termination::GradientTolerance;
+        };
+        let line_search = search.line_search(first_step);
+        let Some(f_new) = line_search.accepted else {
+            if !search.s_hist.is_empty() {
+                // Retry once from steepest descent.
+                search.forget_curvature();
+                continue;
+            }
+            break if line_search.negligible {
+                Termination::FunctionTolerance
+            } else {
+                Termination::LineSearchFailed
+            };
+        };
+        if search.move_to_best_trial(f_new) {
+            break Termination::FunctionTolerance;
+        }
+    };
+    Ok(search.into_minimum(termination))
+}
+
+/// Rejects bounds of the wrong length, non-finite or crossed bounds and a non-finite start.
+fn check_bounds(x0: &[f64], lower: &[f64], upper: &[f64]) -> Result<()> {
     let p = x0.len();
     if lower.len() != p || upper.len() != p {
         return Err(GpError::LengthMismatch {
@@ -231,138 +264,248 @@ pub fn minimize_bounded_objective<O: Objective + ?Sized>(
             reason: "bounds and start must be finite with lower ≤ upper".into(),
         });
     }
-    let mut x = x0.to_vec();
-    project(&mut x, lower, upper);
-    let mut g = vec![0.0; p];
-    let mut evaluations = 1;
-    let mut gradient_evaluations = 1;
-    let mut f = match objective.value(&x) {
-        Some(v)
-            if v.is_finite() && objective.gradient(&mut g) && g.iter().all(|v| v.is_finite()) =>
+    Ok(())
+}
+
+/// The outcome of one line search.
+struct LineSearchOutcome {
+    /// f at the accepted trial point (kept in `x_best`, `g_best`), if any was accepted.
+    accepted: Option<f64>,
+    /// The search stopped because a trial step predicted a negligible decrease.
+    negligible: bool,
+}
+
+/// The state of the projected L-BFGS iteration: the current point, the curvature pairs and
+/// the work vectors of the direction and the line search.
+struct ProjectedLbfgs<'a, O: ?Sized> {
+    objective: &'a mut O,
+    lower: &'a [f64],
+    upper: &'a [f64],
+    options: &'a OptimizerOptions,
+    /// The current point, f and ∇f there.
+    x: Vec<f64>,
+    f: f64,
+    g: Vec<f64>,
+    iterations: usize,
+    evaluations: usize,
+    gradient_evaluations: usize,
+    /// The last m pairs s = Δx and y = Δ∇f, oldest first.
+    s_hist: Vec<Vec<f64>>,
+    y_hist: Vec<Vec<f64>>,
+    /// Variables not held at a bound by an outward gradient.
+    free: Vec<bool>,
+    /// The search direction.
+    d: Vec<f64>,
+    /// The two-loop recursion's work vector and coefficients.
+    q: Vec<f64>,
+    coef: Vec<f64>,
+    x_trial: Vec<f64>,
+    g_trial: Vec<f64>,
+    /// The best accepted trial point of the current line search, and ∇f there.
+    x_best: Vec<f64>,
+    g_best: Vec<f64>,
+}
+
+impl<'a, O: Objective + ?Sized> ProjectedLbfgs<'a, O> {
+    /// Projects `x0` into the box and evaluates f and ∇f there.
+    fn start(
+        objective: &'a mut O,
+        x0: &[f64],
+        lower: &'a [f64],
+        upper: &'a [f64],
+        options: &'a OptimizerOptions,
+    ) -> Result<Self> {
+        let p = x0.len();
+        let mut x = x0.to_vec();
+        project(&mut x, lower, upper);
+        let mut g = vec![0.0; p];
+        let f = match objective.value(&x) {
+            Some(v)
+                if v.is_finite()
+                    && objective.gradient(&mut g)
+                    && g.iter().all(|v| v.is_finite()) =>
+            {
+                v
+            }
+            _ => {
+                return Err(GpError::FitFailed(
+                    "objective cannot be evaluated at the start point".into(),
+                ));
+            }
+        };
+        Ok(Self {
+            objective,
+            lower,
+            upper,
+            options,
+            x,
+            f,
+            g,
+            iterations: 0,
+            evaluations: 1,
+            gradient_evaluations: 1,
+            s_hist: Vec::new(),
+            y_hist: Vec::new(),
+            free: vec![true; p],
+            d: vec![0.0; p],
+            q: vec![0.0; p],
+            coef: vec![0.0; options.memory],
+            x_trial: vec![0.0; p],
+            g_trial: vec![0.0; p],
+            x_best: vec![0.0; p],
+            g_best: vec![0.0; p],
+        })
+    }
+
+    /// The criterion checked before each iteration that stops the search, if one holds.
+    fn stopping_criterion(&self) -> Option<Termination> {
+        if projected_gradient_norm(&self.x, &self.g, self.lower, self.upper)
+            <= self.options.gradient_tolerance
         {
-            v
+            Some(Termination::GradientTolerance)
+        } else if self.iterations >= self.options.max_iterations {
+            Some(Termination::MaxIterations)
+        } else if self.evaluations >= self.options.max_evaluations {
+            Some(Termination::MaxEvaluations)
+        } else {
+            None
         }
-        _ => {
-            return Err(GpError::FitFailed(
-                "objective cannot be evaluated at the start point".into(),
-            ));
+    }
+
+    /// Freezes the variables at a bound whose gradient pushes outwards.
+    fn freeze_variables_pushed_out(&mut self) {
+        let (x, g) = (&self.x, &self.g);
+        for i in 0..x.len() {
+            self.free[i] =
+                !((x[i] <= self.lower[i] && g[i] > 0.0) || (x[i] >= self.upper[i] && g[i] < 0.0));
         }
-    };
-    let mut s_hist: Vec<Vec<f64>> = Vec::new();
-    let mut y_hist: Vec<Vec<f64>> = Vec::new();
-    let mut free = vec![true; p];
-    let mut d = vec![0.0; p];
-    let mut q = vec![0.0; p];
-    let mut coef = vec![0.0; options.memory];
-    let mut x_trial = vec![0.0; p];
-    let mut g_trial = vec![0.0; p];
-    let mut x_best = vec![0.0; p];
-    let mut g_best = vec![0.0; p];
-    let mut iterations = 0;
-    let termination = loop {
-        if projected_gradient_norm(&x, &g, lower, upper) <= options.gradient_tolerance {
-            break Termination::GradientTolerance;
+    }
+
+    fn forget_curvature(&mut self) {
+        self.s_hist.clear();
+        self.y_hist.clear();
+    }
+
+    /// Sets `d` to the quasi-Newton direction, or to steepest descent without curvature pairs
+    /// or where the former is no descent direction; returns the first trial step, `None` when
+    /// the free gradient is zero.
+    fn search_direction(&mut self) -> Option<f64> {
+        if !self.s_hist.is_empty() && self.quasi_newton_direction() {
+            return Some(1.0);
         }
-        if iterations >= options.max_iterations {
-            break Termination::MaxIterations;
-        }
-        if evaluations >= options.max_evaluations {
-            break Termination::MaxEvaluations;
-        }
-        iterations += 1;
+        let p = self.x.len();
         for i in 0..p {
-            free[i] = !((x[i] <= lower[i] && g[i] > 0.0) || (x[i] >= upper[i] && g[i] < 0.0));
+            self.d[i] = if self.free[i] { -self.g[i] } else { 0.0 };
         }
-        // Search direction by the two-loop recursion on the free variables.
-        let mut steepest = s_hist.is_empty();
-        if !steepest {
+        let norm = dot(&self.d, &self.d).sqrt();
+        if norm == 0.0 {
+            return None;
+        }
+        Some((1.0 / norm).min(1.0))
+    }
+
+    /// The two-loop recursion on the free variables: sets `d`, and returns whether it is a
+    /// descent direction (if not, the curvature pairs are dropped).
+    fn quasi_newton_direction(&mut self) -> bool {
+        let p = self.x.len();
+        let (s_hist, y_hist, free, q, coef) = (
+            &self.s_hist,
+            &self.y_hist,
+            &self.free,
+            &mut self.q,
+            &mut self.coef,
+        );
+        for i in 0..p {
+            q[i] = if free[i] { self.g[i] } else { 0.0 };
+        }
+        let m = s_hist.len();
+        for k in (0..m).rev() {
+            let rho = 1.0 / dot(&s_hist[k], &y_hist[k]);
+            coef[k] = rho * masked_dot(&s_hist[k], q, free);
             for i in 0..p {
-                q[i] = if free[i] { g[i] } else { 0.0 };
-            }
-            let m = s_hist.len();
-            for k in (0..m).rev() {
-                let rho = 1.0 / dot(&s_hist[k], &y_hist[k]);
-                coef[k] = rho * masked_dot(&s_hist[k], &q, &free);
-                for i in 0..p {
-                    if free[i] {
-                        q[i] -= coef[k] * y_hist[k][i];
-                    }
+                if free[i] {
+                    q[i] -= coef[k] * y_hist[k][i];
                 }
             }
-            let (s_last, y_last) = (&s_hist[m - 1], &y_hist[m - 1]);
-            let gamma = dot(s_last, y_last) / dot(y_last, y_last);
-            for v in q.iter_mut() {
-                *v *= gamma;
-            }
-            for k in 0..m {
-                let rho = 1.0 / dot(&s_hist[k], &y_hist[k]);
-                let beta = rho * masked_dot(&y_hist[k], &q, &free);
-                for i in 0..p {
-                    if free[i] {
-                        q[i] += s_hist[k][i] * (coef[k] - beta);
-                    }
+        }
+        let (s_last, y_last) = (&s_hist[m - 1], &y_hist[m - 1]);
+        let gamma = dot(s_last, y_last) / dot(y_last, y_last);
+        for v in q.iter_mut() {
+            *v *= gamma;
+        }
+        for k in 0..m {
+            let rho = 1.0 / dot(&s_hist[k], &y_hist[k]);
+            let beta = rho * masked_dot(&y_hist[k], q, free);
+            for i in 0..p {
+                if free[i] {
+                    q[i] += s_hist[k][i] * (coef[k] - beta);
                 }
             }
-            for i in 0..p {
-                d[i] = if free[i] { -q[i] } else { 0.0 };
-            }
-            let slope = dot(&g, &d);
-            if !(slope < 0.0 && slope.is_finite()) {
-                steepest = true;
-                s_hist.clear();
-                y_hist.clear();
-            }
         }
-        let mut t = 1.0;
-        if steepest {
-            for i in 0..p {
-                d[i] = if free[i] { -g[i] } else { 0.0 };
-            }
-            let norm = dot(&d, &d).sqrt();
-            if norm == 0.0 {
-                break Termination::GradientTolerance;
-            }
-            t = (1.0 / norm).min(1.0);
+        for i in 0..p {
+            self.d[i] = if free[i] { -q[i] } else { 0.0 };
         }
-        let slope = dot(&g, &d);
-        // Projected backtracking / extrapolating line search.
+        let slope = dot(&self.g, &self.d);
+        if !(slope < 0.0 && slope.is_finite()) {
+            self.forget_curvature();
+            return false;
+        }
+        true
+    }
+
+    /// Projected backtracking / extrapolating line search along `d` from step `t`; the best
+    /// accepted point is left in `x_best` and `g_best`.
+    fn line_search(&mut self, mut t: f64) -> LineSearchOutcome {
+        let p = self.x.len();
+        let f = self.f;
+        let slope = dot(&self.g, &self.d);
         let mut accepted: Option<f64> = None;
         let mut trials = 0;
         let mut extending = false;
         let mut negligible = false;
         loop {
-            if evaluations >= options.max_evaluations || trials >= 40 {
+            if self.evaluations >= self.options.max_evaluations || trials >= 40 {
                 break;
             }
             trials += 1;
             let mut touched = false;
             for i in 0..p {
-                let v = x[i] + t * d[i];
-                x_trial[i] = v.clamp(lower[i], upper[i]);
-                touched |= x_trial[i] != v;
+                let v = self.x[i] + t * self.d[i];
+                self.x_trial[i] = v.clamp(self.lower[i], self.upper[i]);
+                touched |= self.x_trial[i] != v;
             }
-            let step: Vec<f64> = x_trial.iter().zip(&x).map(|(a, b)| a - b).collect();
+            let step: Vec<f64> = self
+                .x_trial
+                .iter()
+                .zip(&self.x)
+                .map(|(a, b)| a - b)
+                .collect();
             // A step below round-off of x cannot decrease f measurably.
             if step
                 .iter()
-                .zip(&x)
+                .zip(&self.x)
                 .all(|(s, xi)| s.abs() <= MIN_RELATIVE_STEP * xi.abs().max(1.0))
             {
                 break;
             }
-            let decrease = dot(&g, &step);
+            let decrease = dot(&self.g, &step);
             // A step whose predicted decrease is below the function tolerance cannot make
             // progress that counts (and f is only accurate to round-off anyway).
-            if -decrease <= options.function_tolerance * f.abs().max(1.0) {
+            if -decrease <= self.options.function_tolerance * f.abs().max(1.0) {
                 negligible = true;
                 break;
             }
-            evaluations += 1;
-            let mut ft = objective.value(&x_trial).filter(|v| v.is_finite());
+            self.evaluations += 1;
+            let mut ft = self
+                .objective
+                .value(&self.x_trial)
+                .filter(|v| v.is_finite());
             let mut ok = ft.is_some_and(|v| v <= f + 1e-4 * decrease);
             if ok {
-                gradient_evaluations += 1;
-                if !(objective.gradient(&mut g_trial) && g_trial.iter().all(|g| g.is_finite())) {
+                self.gradient_evaluations += 1;
+                if !(self.objective.gradient(&mut self.g_trial)
+                    && self.g_trial.iter().all(|g| g.is_finite()))
+                {
                     ok = false;
                     ft = None;
                 }
@@ -371,13 +514,13 @@ pub fn minimize_bounded_objective<O: Objective + ?Sized>(
                 let v = ft.unwrap_or(f64::INFINITY);
                 if accepted.is_none_or(|best| v < best) {
                     accepted = Some(v);
-                    x_best.copy_from_slice(&x_trial);
-                    g_best.copy_from_slice(&g_trial);
+                    self.x_best.copy_from_slice(&self.x_trial);
+                    self.g_best.copy_from_slice(&self.g_trial);
                 } else {
                     break;
                 }
                 // Extend while the slope stays steep and no bound was touched.
-                if !touched && dot(&g_trial, &d) < 0.9 * slope && t < 1e10 {
+                if !touched && dot(&self.g_trial, &self.d) < 0.9 * slope && t < 1e10 {
                     extending = true;
                     t *= 4.0;
                     continue;
@@ -387,62 +530,79 @@ pub fn minimize_bounded_objective<O: Objective + ?Sized>(
             if extending {
                 break;
             }
-            t = match ft {
-                Some(v) => {
-                    let denom = 2.0 * (v - f - slope * t);
-                    let tq = if denom > 0.0 {
-                        -slope * t * t / denom
-                    } else {
-                        0.5 * t
-                    };
-                    tq.clamp(0.1 * t, 0.5 * t)
-                }
-                None => 0.1 * t,
-            };
+            t = shortened_step(t, ft, f, slope);
         }
-        let Some(f_new) = accepted else {
-            if !s_hist.is_empty() {
-                // Retry once from steepest descent.
-                s_hist.clear();
-                y_hist.clear();
-                continue;
-            }
-            break if negligible {
-                Termination::FunctionTolerance
-            } else {
-                Termination::LineSearchFailed
-            };
-        };
-        let s: Vec<f64> = x_best.iter().zip(&x).map(|(a, b)| a - b).collect();
-        let yv: Vec<f64> = g_best.iter().zip(&g).map(|(a, b)| a - b).collect();
+        LineSearchOutcome {
+            accepted,
+            negligible,
+        }
+    }
+
+    /// Moves to the line search's best point (value `f_new`), storing the pair (s, y) when
+    /// it keeps H positive definite; returns whether the relative decrease is below
+    /// `function_tolerance`.
+    fn move_to_best_trial(&mut self, f_new: f64) -> bool {
+        let s: Vec<f64> = self
+            .x_best
+            .iter()
+            .zip(&self.x)
+            .map(|(a, b)| a - b)
+            .collect();
+        let yv: Vec<f64> = self
+            .g_best
+            .iter()
+            .zip(&self.g)
+            .map(|(a, b)| a - b)
+            .collect();
         let sy = dot(&s, &yv);
         let yy = dot(&yv, &yv);
         if sy > f64::EPSILON * yy && sy > 0.0 {
-            if s_hist.len() == options.memory {
-                s_hist.remove(0);
-                y_hist.remove(0);
+            if self.s_hist.len() == self.options.memory {
+                self.s_hist.remove(0);
+                self.y_hist.remove(0);
             }
-            s_hist.push(s);
-            y_hist.push(yv);
+            self.s_hist.push(s);
+            self.y_hist.push(yv);
         }
-        let f_old = f;
-        f = f_new;
-        x.copy_from_slice(&x_best);
-        g.copy_from_slice(&g_best);
-        if (f_old - f) <= options.function_tolerance * f_old.abs().max(f.abs()).max(1.0) {
-            break Termination::FunctionTolerance;
+        let f_old = self.f;
+        self.f = f_new;
+        self.x.copy_from_slice(&self.x_best);
+        self.g.copy_from_slice(&self.g_best);
+        let f = self.f;
+        (f_old - f) <= self.options.function_tolerance * f_old.abs().max(f.abs()).max(1.0)
+    }
+
+    fn into_minimum(self, termination: Termination) -> Minimum {
+        Minimum {
+            projected_gradient_norm: projected_gradient_norm(
+                &self.x, &self.g, self.lower, self.upper,
+            ),
+            x: self.x,
+            value: self.f,
+            gradient: self.g,
+            iterations: self.iterations,
+            evaluations: self.evaluations,
+            gradient_evaluations: self.gradient_evaluations,
+            termination,
         }
-    };
-    Ok(Minimum {
-        projected_gradient_norm: projected_gradient_norm(&x, &g, lower, upper),
-        x,
-        value: f,
-        gradient: g,
-        iterations,
-        evaluations,
-        gradient_evaluations,
-        termination,
-    })
+    }
+}
+
+/// The next trial step after a rejected step `t` with value `trial_value` (`None`: unusable):
+/// safeguarded quadratic interpolation in [0.1 t, 0.5 t].
+fn shortened_step(t: f64, trial_value: Option<f64>, f: f64, slope: f64) -> f64 {
+    match trial_value {
+        Some(v) => {
+            let denom = 2.0 * (v - f - slope * t);
+            let tq = if denom > 0.0 {
+                -slope * t * t / denom
+            } else {
+                0.5 * t
+            };
+            tq.clamp(0.1 * t, 0.5 * t)
+        }
+        None => 0.1 * t,
+    }
 }
 
 #[cfg(test)]

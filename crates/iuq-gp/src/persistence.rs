@@ -10,7 +10,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::diagnostics::FitDiagnostics;
 use crate::error::{GpError, Result};
-use crate::gaussian_process::{GaussianProcess, prepare_with};
+use crate::gaussian_process::{Covariance, GaussianProcess, prepare_with};
 use crate::kernel::{Hyperparameters, Kernel};
 use crate::log_marginal_likelihood::validate_jitter;
 use crate::scaling::{InputScaling, OutputScaling};
@@ -119,9 +119,11 @@ impl TryFrom<SavedGaussianProcess> for GaussianProcess {
             &s.training_inputs,
             &s.training_outputs,
             prepared,
-            s.kernel,
-            s.hyperparameters,
-            s.jitter,
+            Covariance {
+                kernel: s.kernel,
+                hyperparameters: s.hyperparameters,
+                jitter: s.jitter,
+            },
             f64::NEG_INFINITY,
             diagnostics,
         )?;

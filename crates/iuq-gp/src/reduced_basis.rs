@@ -95,122 +95,26 @@ impl ReducedBasis {
     ) -> Result<Self> {
         let n = outputs.len();
         let m = output_names.len();
-        if n < 3 {
-            return Err(GpError::TooFewPoints {
-                required: 3,
-                actual: n,
-            });
-        }
-        if inputs.len() != n {
-            return Err(GpError::LengthMismatch {
-                what: "runs' inputs vs. their outputs",
-                expected: n,
-                actual: inputs.len(),
-            });
-        }
-        if !(options.explained_variance > 0.0 && options.explained_variance <= 1.0) {
-            return Err(GpError::InvalidParameter {
-                what: "explained_variance",
-                reason: format!("must lie in (0, 1], got {}", options.explained_variance),
-            });
-        }
-        if options.max_components == 0 {
-            return Err(GpError::InvalidParameter {
-                what: "max_components",
-                reason: "must be at least 1".into(),
-            });
-        }
-        for (i, row) in outputs.iter().enumerate() {
-            if row.len() != m {
-                return Err(GpError::DimensionMismatch {
-                    what: "run's outputs",
-                    index: i,
-                    expected: m,
-                    actual: row.len(),
-                });
-            }
-            if let Some((j, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                return Err(GpError::NonFinite {
-                    what: "output",
-                    index: i * m + j,
-                    value: *v,
-                });
-            }
-        }
+        check_runs(inputs, outputs, m, options)?;
         let centre: Vec<f64> = (0..m)
             .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n as f64)
             .collect();
-        let scale = match &options.output_scale {
-            Some(s) if s.len() != m => {
-                return Err(GpError::LengthMismatch {
-                    what: "output scales vs. outputs",
-                    expected: m,
-                    actual: s.len(),
-                });
-            }
-            Some(s) => {
-                if let Some(v) = s.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
-                    return Err(GpError::InvalidParameter {
-                        what: "output scale",
-                        reason: format!("must be finite and positive, got {v}"),
-                    });
-                }
-                s.clone()
-            }
-            None => {
-                let sum: f64 = outputs
-                    .iter()
-                    .flat_map(|r| r.iter().zip(&centre).map(|(y, c)| (y - c) * (y - c)))
-                    .sum();
-                let s = (sum / (n * m) as f64).sqrt();
-                vec![if s > 0.0 { s } else { 1.0 }; m]
-            }
-        };
+        let scale = output_scale(options.output_scale.as_deref(), outputs, &centre)?;
         let z = Mat::<f64>::from_fn(n, m, |i, j| (outputs[i][j] - centre[j]) / scale[j]);
-        let size = n.min(m);
-        let mut s = faer::diag::Diag::<f64>::zeros(size);
-        let mut u = Mat::<f64>::zeros(n, size);
-        let mut v = Mat::<f64>::zeros(m, size);
-        let mut buffer = MemBuffer::new(svd_scratch::<f64>(
-            n,
-            m,
-            ComputeSvdVectors::Thin,
-            ComputeSvdVectors::Thin,
-            Par::Seq,
-            Default::default(),
-        ));
-        svd(
-            z.as_ref(),
-            s.as_mut(),
-            Some(u.as_mut()),
-            Some(v.as_mut()),
-            Par::Seq,
-            MemStack::new(&mut buffer),
-            Default::default(),
-        )
-        .map_err(|e| GpError::FitFailed(format!("principal components: {e:?}")))?;
-        let singular: Vec<f64> = (0..size).map(|k| s[k]).collect();
-        // Components by decreasing singular value (faer's order, made sure of).
-        let mut order: Vec<usize> = (0..size).collect();
-        order.sort_by(|&a, &b| singular[b].total_cmp(&singular[a]).then(a.cmp(&b)));
-        let total: f64 = singular.iter().map(|v| v * v).sum();
-        let limit = options.max_components.min(n - 1).min(size).max(1);
-        let mut q = 0;
-        let mut cumulative = 0.0;
-        let mut explained = Vec::new();
-        while q < limit {
-            let share = if total > 0.0 {
-                singular[order[q]].powi(2) / total
-            } else {
-                0.0
-            };
-            explained.push(share);
-            cumulative += share;
-            q += 1;
-            if total <= 0.0 || cumulative >= options.explained_variance {
-                break;
-            }
-        }
+        let components = PrincipalComponents::of(&z)?;
+        let limit = options
+            .max_components
+            .min(n - 1)
+            .min(components.singular.len())
+            .max(1);
+        let explained = components.leading_shares(limit, options.explained_variance);
+        let q = explained.len();
+        let (singular, order, u, v) = (
+            &components.singular,
+            &components.order,
+            &components.u,
+            &components.v,
+        );
         let basis: Vec<Vec<f64>> = (0..m)
             .map(|j| order[..q].iter().map(|&k| v[(j, k)]).collect())
             .collect();
@@ -355,6 +259,161 @@ impl ReducedBasis {
             variance,
             noise_variance,
         }
+    }
+}
+
+/// Rejects fewer than 3 runs, inputs and outputs of different counts, options out of range
+/// and outputs that are ragged (not `m` per run) or non-finite.
+fn check_runs(
+    inputs: &[Vec<f64>],
+    outputs: &[Vec<f64>],
+    m: usize,
+    options: &ReducedBasisOptions,
+) -> Result<()> {
+    let n = outputs.len();
+    if n < 3 {
+        return Err(GpError::TooFewPoints {
+            required: 3,
+            actual: n,
+        });
+    }
+    if inputs.len() != n {
+        return Err(GpError::LengthMismatch {
+            what: "runs' inputs vs. their outputs",
+            expected: n,
+            actual: inputs.len(),
+        });
+    }
+    if !(options.explained_variance > 0.0 && options.explained_variance <= 1.0) {
+        return Err(GpError::InvalidParameter {
+            what: "explained_variance",
+            reason: format!("must lie in (0, 1], got {}", options.explained_variance),
+        });
+    }
+    if options.max_components == 0 {
+        return Err(GpError::InvalidParameter {
+            what: "max_components",
+            reason: "must be at least 1".into(),
+        });
+    }
+    for (i, row) in outputs.iter().enumerate() {
+        if row.len() != m {
+            return Err(GpError::DimensionMismatch {
+                what: "run's outputs",
+                index: i,
+                expected: m,
+                actual: row.len(),
+            });
+        }
+        if let Some((j, v)) = row.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(GpError::NonFinite {
+                what: "output",
+                index: i * m + j,
+                value: *v,
+            });
+        }
+    }
+    Ok(())
+}
+
+/// The scale s_j of each output: the caller's (checked finite and positive), or else one for
+/// all, the std of every centred output value over the runs (1 where that is 0).
+fn output_scale(given: Option<&[f64]>, outputs: &[Vec<f64>], centre: &[f64]) -> Result<Vec<f64>> {
+    let (n, m) = (outputs.len(), centre.len());
+    match given {
+        Some(s) if s.len() != m => Err(GpError::LengthMismatch {
+            what: "output scales vs. outputs",
+            expected: m,
+            actual: s.len(),
+        }),
+        Some(s) => {
+            if let Some(v) = s.iter().find(|v| !(v.is_finite() && **v > 0.0)) {
+                return Err(GpError::InvalidParameter {
+                    what: "output scale",
+                    reason: format!("must be finite and positive, got {v}"),
+                });
+            }
+            Ok(s.to_vec())
+        }
+        None => {
+            let sum: f64 = outputs
+                .iter()
+                .flat_map(|r| r.iter().zip(centre).map(|(y, c)| (y - c) * (y - c)))
+                .sum();
+            let s = (sum / (n * m) as f64).sqrt();
+            Ok(vec![if s > 0.0 { s } else { 1.0 }; m])
+        }
+    }
+}
+
+/// The thin SVD Z = U S Vᵀ of the scaled runs, computed sequentially.
+struct PrincipalComponents {
+    /// S's diagonal, in faer's order.
+    singular: Vec<f64>,
+    /// Component indices by decreasing singular value (ties by index).
+    order: Vec<usize>,
+    u: Mat<f64>,
+    v: Mat<f64>,
+}
+
+impl PrincipalComponents {
+    fn of(z: &Mat<f64>) -> Result<Self> {
+        let (n, m) = (z.nrows(), z.ncols());
+        let size = n.min(m);
+        let mut s = faer::diag::Diag::<f64>::zeros(size);
+        let mut u = Mat::<f64>::zeros(n, size);
+        let mut v = Mat::<f64>::zeros(m, size);
+        let mut buffer = MemBuffer::new(svd_scratch::<f64>(
+            n,
+            m,
+            ComputeSvdVectors::Thin,
+            ComputeSvdVectors::Thin,
+            Par::Seq,
+            Default::default(),
+        ));
+        svd(
+            z.as_ref(),
+            s.as_mut(),
+            Some(u.as_mut()),
+            Some(v.as_mut()),
+            Par::Seq,
+            MemStack::new(&mut buffer),
+            Default::default(),
+        )
+        .map_err(|e| GpError::FitFailed(format!("principal components: {e:?}")))?;
+        let singular: Vec<f64> = (0..size).map(|k| s[k]).collect();
+        // Components by decreasing singular value (faer's order, made sure of).
+        let mut order: Vec<usize> = (0..size).collect();
+        order.sort_by(|&a, &b| singular[b].total_cmp(&singular[a]).then(a.cmp(&b)));
+        Ok(Self {
+            singular,
+            order,
+            u,
+            v,
+        })
+    }
+
+    /// The share of Σ S² of each leading component kept: the fewest whose shares reach
+    /// `explained_variance`, at most `limit`.
+    fn leading_shares(&self, limit: usize, explained_variance: f64) -> Vec<f64> {
+        let total: f64 = self.singular.iter().map(|v| v * v).sum();
+        let mut q = 0;
+        let mut cumulative = 0.0;
+        let mut explained = Vec::new();
+        while q < limit {
+            let share = if total > 0.0 {
+                self.singular[self.order[q]].powi(2) / total
+            } else {
+                0.0
+            };
+            explained.push(share);
+            cumulative += share;
+            q += 1;
+            if total <= 0.0 || cumulative >= explained_variance {
+                break;
+            }
+        }
+        explained
     }
 }
 

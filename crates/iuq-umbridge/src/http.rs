@@ -100,43 +100,10 @@ pub fn read_request<R: BufRead, W: Write>(
     interim: &mut W,
     limits: &Limits,
 ) -> io::Result<Incoming> {
-    // The head: lines up to the empty line, at most max_head_bytes in total.
-    let mut head = Vec::new();
-    loop {
-        let remaining = limits.max_head_bytes.saturating_sub(head.len());
-        if remaining == 0 {
-            return Ok(Incoming::Refused(too_large_head(limits)));
-        }
-        let Some(line) = read_line_limited(reader, remaining)? else {
-            if head.is_empty() {
-                return Ok(Incoming::Closed);
-            }
-            return Err(io::Error::new(
-                io::ErrorKind::UnexpectedEof,
-                "connection closed inside a request head",
-            ));
-        };
-        if !line.ends_with(b"\n") {
-            // Longer than what is left of the limit (or EOF inside a line).
-            if line.len() >= remaining {
-                return Ok(Incoming::Refused(too_large_head(limits)));
-            }
-            return Err(io::Error::new(
-                io::ErrorKind::UnexpectedEof,
-                "connection closed inside a request head",
-            ));
-        }
-        let blank = line == b"\r\n" || line == b"\n";
-        if blank && head.is_empty() {
-            // Robustness (RFC 9112 §2.2): ignore empty lines before the request line.
-            continue;
-        }
-        head.extend_from_slice(&line);
-        if blank {
-            break;
-        }
-    }
-
+    let head = match read_head(reader, limits)? {
+        Ok(head) => head,
+        Err(incoming) => return Ok(incoming),
+    };
     let mut headers = [httparse::EMPTY_HEADER; MAX_HEADERS];
     let mut parsed = httparse::Request::new(&mut headers);
     match parsed.parse(&head) {
@@ -159,99 +126,171 @@ pub fn read_request<R: BufRead, W: Write>(
     let target = parsed.path.unwrap_or("/");
     let path = target.split(['?', '#']).next().unwrap_or("/").to_string();
     let http_1_1 = parsed.version == Some(1);
-
-    let mut keep_alive = http_1_1;
-    let mut content_length: Option<u64> = None;
-    let mut transfer_encoding: Option<String> = None;
-    let mut expect_continue = false;
-    for h in parsed.headers.iter() {
-        let value = String::from_utf8_lossy(h.value).trim().to_ascii_lowercase();
-        if h.name.eq_ignore_ascii_case("connection") {
-            for token in value.split(',').map(str::trim) {
-                if token == "close" {
-                    keep_alive = false;
-                } else if token == "keep-alive" {
-                    keep_alive = true;
-                }
-            }
-        } else if h.name.eq_ignore_ascii_case("content-length") {
-            let length = if !value.is_empty() && value.bytes().all(|b| b.is_ascii_digit()) {
-                value.parse::<u64>().ok()
-            } else {
-                None
-            };
-            match (length, content_length) {
-                (None, _) => {
-                    return Ok(Incoming::Refused(ErrorAnswer::invalid_input(format!(
-                        "invalid Content-Length `{value}`"
-                    ))));
-                }
-                (Some(n), Some(m)) if n != m => {
-                    return Ok(Incoming::Refused(ErrorAnswer::invalid_input(
-                        "conflicting Content-Length headers",
-                    )));
-                }
-                (Some(n), _) => content_length = Some(n),
-            }
-        } else if h.name.eq_ignore_ascii_case("transfer-encoding") {
-            transfer_encoding = Some(match transfer_encoding {
-                Some(previous) => format!("{previous}, {value}"),
-                None => value,
-            });
-        } else if h.name.eq_ignore_ascii_case("expect") {
-            if value == "100-continue" {
-                expect_continue = true;
-            } else {
-                return Ok(Incoming::Refused(
-                    ErrorAnswer::invalid_input(format!("unsupported Expect: {value}"))
-                        .with_status(417),
-                ));
-            }
-        }
-    }
-
-    let body = match (&transfer_encoding, content_length) {
-        (Some(_), Some(_)) => {
-            return Ok(Incoming::Refused(ErrorAnswer::invalid_input(
-                "a request must not have both Transfer-Encoding and Content-Length",
-            )));
-        }
-        (Some(coding), None) => {
-            if coding.rsplit(',').next().map(str::trim) != Some("chunked")
-                || coding.split(',').count() != 1
-            {
-                return Ok(Incoming::Refused(ErrorAnswer::invalid_input(format!(
-                    "unsupported Transfer-Encoding `{coding}` (only chunked)"
-                ))));
-            }
-            if expect_continue {
-                send_continue(interim)?;
-            }
-            match read_chunked(reader, limits)? {
-                Ok(body) => body,
-                Err(refusal) => return Ok(Incoming::Refused(refusal)),
-            }
-        }
-        (None, Some(length)) => {
-            if length > limits.max_body_bytes as u64 {
-                return Ok(Incoming::Refused(body_too_large(limits, Some(length))));
-            }
-            if expect_continue && length > 0 {
-                send_continue(interim)?;
-            }
-            // length ≤ max_body_bytes, so it fits in memory as the operator allowed.
-            let mut body = vec![0; length as usize];
-            reader.read_exact(&mut body)?;
-            body
-        }
-        (None, None) => Vec::new(),
+    let framing = match Framing::of(parsed.headers, http_1_1) {
+        Ok(framing) => framing,
+        Err(refusal) => return Ok(Incoming::Refused(refusal)),
+    };
+    let body = match framing.read_body(reader, interim, limits)? {
+        Ok(body) => body,
+        Err(refusal) => return Ok(Incoming::Refused(refusal)),
     };
     Ok(Incoming::Request(Request {
         method,
         path,
         body,
-        keep_alive,
+        keep_alive: framing.keep_alive,
     }))
+}
+
+/// Reads the request head: the lines up to the empty line, at most `max_head_bytes` in total
+/// (empty lines before the request line skipped). `Ok(Err(incoming))` when there is no head to
+/// parse: the connection closed before a request, or a head too large.
+fn read_head<R: BufRead>(reader: &mut R, limits: &Limits) -> io::Result<Result<Vec<u8>, Incoming>> {
+    let mut head = Vec::new();
+    loop {
+        let remaining = limits.max_head_bytes.saturating_sub(head.len());
+        if remaining == 0 {
+            return Ok(Err(Incoming::Refused(too_large_head(limits))));
+        }
+        let Some(line) = read_line_limited(reader, remaining)? else {
+            if head.is_empty() {
+                return Ok(Err(Incoming::Closed));
+            }
+            return Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "connection closed inside a request head",
+            ));
+        };
+        if !line.ends_with(b"\n") {
+            // Longer than what is left of the limit (or EOF inside a line).
+            if line.len() >= remaining {
+                return Ok(Err(Incoming::Refused(too_large_head(limits))));
+            }
+            return Err(io::Error::new(
+                io::ErrorKind::UnexpectedEof,
+                "connection closed inside a request head",
+            ));
+        }
+        let blank = line == b"\r\n" || line == b"\n";
+        if blank && head.is_empty() {
+            // Robustness (RFC 9112 §2.2): ignore empty lines before the request line.
+            continue;
+        }
+        head.extend_from_slice(&line);
+        if blank {
+            return Ok(Ok(head));
+        }
+    }
+}
+
+/// What a request's headers say about its body and its connection.
+struct Framing {
+    keep_alive: bool,
+    content_length: Option<u64>,
+    /// The transfer codings of every `Transfer-Encoding` header, comma-separated.
+    transfer_encoding: Option<String>,
+    expect_continue: bool,
+}
+
+impl Framing {
+    /// Reads the framing headers (a connection is kept alive by default from HTTP/1.1 on);
+    /// `Err` for an invalid or conflicting `Content-Length` or an unsupported `Expect`.
+    fn of(headers: &[httparse::Header], http_1_1: bool) -> Result<Self, ErrorAnswer> {
+        let mut framing = Self {
+            keep_alive: http_1_1,
+            content_length: None,
+            transfer_encoding: None,
+            expect_continue: false,
+        };
+        for h in headers {
+            let value = String::from_utf8_lossy(h.value).trim().to_ascii_lowercase();
+            if h.name.eq_ignore_ascii_case("connection") {
+                for token in value.split(',').map(str::trim) {
+                    if token == "close" {
+                        framing.keep_alive = false;
+                    } else if token == "keep-alive" {
+                        framing.keep_alive = true;
+                    }
+                }
+            } else if h.name.eq_ignore_ascii_case("content-length") {
+                let length = if !value.is_empty() && value.bytes().all(|b| b.is_ascii_digit()) {
+                    value.parse::<u64>().ok()
+                } else {
+                    None
+                };
+                match (length, framing.content_length) {
+                    (None, _) => {
+                        return Err(ErrorAnswer::invalid_input(format!(
+                            "invalid Content-Length `{value}`"
+                        )));
+                    }
+                    (Some(n), Some(m)) if n != m => {
+                        return Err(ErrorAnswer::invalid_input(
+                            "conflicting Content-Length headers",
+                        ));
+                    }
+                    (Some(n), _) => framing.content_length = Some(n),
+                }
+            } else if h.name.eq_ignore_ascii_case("transfer-encoding") {
+                framing.transfer_encoding = Some(match framing.transfer_encoding {
+                    Some(previous) => format!("{previous}, {value}"),
+                    None => value,
+                });
+            } else if h.name.eq_ignore_ascii_case("expect") {
+                if value == "100-continue" {
+                    framing.expect_continue = true;
+                } else {
+                    return Err(
+                        ErrorAnswer::invalid_input(format!("unsupported Expect: {value}"))
+                            .with_status(417),
+                    );
+                }
+            }
+        }
+        Ok(framing)
+    }
+
+    /// Reads the body as framed (none without a length or coding), sending `100 Continue` to
+    /// `interim` first where it was asked for; `Ok(Err(refusal))` for a body over the limit,
+    /// an unsupported coding or ambiguous framing.
+    fn read_body<R: BufRead, W: Write>(
+        &self,
+        reader: &mut R,
+        interim: &mut W,
+        limits: &Limits,
+    ) -> io::Result<Result<Vec<u8>, ErrorAnswer>> {
+        match (&self.transfer_encoding, self.content_length) {
+            (Some(_), Some(_)) => Ok(Err(ErrorAnswer::invalid_input(
+                "a request must not have both Transfer-Encoding and Content-Length",
+            ))),
+            (Some(coding), None) => {
+                if coding.rsplit(',').next().map(str::trim) != Some("chunked")
+                    || coding.split(',').count() != 1
+                {
+                    return Ok(Err(ErrorAnswer::invalid_input(format!(
+                        "unsupported Transfer-Encoding `{coding}` (only chunked)"
+                    ))));
+                }
+                if self.expect_continue {
+                    send_continue(interim)?;
+                }
+                read_chunked(reader, limits)
+            }
+            (None, Some(length)) => {
+                if length > limits.max_body_bytes as u64 {
+                    return Ok(Err(body_too_large(limits, Some(length))));
+                }
+                if self.expect_continue && length > 0 {
+                    send_continue(interim)?;
+                }
+                // length ≤ max_body_bytes, so it fits in memory as the operator allowed.
+                let mut body = vec![0; length as usize];
+                reader.read_exact(&mut body)?;
+                Ok(Ok(body))
+            }
+            (None, None) => Ok(Ok(Vec::new())),
+        }
+    }
 }
 
 fn send_continue<W: Write>(writer: &mut W) -> io::Result<()> {

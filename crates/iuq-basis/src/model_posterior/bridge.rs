@@ -26,13 +26,13 @@ use iuq_core::random::stream;
 
 /// What the method's steps read besides the members: the space, both likelihoods and the
 /// settings.
-pub(super) struct MethodInputs<'a> {
-    pub(super) space: &'a ParameterSpace,
-    pub(super) surrogate: &'a dyn LogLikelihood,
-    pub(super) model: &'a dyn LogLikelihood,
-    pub(super) settings: &'a ModelPosteriorSettings,
+pub(crate) struct MethodInputs<'a> {
+    pub(crate) space: &'a ParameterSpace,
+    pub(crate) surrogate: &'a dyn LogLikelihood,
+    pub(crate) model: &'a dyn LogLikelihood,
+    pub(crate) settings: &'a ModelPosteriorSettings,
     /// The prior ranges' widths (the proposal's scale where the members have no spread).
-    pub(super) widths: &'a [f64],
+    pub(crate) widths: &'a [f64],
 }
 
 /// The stage a bridge follows: its number, the β it stepped to, the members' log-ratios

@@ -80,7 +80,8 @@
 mod bridge;
 mod correction;
 
-use bridge::{MethodInputs, StageWeights};
+pub(crate) use bridge::MethodInputs;
+use bridge::StageWeights;
 use correction::{CorrectedBatch, FirstBatch, correct_first_batch};
 use serde::{Deserialize, Serialize};
 
@@ -604,46 +605,14 @@ pub fn model_posterior(
 ) -> Result<ModelPosterior> {
     settings.check()?;
     check_inputs(space, &population, surrogate, model)?;
-    let n = population.samples.len();
-    let s = settings.samples.min(n);
+    let s = settings.samples.min(population.samples.len());
     let widths: Vec<f64> = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
-    let chosen = selected_members(n, settings);
-    let mut theta: Vec<Vec<f64>> = chosen
-        .iter()
-        .map(|&i| population.samples[i].clone())
-        .collect();
-    let mut ls: Vec<f64> = chosen
-        .iter()
-        .map(|&i| population.log_likelihood[i])
-        .collect();
-    let mut lp: Vec<f64> = chosen.iter().map(|&i| population.log_prior[i]).collect();
-    let mut lm = evaluate(
-        model,
-        &theta,
-        "the model at the surrogate's posterior samples",
-    )?;
-    let mut evaluations = s;
-    let mut failures = lm.iter().filter(|v| !v.is_finite()).count();
-    let mut best = Best::default();
-    best.offer(&theta, &lm, &lp);
-    let mut stage_evaluations = (s, failures);
-    let mut log_evidence_ratio = 0.0;
-    let mut stages = Vec::new();
-    let mut threshold = pareto_k_threshold(s);
-    let mut corrections = Vec::new();
-    let mut correction_not_made = None;
+    let mut state = MethodState::first_batch(model, &population, settings)?;
     let corrected_holder: CorrectedLikelihood<'_, BoxedCorrection>;
     // After a correction: both batches as one sample of ½q + ½q_c, tried before the stages.
-    let mut mixture: Option<(Members, Vec<f64>)> = None;
-    let mut both_batches = false;
+    let mut mixture: Option<BatchMixture> = None;
     let mut surrogate = surrogate;
     if settings.corrections > 0 && !settings.pseudo_marginal {
-        let first = Members {
-            theta: theta.clone(),
-            surrogate: ls.clone(),
-            model: lm.clone(),
-            prior: lp.clone(),
-        };
         let inputs = MethodInputs {
             space,
             surrogate,
@@ -651,180 +620,308 @@ pub fn model_posterior(
             settings,
             widths: &widths,
         };
-        match correct_first_batch(&inputs, &population, first, threshold, on_event)? {
-            FirstBatch::Kept { not_corrected } => correction_not_made = not_corrected,
-            FirstBatch::Corrected(corrected) => {
-                let CorrectedBatch {
-                    record,
-                    likelihood,
-                    log_evidence_ratio: ratio,
-                    batch,
-                    mixture: both,
-                } = *corrected;
-                corrections.push(record);
-                corrected_holder = likelihood;
-                surrogate = &corrected_holder;
-                log_evidence_ratio += ratio;
-                let batch_failures = batch.model.iter().filter(|v| !v.is_finite()).count();
-                evaluations += s;
-                failures += batch_failures;
-                stage_evaluations = (s, batch_failures);
-                Members {
-                    theta,
-                    surrogate: ls,
-                    model: lm,
-                    prior: lp,
-                } = batch;
-                best.offer(&theta, &lm, &lp);
-                mixture = Some(both);
-            }
+        if let Some((likelihood, both)) = state.correct(&inputs, &population, on_event)? {
+            corrected_holder = likelihood;
+            surrogate = &corrected_holder;
+            mixture = Some(both);
         }
     }
-    let mut mismatch = None;
     // Each member's ancestor in the batch the stages started from (itself until a bridge
     // resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
-    let mut ancestor: Vec<usize> = (0..theta.len()).collect();
-    let (raw, smoothed, pareto_k, stop) = if settings.pseudo_marginal {
-        let first = Members {
-            theta: std::mem::take(&mut theta),
-            surrogate: std::mem::take(&mut ls),
-            model: std::mem::take(&mut lm),
-            prior: std::mem::take(&mut lp),
-        };
-        let estimate = noisy_estimate(
-            space, population, surrogate, model, settings, first, failures, &mut best, on_event,
-        )?;
-        on_event(ModelPosteriorEvent::Stage(&estimate.stage));
-        stages.push(estimate.stage);
-        Members {
-            theta,
-            surrogate: ls,
-            model: lm,
-            prior: lp,
-        } = estimate.members;
-        ancestor = (0..theta.len()).collect();
-        evaluations += estimate.evaluations;
-        failures += estimate.failures;
-        corrections.extend(estimate.correction);
-        log_evidence_ratio += estimate.log_evidence_ratio;
-        threshold = estimate.threshold;
-        mismatch = estimate.mismatch;
-        correction_not_made = estimate.not_corrected;
-        both_batches = !corrections.is_empty();
-        (
-            estimate.raw,
-            estimate.smoothing.log_weights,
-            estimate.smoothing.pareto_k,
-            estimate.stop,
-        )
-    } else if let Some((members, raw, smoothing, stage)) =
-        mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, failures))
+    state.ancestor = (0..state.members.theta.len()).collect();
+    let inputs = MethodInputs {
+        space,
+        surrogate,
+        model,
+        settings,
+        widths: &widths,
+    };
+    let weights = if settings.pseudo_marginal {
+        state.pseudo_marginal(&inputs, population, on_event)?
+    } else if let Some(certified) =
+        mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, state.failures))
     {
-        log_evidence_ratio = log_evidence_increment(&raw, 1.0, largest_finite(&raw));
-        threshold = pareto_k_threshold(raw.len());
-        both_batches = true;
-        on_event(ModelPosteriorEvent::Stage(&stage));
-        stages.push(stage);
-        Members {
-            theta,
-            surrogate: ls,
-            model: lm,
-            prior: lp,
-        } = members;
-        ancestor = (0..theta.len()).collect();
-        (
-            raw,
-            smoothing.log_weights,
-            smoothing.pareto_k,
-            ModelPosteriorStop::Certified,
-        )
+        state.adopt_mixture(certified, on_event)
     } else {
-        let bridge = MethodInputs {
-            space,
-            surrogate,
+        state.temper(&inputs, on_event)?
+    };
+    state.into_posterior(space, settings, weights)
+}
+
+/// Both batches as one sample of their even mixture, with their raw log-weights.
+type BatchMixture = (Members, Vec<f64>);
+
+/// The state of [`model_posterior`] between its phases (argmin's shape): the members the
+/// weights are for, the model runs made, the stages and corrections so far.
+struct MethodState {
+    members: Members,
+    /// Each member's ancestor in the batch the stages started from.
+    ancestor: Vec<usize>,
+    evaluations: usize,
+    failures: usize,
+    best: Best,
+    /// Model evaluations and failures of the batch the first stage weighs.
+    stage_evaluations: (usize, usize),
+    log_evidence_ratio: f64,
+    stages: Vec<ModelPosteriorStage>,
+    /// The k̂ threshold the final weights are held to.
+    threshold: f64,
+    corrections: Vec<SurrogateCorrection>,
+    correction_not_made: Option<String>,
+    mismatch: Option<ProposalMismatch>,
+    both_batches: bool,
+}
+
+impl MethodState {
+    /// The first batch: the [`selected_members`] of `population`, run through the model.
+    fn first_batch(
+        model: &dyn LogLikelihood,
+        population: &SurrogatePopulation<'_>,
+        settings: &ModelPosteriorSettings,
+    ) -> Result<Self> {
+        let n = population.samples.len();
+        let s = settings.samples.min(n);
+        let chosen = selected_members(n, settings);
+        let theta: Vec<Vec<f64>> = chosen
+            .iter()
+            .map(|&i| population.samples[i].clone())
+            .collect();
+        let ls: Vec<f64> = chosen
+            .iter()
+            .map(|&i| population.log_likelihood[i])
+            .collect();
+        let lp: Vec<f64> = chosen.iter().map(|&i| population.log_prior[i]).collect();
+        let lm = evaluate(
             model,
-            settings,
-            widths: &widths,
-        };
-        let mut tempering = Tempering {
-            members: Members {
-                theta: std::mem::take(&mut theta),
-                surrogate: std::mem::take(&mut ls),
-                model: std::mem::take(&mut lm),
-                prior: std::mem::take(&mut lp),
-            },
-            ancestor: std::mem::take(&mut ancestor),
-            beta: 0.0,
-            log_evidence_ratio,
-            stages: std::mem::take(&mut stages),
-            stage_evaluations,
-            bridge_rates: (None, None),
-            evaluations,
-            failures,
-            best: std::mem::take(&mut best),
-        };
-        let weights = loop {
-            if let Some(done) = tempering.step(&bridge, threshold, on_event)? {
-                break done;
-            }
-        };
-        Tempering {
+            &theta,
+            "the model at the surrogate's posterior samples",
+        )?;
+        let failures = lm.iter().filter(|v| !v.is_finite()).count();
+        let mut best = Best::default();
+        best.offer(&theta, &lm, &lp);
+        Ok(Self {
             members: Members {
                 theta,
                 surrogate: ls,
                 model: lm,
                 prior: lp,
             },
-            ancestor,
-            log_evidence_ratio,
-            stages,
-            evaluations,
+            ancestor: Vec::new(),
+            evaluations: s,
             failures,
             best,
-            ..
-        } = tempering;
-        weights
-    };
-    let (weights, mean, std, quantiles) =
-        weighted_moments(&theta, &smoothed, &settings.probabilities)?;
-    let errors = ancestral_errors(&theta, &weights, &ancestor, &mean, &std);
-    let Some((map, map_log_likelihood, map_log_prior)) = best.point else {
-        return Err(BasisError::NoFiniteLikelihood {
-            stage: stages.len(),
-            failures,
-        });
-    };
-    Ok(ModelPosterior {
-        names: space.names(),
-        effective_sample_size: effective_sample_size(&weights),
-        samples: theta,
-        log_weights: smoothed,
-        raw_log_weights: raw,
-        model_log_likelihood: lm,
-        surrogate_log_likelihood: ls,
-        log_prior: lp,
-        stages,
-        pareto_k,
-        pareto_k_threshold: threshold,
-        stop,
-        mean,
-        std,
-        mcse_mean: errors.mean,
-        mcse_std: errors.std,
-        ancestors: errors.ancestors,
-        probabilities: settings.probabilities.clone(),
-        quantiles,
-        map,
-        map_log_likelihood,
-        map_log_prior,
-        log_evidence_ratio,
-        corrections,
-        proposal_mismatch: mismatch,
-        correction_not_made,
-        both_batches,
-        model_evaluations: evaluations,
-        failures,
-    })
+            stage_evaluations: (s, failures),
+            log_evidence_ratio: 0.0,
+            stages: Vec::new(),
+            threshold: pareto_k_threshold(s),
+            corrections: Vec::new(),
+            correction_not_made: None,
+            mismatch: None,
+            both_batches: false,
+        })
+    }
+
+    /// Corrects the surrogate where the first batch does not hold in one stage
+    /// ([`correct_first_batch`]); after a correction the members are the second batch, and the
+    /// corrected surrogate comes back with both batches' mixture.
+    fn correct<'a>(
+        &mut self,
+        inputs: &MethodInputs<'a>,
+        population: &SurrogatePopulation<'_>,
+        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    ) -> Result<Option<(CorrectedLikelihood<'a, BoxedCorrection>, BatchMixture)>> {
+        let s = inputs.settings.samples.min(population.samples.len());
+        let first = Members {
+            theta: self.members.theta.clone(),
+            surrogate: self.members.surrogate.clone(),
+            model: self.members.model.clone(),
+            prior: self.members.prior.clone(),
+        };
+        match correct_first_batch(inputs, population, first, self.threshold, on_event)? {
+            FirstBatch::Kept { not_corrected } => {
+                self.correction_not_made = not_corrected;
+                Ok(None)
+            }
+            FirstBatch::Corrected(corrected) => {
+                let CorrectedBatch {
+                    record,
+                    likelihood,
+                    log_evidence_ratio: ratio,
+                    batch,
+                    mixture,
+                } = *corrected;
+                self.corrections.push(record);
+                self.log_evidence_ratio += ratio;
+                let batch_failures = batch.model.iter().filter(|v| !v.is_finite()).count();
+                self.evaluations += s;
+                self.failures += batch_failures;
+                self.stage_evaluations = (s, batch_failures);
+                self.members = batch;
+                self.best.offer(
+                    &self.members.theta,
+                    &self.members.model,
+                    &self.members.prior,
+                );
+                Ok(Some((likelihood, mixture)))
+            }
+        }
+    }
+
+    /// The members, leaving empty ones in their place.
+    fn take_members(&mut self) -> Members {
+        Members {
+            theta: std::mem::take(&mut self.members.theta),
+            surrogate: std::mem::take(&mut self.members.surrogate),
+            model: std::mem::take(&mut self.members.model),
+            prior: std::mem::take(&mut self.members.prior),
+        }
+    }
+
+    /// A noisy model's weights: the pseudo-marginal estimate ([`noisy_estimate`]).
+    fn pseudo_marginal(
+        &mut self,
+        inputs: &MethodInputs<'_>,
+        population: SurrogatePopulation<'_>,
+        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    ) -> Result<TemperedWeights> {
+        let first = self.take_members();
+        let estimate = noisy_estimate(
+            inputs,
+            population,
+            first,
+            self.failures,
+            &mut self.best,
+            on_event,
+        )?;
+        on_event(ModelPosteriorEvent::Stage(&estimate.stage));
+        self.stages.push(estimate.stage);
+        self.members = estimate.members;
+        self.ancestor = (0..self.members.theta.len()).collect();
+        self.evaluations += estimate.evaluations;
+        self.failures += estimate.failures;
+        self.corrections.extend(estimate.correction);
+        self.log_evidence_ratio += estimate.log_evidence_ratio;
+        self.threshold = estimate.threshold;
+        self.mismatch = estimate.mismatch;
+        self.correction_not_made = estimate.not_corrected;
+        self.both_batches = !self.corrections.is_empty();
+        Ok((
+            estimate.raw,
+            estimate.smoothing.log_weights,
+            estimate.smoothing.pareto_k,
+            estimate.stop,
+        ))
+    }
+
+    /// Both batches' certified mixture ([`certified_mixture`]) as the one full step.
+    fn adopt_mixture(
+        &mut self,
+        (members, raw, smoothing, stage): (Members, Vec<f64>, ParetoSmoothing, ModelPosteriorStage),
+        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    ) -> TemperedWeights {
+        self.log_evidence_ratio = log_evidence_increment(&raw, 1.0, largest_finite(&raw));
+        self.threshold = pareto_k_threshold(raw.len());
+        self.both_batches = true;
+        on_event(ModelPosteriorEvent::Stage(&stage));
+        self.stages.push(stage);
+        self.members = members;
+        self.ancestor = (0..self.members.theta.len()).collect();
+        (
+            raw,
+            smoothing.log_weights,
+            smoothing.pareto_k,
+            ModelPosteriorStop::Certified,
+        )
+    }
+
+    /// The tempered stages from the members to the model's posterior ([`Tempering`]).
+    fn temper(
+        &mut self,
+        bridge: &MethodInputs<'_>,
+        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    ) -> Result<TemperedWeights> {
+        let mut tempering = Tempering {
+            members: self.take_members(),
+            ancestor: std::mem::take(&mut self.ancestor),
+            beta: 0.0,
+            log_evidence_ratio: self.log_evidence_ratio,
+            stages: std::mem::take(&mut self.stages),
+            stage_evaluations: self.stage_evaluations,
+            bridge_rates: (None, None),
+            evaluations: self.evaluations,
+            failures: self.failures,
+            best: std::mem::take(&mut self.best),
+        };
+        let weights = loop {
+            if let Some(done) = tempering.step(bridge, self.threshold, on_event)? {
+                break done;
+            }
+        };
+        self.members = tempering.members;
+        self.ancestor = tempering.ancestor;
+        self.log_evidence_ratio = tempering.log_evidence_ratio;
+        self.stages = tempering.stages;
+        self.evaluations = tempering.evaluations;
+        self.failures = tempering.failures;
+        self.best = tempering.best;
+        Ok(weights)
+    }
+
+    /// The posterior of the members weighed by the final `weights`: moments, quantiles, their
+    /// standard errors and the MAP point.
+    fn into_posterior(
+        self,
+        space: &ParameterSpace,
+        settings: &ModelPosteriorSettings,
+        (raw, smoothed, pareto_k, stop): TemperedWeights,
+    ) -> Result<ModelPosterior> {
+        let Members {
+            theta,
+            surrogate: ls,
+            model: lm,
+            prior: lp,
+        } = self.members;
+        let (weights, mean, std, quantiles) =
+            weighted_moments(&theta, &smoothed, &settings.probabilities)?;
+        let errors = ancestral_errors(&theta, &weights, &self.ancestor, &mean, &std);
+        let Some((map, map_log_likelihood, map_log_prior)) = self.best.point else {
+            return Err(BasisError::NoFiniteLikelihood {
+                stage: self.stages.len(),
+                failures: self.failures,
+            });
+        };
+        Ok(ModelPosterior {
+            names: space.names(),
+            effective_sample_size: effective_sample_size(&weights),
+            samples: theta,
+            log_weights: smoothed,
+            raw_log_weights: raw,
+            model_log_likelihood: lm,
+            surrogate_log_likelihood: ls,
+            log_prior: lp,
+            stages: self.stages,
+            pareto_k,
+            pareto_k_threshold: self.threshold,
+            stop,
+            mean,
+            std,
+            mcse_mean: errors.mean,
+            mcse_std: errors.std,
+            ancestors: errors.ancestors,
+            probabilities: settings.probabilities.clone(),
+            quantiles,
+            map,
+            map_log_likelihood,
+            map_log_prior,
+            log_evidence_ratio: self.log_evidence_ratio,
+            corrections: self.corrections,
+            proposal_mismatch: self.mismatch,
+            correction_not_made: self.correction_not_made,
+            both_batches: self.both_batches,
+            model_evaluations: self.evaluations,
+            failures: self.failures,
+        })
+    }
 }
 
 /// The surrogate population and both likelihoods fit `space`: samples of its dimension, one

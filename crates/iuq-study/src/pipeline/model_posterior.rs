@@ -21,8 +21,9 @@ use serde_json::{Value, json};
 
 use iuq_basis::model_posterior::SurrogateCorrection;
 use iuq_basis::{
-    ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings,
-    ModelPosteriorStage, SurrogatePopulation, model_posterior, selected_members,
+    BasisState, ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorEvent,
+    ModelPosteriorSettings, ModelPosteriorStage, SurrogatePopulation, model_posterior,
+    selected_members,
 };
 use iuq_campaign::study_section::StudySection;
 use iuq_core::{Model, Outcome};
@@ -32,7 +33,7 @@ use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood, bits};
 use super::reproducibility_probe::{RELATIVE_NUDGE, ReproducibilityProbe, probe_reproducibility};
 use super::surrogate::Surrogate;
 use crate::error::{Context, Result, StudyError};
-use crate::likelihood_section::{LikelihoodSection, parse_likelihood};
+use crate::likelihood_section::{DataLikelihood, LikelihoodSection, parse_likelihood};
 use crate::posterior::{SampledPosterior, build_posterior_with};
 use crate::study::Study;
 use crate::table_io::{write_atomically, write_numeric_csv};
@@ -321,48 +322,12 @@ pub fn reweight_to_model(
         LikelihoodSection::Data(data) => Some(data),
         LikelihoodSection::LogDensity(_) => None,
     };
-    let probe = if reweight.probe > 0 {
-        let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &reweight.method)
-            .into_iter()
-            .take(reweight.probe)
-            .map(|i| state.samples[i][..d].to_vec())
-            .collect();
-        let scales = data.as_ref().map(error_scales).unwrap_or_default();
-        Some(probe_reproducibility(
-            model_runs,
-            &members,
-            &study.space.ranges(),
-            &scales,
-        )?)
-    } else {
-        None
-    };
+    let probe = probe_first_members(study, state, model_runs, reweight, data.as_ref())?;
     let pseudo_marginal = reweight
         .noisy
         .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
     if let Some(probe) = &probe {
-        let irregular: Vec<&str> = probe
-            .outputs
-            .iter()
-            .filter(|o| o.irregular)
-            .map(|o| o.name.as_str())
-            .collect();
-        message(format!(
-            "the model's outputs under a nudge of the parameters by {RELATIVE_NUDGE:e} of their ranges ({} members): {}",
-            probe.pairs,
-            match (probe.pairs, irregular.is_empty(), pseudo_marginal) {
-                (0, _, _) => "inconclusive: every probed member had a failed run".to_string(),
-                (_, true, _) => "they repeat".to_string(),
-                (_, false, true) => format!(
-                    "irregular at {} (the likelihood is a noisy estimate: one importance step, certified by k̂)",
-                    irregular.join(", ")
-                ),
-                (_, false, false) => format!(
-                    "irregular at {} (`noisy = false`: the stages all the same)",
-                    irregular.join(", ")
-                ),
-            }
-        ));
+        message(probe_line(probe, pseudo_marginal));
     }
     if reweight.replicates > 1 && !pseudo_marginal {
         message(format!(
@@ -382,53 +347,27 @@ pub fn reweight_to_model(
     let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
     let replicated = match (pseudo_marginal && reweight.replicates > 1, data) {
         (true, Some(data)) => {
-            let all: Vec<usize> = (0..model_runs.output_names().len()).collect();
-            let irregular = match &probe {
-                Some(p) if p.irregular() => (0..p.outputs.len())
-                    .filter(|&j| p.outputs[j].irregular)
-                    .collect(),
-                _ => all,
-            };
+            let irregular = irregular_outputs(probe.as_ref(), model_runs.output_names().len());
             Some((data, irregular))
         }
         _ => None,
     };
-    let replicated_likelihood = replicated
-        .as_ref()
-        .map(|(data, irregular)| ReplicatedLikelihood {
-            base: model_posterior_likelihood.likelihood.as_ref(),
-            runs: model_runs,
-            observations: &data.observations,
-            errors: ErrorModel {
-                measurement_error: data.measurement_error,
-                computational_error: data.computational_error,
-                modelling_error: data.modelling_error,
+    let replicated_likelihood = replicated.as_ref().map(|(data, irregular)| {
+        replicated_likelihood(
+            model_posterior_likelihood.likelihood.as_ref(),
+            model_runs,
+            data,
+            irregular,
+            Replication {
+                replicates: reweight.replicates,
+                ranges: study.space.ranges(),
+                probe: probe.as_ref(),
             },
-            irregular: irregular.clone(),
-            replicates: reweight.replicates,
-            ranges: study.space.ranges(),
-            already_run: probe
-                .iter()
-                .flat_map(|p| p.nudged_points().iter().map(|x| bits(x)))
-                .collect(),
-            replicate_runs: AtomicUsize::new(0),
-            replicate_failures: AtomicUsize::new(0),
-        });
+        )
+    });
     if let Some(r) = &replicated_likelihood {
-        let groups = r.irregular_groups().len();
         let members = reweight.method.samples.min(state.samples.len());
-        let names: Vec<&str> = r
-            .irregular
-            .iter()
-            .map(|&j| model_runs.output_names()[j].as_str())
-            .collect();
-        message(format!(
-            "replicates = {m}: after each batch, every member whose own runs succeeded is run {} more times (its parameters moved by k·1e-9 of their ranges) in the {groups} run group(s) holding {}: up to {} runs per batch of {members} members (results already stored are reused)",
-            r.replicates - 1,
-            names.join(", "),
-            members * (r.replicates - 1) * groups,
-            m = r.replicates,
-        ));
+        message(replicates_line(r, model_runs, members));
     }
     let model_likelihood: &dyn LogLikelihood = match &replicated_likelihood {
         Some(r) => r,
@@ -459,40 +398,15 @@ pub fn reweight_to_model(
             )),
         },
     )
-    .map_err(|e| match e {
-        iuq_basis::BasisError::ModelInput(reason) => StudyError::BadInput(reason),
-        iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
-            "the model posterior: the model could not evaluate a batch: {reason}"
-        )),
-        e => StudyError::Failure(format!("the model posterior: {e}")),
-    })?;
+    .map_err(method_error)?;
     let replicate_runs = replicated_likelihood
         .as_ref()
         .map_or(0, |r| r.replicate_runs.load(Ordering::Relaxed));
     let replicate_failures = replicated_likelihood
         .as_ref()
         .map_or(0, |r| r.replicate_failures.load(Ordering::Relaxed));
-    // The model at both MAPs (the surrogate's is usually stored by the posterior check, the
-    // model's by the stages).
     let surrogate_map = gp_posterior.summary.map[..d].to_vec();
-    let maps = [surrogate_map.clone(), posterior.map[..d].to_vec()];
-    let at_maps = model_runs
-        .model_at_data()
-        .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-maps"), &maps)
-        .map_err(|e| StudyError::from(e).context("the model at both MAPs"))?;
-    let outputs: Vec<Option<Vec<f64>>> = at_maps
-        .into_iter()
-        .map(|o| o.ok().map(|e| e.outputs))
-        .collect();
-    let points = model_runs.output_names().len();
-    let map_runs = (0..points)
-        .map(|j| {
-            (
-                outputs[0].as_ref().and_then(|v| v.get(j).copied()),
-                outputs[1].as_ref().and_then(|v| v.get(j).copied()),
-            )
-        })
-        .collect();
+    let map_runs = runs_at_maps(model_runs, &surrogate_map, &posterior.map[..d])?;
     let member_outputs = member_outputs(model_runs, &posterior, d)?;
     let k = posterior.mean.len();
     let outcome = ModelPosteriorOutcome {
@@ -522,6 +436,170 @@ pub fn reweight_to_model(
     };
     write_results(&outcome, &out.join("model-posterior"))?;
     Ok(outcome)
+}
+
+/// The reproducibility probe at the first `reweight.probe` members of the method's first batch
+/// (`None` without a probe), judged against the data's error scales.
+fn probe_first_members(
+    study: &Study,
+    state: &BasisState,
+    model_runs: &ModelRuns,
+    reweight: &ReweightSettings,
+    data: Option<&DataLikelihood>,
+) -> Result<Option<ReproducibilityProbe>> {
+    if reweight.probe == 0 {
+        return Ok(None);
+    }
+    let d = model_runs.parameters().len();
+    let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &reweight.method)
+        .into_iter()
+        .take(reweight.probe)
+        .map(|i| state.samples[i][..d].to_vec())
+        .collect();
+    let scales = data.map(error_scales).unwrap_or_default();
+    Ok(Some(probe_reproducibility(
+        model_runs,
+        &members,
+        &study.space.ranges(),
+        &scales,
+    )?))
+}
+
+/// The progress line of the reproducibility probe: whether the model's outputs repeat under a
+/// nudge, and what that means for the method (`pseudo_marginal`).
+fn probe_line(probe: &ReproducibilityProbe, pseudo_marginal: bool) -> String {
+    let irregular: Vec<&str> = probe
+        .outputs
+        .iter()
+        .filter(|o| o.irregular)
+        .map(|o| o.name.as_str())
+        .collect();
+    format!(
+        "the model's outputs under a nudge of the parameters by {RELATIVE_NUDGE:e} of their ranges ({} members): {}",
+        probe.pairs,
+        match (probe.pairs, irregular.is_empty(), pseudo_marginal) {
+            (0, _, _) => "inconclusive: every probed member had a failed run".to_string(),
+            (_, true, _) => "they repeat".to_string(),
+            (_, false, true) => format!(
+                "irregular at {} (the likelihood is a noisy estimate: one importance step, certified by k̂)",
+                irregular.join(", ")
+            ),
+            (_, false, false) => format!(
+                "irregular at {} (`noisy = false`: the stages all the same)",
+                irregular.join(", ")
+            ),
+        }
+    )
+}
+
+/// The data points whose runs are replicated: those the probe found irregular, or all
+/// `points` where it found none (or there was no probe).
+fn irregular_outputs(probe: Option<&ReproducibilityProbe>, points: usize) -> Vec<usize> {
+    let all: Vec<usize> = (0..points).collect();
+    match probe {
+        Some(p) if p.irregular() => (0..p.outputs.len())
+            .filter(|&j| p.outputs[j].irregular)
+            .collect(),
+        _ => all,
+    }
+}
+
+/// How a noisy likelihood's members are replicated.
+struct Replication<'a> {
+    /// Runs per member at each irregular data point, the member's own included.
+    replicates: usize,
+    /// The parameters' prior ranges (the nudges' scale).
+    ranges: Vec<(f64, f64)>,
+    /// The probe, whose nudged points are already run.
+    probe: Option<&'a ReproducibilityProbe>,
+}
+
+/// The model's likelihood with the members' runs at the `irregular` data points replicated
+/// (averaged as [`ReplicatedLikelihood`] does), on top of `base`.
+fn replicated_likelihood<'a>(
+    base: &'a dyn LogLikelihood,
+    model_runs: &'a ModelRuns,
+    data: &'a DataLikelihood,
+    irregular: &[usize],
+    replication: Replication<'_>,
+) -> ReplicatedLikelihood<'a> {
+    ReplicatedLikelihood {
+        base,
+        runs: model_runs,
+        observations: &data.observations,
+        errors: ErrorModel {
+            measurement_error: data.measurement_error,
+            computational_error: data.computational_error,
+            modelling_error: data.modelling_error,
+        },
+        irregular: irregular.to_vec(),
+        replicates: replication.replicates,
+        ranges: replication.ranges,
+        already_run: replication
+            .probe
+            .iter()
+            .flat_map(|p| p.nudged_points().iter().map(|x| bits(x)))
+            .collect(),
+        replicate_runs: AtomicUsize::new(0),
+        replicate_failures: AtomicUsize::new(0),
+    }
+}
+
+/// The progress line announcing the replicates: how many runs a batch of `members` members
+/// may add, and in which run groups.
+fn replicates_line(r: &ReplicatedLikelihood<'_>, model_runs: &ModelRuns, members: usize) -> String {
+    let groups = r.irregular_groups().len();
+    let names: Vec<&str> = r
+        .irregular
+        .iter()
+        .map(|&j| model_runs.output_names()[j].as_str())
+        .collect();
+    format!(
+        "replicates = {m}: after each batch, every member whose own runs succeeded is run {} more times (its parameters moved by k·1e-9 of their ranges) in the {groups} run group(s) holding {}: up to {} runs per batch of {members} members (results already stored are reused)",
+        r.replicates - 1,
+        names.join(", "),
+        members * (r.replicates - 1) * groups,
+        m = r.replicates,
+    )
+}
+
+/// The method's error as the study reports it: bad model input, a batch the model could not
+/// evaluate, or another failure.
+fn method_error(e: iuq_basis::BasisError) -> StudyError {
+    match e {
+        iuq_basis::BasisError::ModelInput(reason) => StudyError::BadInput(reason),
+        iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
+            "the model posterior: the model could not evaluate a batch: {reason}"
+        )),
+        e => StudyError::Failure(format!("the model posterior: {e}")),
+    }
+}
+
+/// The model at both MAPs, per data point (`None`: a run failed): the surrogate posterior's
+/// (usually stored by the posterior check) and the model posterior's (stored by the stages).
+fn runs_at_maps(
+    model_runs: &ModelRuns,
+    surrogate_map: &[f64],
+    model_map: &[f64],
+) -> Result<Vec<(Option<f64>, Option<f64>)>> {
+    let maps = [surrogate_map.to_vec(), model_map.to_vec()];
+    let at_maps = model_runs
+        .model_at_data()
+        .evaluate_labelled(&format!("{MODEL_POSTERIOR_DESIGN}-maps"), &maps)
+        .map_err(|e| StudyError::from(e).context("the model at both MAPs"))?;
+    let outputs: Vec<Option<Vec<f64>>> = at_maps
+        .into_iter()
+        .map(|o| o.ok().map(|e| e.outputs))
+        .collect();
+    let points = model_runs.output_names().len();
+    Ok((0..points)
+        .map(|j| {
+            (
+                outputs[0].as_ref().and_then(|v| v.get(j).copied()),
+                outputs[1].as_ref().and_then(|v| v.get(j).copied()),
+            )
+        })
+        .collect())
 }
 
 /// The model's outputs at every member of `posterior` with weight, from the members' runs,

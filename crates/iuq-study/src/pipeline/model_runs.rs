@@ -215,6 +215,147 @@ pub fn pipeline_campaign_study(study: &Study) -> Result<CampaignStudy> {
     CampaignStudy::parse(&text, &study.path).map_err(campaign_error)
 }
 
+/// What [`ModelRuns::open`] holds a model to: the outputs a run must return (one per run per
+/// data point, or one per data point) and, for an in-process model, the local executor.
+struct ModelCheck<'a> {
+    /// The study file, for the errors.
+    file: &'a str,
+    /// The number of data points.
+    n: usize,
+    /// One run per (θ, x_j).
+    per_abscissa: bool,
+    /// The executor is local.
+    local: bool,
+}
+
+impl ModelCheck<'_> {
+    fn outputs_per_run(&self) -> usize {
+        if self.per_abscissa { 1 } else { self.n }
+    }
+
+    /// A model returning `count` outputs per run fits the data.
+    fn check_outputs(&self, count: usize) -> Result<()> {
+        let (file, n) = (self.file, self.n);
+        if count != self.outputs_per_run() {
+            let expected = if self.per_abscissa {
+                "1 (one run per parameter vector and data point returns the model's value at that point)".to_string()
+            } else {
+                format!(
+                    "{n}, one per data point (output j is compared with data row j; or set `model.abscissa` to run the model once per data point)"
+                )
+            };
+            return Err(input_error(format!(
+                "{file}: key `model.outputs`: the model has {count} outputs, expected {expected}"
+            )));
+        }
+        Ok(())
+    }
+
+    /// A model of `kind`, evaluated in this process, needs the local executor.
+    fn in_process_only(&self, kind: &str) -> Result<()> {
+        if self.local {
+            Ok(())
+        } else {
+            let file = self.file;
+            Err(input_error(format!(
+                "{file}: key `executor.kind`: a model of kind `{kind}` is evaluated in this process; use kind = \"local\""
+            )))
+        }
+    }
+}
+
+/// The campaign text of `study`'s model at the data's abscissae, and the model evaluated in this
+/// process where it is one (`callable`: the model a program supplies for kind `callable`).
+fn campaign_of_model(
+    study: &Study,
+    data: &DataLikelihood,
+    check: &ModelCheck<'_>,
+    callable: Option<SharedModel>,
+) -> Result<(String, Option<SharedModel>)> {
+    let (file, n) = (check.file, check.n);
+    Ok(match &study.model {
+        ModelSection::RbcShear { .. } => {
+            let text = campaign_study_text(study, &data.x)?;
+            // `iuq rbc shear` processes (isolated, with a timeout, surviving the coordinator)
+            // when there is an iuq executable to start; else, on this machine, this process.
+            let in_process = check.local && iuq_campaign::worker::iuq_executable().is_none();
+            let model = in_process
+                .then(|| cell_model_runs(study, &data.x))
+                .transpose()?
+                .map(|m| SharedModel(Arc::new(m)));
+            (text, model)
+        }
+        ModelSection::Command { table, .. } => {
+            let table =
+                super::array_outputs::with_array_outputs(table.clone(), check.outputs_per_run());
+            let count = table
+                .get("outputs")
+                .and_then(Value::as_array)
+                .map_or(0, Vec::len);
+            check.check_outputs(count)?;
+            (model_campaign_text(study, table, &data.x)?, None)
+        }
+        ModelSection::Expression { outputs } => {
+            check.in_process_only("expression")?;
+            check.check_outputs(outputs.len())?;
+            let model = study.expression_model()?;
+            let mut description = vec!["expression".to_string()];
+            description.extend(outputs.iter().map(|(name, formula)| {
+                format!("{name} = {}", formula.as_str().unwrap_or_default())
+            }));
+            description.push(format!("inputs = {}", study.model_inputs().join(", ")));
+            let names: Vec<String> = outputs.keys().cloned().collect();
+            let table = in_process_model_table(description, &names);
+            (
+                model_campaign_text(study, table, &data.x)?,
+                Some(SharedModel(Arc::new(InProcess(model)))),
+            )
+        }
+        ModelSection::UmBridge(section) => {
+            check.in_process_only("umbridge")?;
+            let model = study.umbridge_model()?;
+            check.check_outputs(model.output_names().len())?;
+            let description = vec![
+                "umbridge".to_string(),
+                section.url.clone(),
+                section.name.clone(),
+                format!("inputs = {}", study.model_inputs().join(", ")),
+            ];
+            let names = model.output_names().to_vec();
+            let table = in_process_model_table(description, &names);
+            (
+                model_campaign_text(study, table, &data.x)?,
+                Some(SharedModel(Arc::new(InProcess(model)))),
+            )
+        }
+        ModelSection::Callable { description } => {
+            check.in_process_only("callable")?;
+            let Some(model) = callable else {
+                return Err(input_error(format!(
+                    "{file}: key `model.kind`: a model of kind `callable` is supplied by the program that runs the study (`iuq.calibrate` in Python); `iuq pipeline` cannot run it"
+                )));
+            };
+            let names: Vec<String> = if check.per_abscissa {
+                vec!["y".to_string()]
+            } else {
+                (0..n).map(|j| format!("y[{j}]")).collect()
+            };
+            let description = vec![
+                "callable".to_string(),
+                description.clone(),
+                format!("inputs = {}", study.model_inputs().join(", ")),
+            ];
+            let table = in_process_model_table(description, &names);
+            (model_campaign_text(study, table, &data.x)?, Some(model))
+        }
+        ModelSection::Absent => {
+            return Err(input_error(format!(
+                "{file}: section `[model]`: missing; the pipeline runs a model (kind = \"command\", \"expression\", \"umbridge\" or \"rbc-shear\")"
+            )));
+        }
+    })
+}
+
 impl ModelRuns {
     /// Open (create or resume) the campaign of `study`'s model at the data `data`, running at
     /// most `max_parallel` runs at once, with campaign progress sent to `progress`.
@@ -242,114 +383,14 @@ impl ModelRuns {
             .and_then(|t| t.get("kind"))
             .and_then(Value::as_str)
             .unwrap_or("local");
-        let local = executor_kind == "local";
         let per_abscissa = matches!(shape, RunShape::PerAbscissa { .. });
-        let outputs_per_run = if per_abscissa { 1 } else { n };
-        let check_outputs = |count: usize| -> Result<()> {
-            if count != outputs_per_run {
-                let expected = if per_abscissa {
-                    "1 (one run per parameter vector and data point returns the model's value at that point)".to_string()
-                } else {
-                    format!(
-                        "{n}, one per data point (output j is compared with data row j; or set `model.abscissa` to run the model once per data point)"
-                    )
-                };
-                return Err(input_error(format!(
-                    "{file}: key `model.outputs`: the model has {count} outputs, expected {expected}"
-                )));
-            }
-            Ok(())
+        let check = ModelCheck {
+            file: &file,
+            n,
+            per_abscissa,
+            local: executor_kind == "local",
         };
-        let in_process_only = |kind: &str| -> Result<()> {
-            if local {
-                Ok(())
-            } else {
-                Err(input_error(format!(
-                    "{file}: key `executor.kind`: a model of kind `{kind}` is evaluated in this process; use kind = \"local\""
-                )))
-            }
-        };
-        let (text, in_process): (String, Option<SharedModel>) = match &study.model {
-            ModelSection::RbcShear { .. } => {
-                let text = campaign_study_text(study, &data.x)?;
-                // `iuq rbc shear` processes (isolated, with a timeout, surviving the coordinator)
-                // when there is an iuq executable to start; else, on this machine, this process.
-                let in_process = local && iuq_campaign::worker::iuq_executable().is_none();
-                let model = in_process
-                    .then(|| cell_model_runs(study, &data.x))
-                    .transpose()?
-                    .map(|m| SharedModel(Arc::new(m)));
-                (text, model)
-            }
-            ModelSection::Command { table, .. } => {
-                let table =
-                    super::array_outputs::with_array_outputs(table.clone(), outputs_per_run);
-                let count = table
-                    .get("outputs")
-                    .and_then(Value::as_array)
-                    .map_or(0, Vec::len);
-                check_outputs(count)?;
-                (model_campaign_text(study, table, &data.x)?, None)
-            }
-            ModelSection::Expression { outputs } => {
-                in_process_only("expression")?;
-                check_outputs(outputs.len())?;
-                let model = study.expression_model()?;
-                let mut description = vec!["expression".to_string()];
-                description.extend(outputs.iter().map(|(name, formula)| {
-                    format!("{name} = {}", formula.as_str().unwrap_or_default())
-                }));
-                description.push(format!("inputs = {}", study.model_inputs().join(", ")));
-                let names: Vec<String> = outputs.keys().cloned().collect();
-                let table = in_process_model_table(description, &names);
-                (
-                    model_campaign_text(study, table, &data.x)?,
-                    Some(SharedModel(Arc::new(InProcess(model)))),
-                )
-            }
-            ModelSection::UmBridge(section) => {
-                in_process_only("umbridge")?;
-                let model = study.umbridge_model()?;
-                check_outputs(model.output_names().len())?;
-                let description = vec![
-                    "umbridge".to_string(),
-                    section.url.clone(),
-                    section.name.clone(),
-                    format!("inputs = {}", study.model_inputs().join(", ")),
-                ];
-                let names = model.output_names().to_vec();
-                let table = in_process_model_table(description, &names);
-                (
-                    model_campaign_text(study, table, &data.x)?,
-                    Some(SharedModel(Arc::new(InProcess(model)))),
-                )
-            }
-            ModelSection::Callable { description } => {
-                in_process_only("callable")?;
-                let Some(model) = callable else {
-                    return Err(input_error(format!(
-                        "{file}: key `model.kind`: a model of kind `callable` is supplied by the program that runs the study (`iuq.calibrate` in Python); `iuq pipeline` cannot run it"
-                    )));
-                };
-                let names: Vec<String> = if per_abscissa {
-                    vec!["y".to_string()]
-                } else {
-                    (0..n).map(|j| format!("y[{j}]")).collect()
-                };
-                let description = vec![
-                    "callable".to_string(),
-                    description.clone(),
-                    format!("inputs = {}", study.model_inputs().join(", ")),
-                ];
-                let table = in_process_model_table(description, &names);
-                (model_campaign_text(study, table, &data.x)?, Some(model))
-            }
-            ModelSection::Absent => {
-                return Err(input_error(format!(
-                    "{file}: section `[model]`: missing; the pipeline runs a model (kind = \"command\", \"expression\", \"umbridge\" or \"rbc-shear\")"
-                )));
-            }
-        };
+        let (text, in_process) = campaign_of_model(study, data, &check, callable)?;
         let campaign_study = CampaignStudy::parse(&text, &study.path).map_err(campaign_error)?;
         let (campaign, resumed) = open_campaign_with(
             campaign_study,

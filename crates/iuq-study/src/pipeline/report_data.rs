@@ -478,29 +478,7 @@ pub fn write_pipeline_report(
     let d = study.space.dimension();
     let labels = Labels::of(study, results.data);
     let stresses: Vec<f64> = results.point_runs.iter().map(|r| r.x).collect();
-    let mut posteriors = vec![posterior_result(
-        "GP surrogate",
-        results.gp_posterior,
-        results.emulator,
-        &stresses,
-        d,
-    )?];
-    if let Some(m) = results.model_posterior {
-        posteriors.push(posterior_result(
-            labels.model_source,
-            m,
-            results.emulator,
-            &stresses,
-            d,
-        )?);
-    }
-    let mut propagated_by_surrogate = 0;
-    if let Some(m) = results.reweighted {
-        let (result, from_surrogate) =
-            reweighted_result(labels.model_source, m, results.emulator, &stresses, d)?;
-        posteriors.push(result);
-        propagated_by_surrogate = from_surrogate;
-    }
+    let (posteriors, propagated_by_surrogate) = posterior_results(results, &labels, &stresses, d)?;
     let mut sensitivity = Vec::new();
     if let Some(m) = results.model_sobol {
         sensitivity.extend(sensitivity_results(m, "model runs", &stresses, &labels));
@@ -511,38 +489,7 @@ pub fn write_pipeline_report(
         &stresses,
         &labels,
     ));
-    let mut gp_diagnostics = Vec::new();
-    let per_output: &[iuq_gp::GaussianProcess] = results.emulator.per_output_gps().unwrap_or(&[]);
-    for ((r, gp), (q2, loo)) in results
-        .point_runs
-        .iter()
-        .zip(per_output)
-        .zip(results.gp_checks)
-    {
-        // The diagnostic plots test runs against predictions; without a test set (the default
-        // of adaptive studies) `pipeline.json` keeps the leave-one-out Q2.
-        if r.test_y.len() < 2 || !q2.is_finite() || !loo.is_finite() {
-            continue;
-        }
-        let prediction = gp.predict(&r.test_x)?;
-        let h = gp.hyperparameters();
-        let mut hyperparameters = vec![("signal variance".to_string(), h.signal_variance)];
-        let lengths = gp.length_scales_in_input_units();
-        for (name, l) in study.space.names().iter().zip(&lengths) {
-            hyperparameters.push((format!("length scale {name}"), *l));
-        }
-        hyperparameters.push(("noise variance".to_string(), h.noise_variance));
-        gp_diagnostics.push(GpDiagnostic {
-            output_label: labels.output(r.x),
-            x: r.x,
-            q2: *q2,
-            loo_q2: *loo,
-            simulated: r.test_y.clone(),
-            predicted: prediction.mean.clone(),
-            predicted_std: prediction.std(),
-            hyperparameters,
-        });
-    }
+    let gp_diagnostics = gp_diagnostics(results, &labels)?;
     let (counts, failed_reasons) = &results.campaign_runs;
     let mut failures: BTreeMap<String, usize> = BTreeMap::new();
     for reason in failed_reasons {
@@ -556,54 +503,7 @@ pub fn write_pipeline_report(
         .measurement_std
         .clone()
         .unwrap_or_else(|| vec![0.0; data.x.len()]);
-    let provenance = vec![
-        (
-            "iuq version".to_string(),
-            env!("CARGO_PKG_VERSION").to_string(),
-        ),
-        (
-            "command".to_string(),
-            std::env::args().collect::<Vec<_>>().join(" "),
-        ),
-        ("study file".to_string(), study.path.display().to_string()),
-        ("data".to_string(), data.file.display().to_string()),
-        (
-            "training design".to_string(),
-            format!(
-                "maximin LHS, {} runs per run group, seed {} + group index",
-                results.settings.training_runs, results.settings.training_seed
-            ),
-        ),
-        (
-            "test design".to_string(),
-            format!(
-                "scrambled Sobol', {} runs per run group, seed {}",
-                results.settings.test_runs, results.settings.test_seed
-            ),
-        ),
-        (
-            "sampler".to_string(),
-            format!(
-                "BASIS, N = {}, seed {}",
-                results.gp_posterior.run.state.samples.len(),
-                results.gp_posterior.run.state.settings.seed
-            ),
-        ),
-        (
-            "propagation".to_string(),
-            if results.reweighted.is_some() {
-                let mut text = "GP surrogate means at every sample of its posterior; the model's own runs at the members of the model's posterior and at its MAP".to_string();
-                if propagated_by_surrogate > 0 {
-                    text.push_str(&format!(
-                        " ({propagated_by_surrogate} of its values the surrogate's, where a run failed)"
-                    ));
-                }
-                text
-            } else {
-                "GP surrogate means at every posterior sample (both posteriors)".to_string()
-            },
-        ),
-    ];
+    let provenance = provenance(results, propagated_by_surrogate);
     if let Some(last) = stage_seconds.last_mut() {
         last.1 = started.elapsed().as_secs_f64();
     }
@@ -645,32 +545,7 @@ pub fn write_pipeline_report(
         model_posterior: results
             .reweighted
             .map(|m| model_posterior_report(m, results.gp_posterior, data, &labels)),
-        cell_portraits: results.portraits.map(|portraits| CellPortraits {
-            source: format!("the {} posterior's MAP", labels.model_source),
-            portraits: portraits
-                .iter()
-                .map(|p| CellPortrait {
-                    x: p.stress,
-                    elongation_index: p.elongation_index,
-                    trace: p.trace.clone(),
-                    window: p.window,
-                    outline: p.outline.clone(),
-                    ellipse: p.ellipse,
-                    side: p.side.clone(),
-                })
-                .collect(),
-            compared: results.compared_portraits.map(|compared| ComparedTraces {
-                source: "the GP surrogate posterior's MAP".to_string(),
-                traces: compared
-                    .iter()
-                    .map(|p| ElongationTrace {
-                        x: p.stress,
-                        elongation_index: p.elongation_index,
-                        trace: p.trace.clone(),
-                    })
-                    .collect(),
-            }),
-        }),
+        cell_portraits: cell_portraits(results, &labels),
         run_statistics: RunStatistics {
             runs,
             succeeded: counts.succeeded as usize,
@@ -694,6 +569,170 @@ pub fn write_pipeline_report(
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     Ok(summary["posteriors"].clone())
+}
+
+/// The posteriors of the report: the GP surrogate's, then the model's (BASIS on the model, or
+/// the surrogate's reweighted), each propagated to the outputs at `stresses`; with how many of
+/// the reweighted posterior's propagated values are the surrogate's (its failed runs).
+fn posterior_results(
+    results: &PipelineResults<'_>,
+    labels: &Labels,
+    stresses: &[f64],
+    d: usize,
+) -> Result<(Vec<PosteriorResult>, usize)> {
+    let mut posteriors = vec![posterior_result(
+        "GP surrogate",
+        results.gp_posterior,
+        results.emulator,
+        stresses,
+        d,
+    )?];
+    if let Some(m) = results.model_posterior {
+        posteriors.push(posterior_result(
+            labels.model_source,
+            m,
+            results.emulator,
+            stresses,
+            d,
+        )?);
+    }
+    let mut propagated_by_surrogate = 0;
+    if let Some(m) = results.reweighted {
+        let (result, from_surrogate) =
+            reweighted_result(labels.model_source, m, results.emulator, stresses, d)?;
+        posteriors.push(result);
+        propagated_by_surrogate = from_surrogate;
+    }
+    Ok((posteriors, propagated_by_surrogate))
+}
+
+/// Each data point's GP against its test runs, with its hyper-parameters in input units (only
+/// points with a test set of at least 2 runs and finite Q2s).
+fn gp_diagnostics(results: &PipelineResults<'_>, labels: &Labels) -> Result<Vec<GpDiagnostic>> {
+    let mut gp_diagnostics = Vec::new();
+    let per_output: &[iuq_gp::GaussianProcess] = results.emulator.per_output_gps().unwrap_or(&[]);
+    for ((r, gp), (q2, loo)) in results
+        .point_runs
+        .iter()
+        .zip(per_output)
+        .zip(results.gp_checks)
+    {
+        // The diagnostic plots test runs against predictions; without a test set (the default
+        // of adaptive studies) `pipeline.json` keeps the leave-one-out Q2.
+        if r.test_y.len() < 2 || !q2.is_finite() || !loo.is_finite() {
+            continue;
+        }
+        let prediction = gp.predict(&r.test_x)?;
+        let h = gp.hyperparameters();
+        let mut hyperparameters = vec![("signal variance".to_string(), h.signal_variance)];
+        let lengths = gp.length_scales_in_input_units();
+        for (name, l) in results.study.space.names().iter().zip(&lengths) {
+            hyperparameters.push((format!("length scale {name}"), *l));
+        }
+        hyperparameters.push(("noise variance".to_string(), h.noise_variance));
+        gp_diagnostics.push(GpDiagnostic {
+            output_label: labels.output(r.x),
+            x: r.x,
+            q2: *q2,
+            loo_q2: *loo,
+            simulated: r.test_y.clone(),
+            predicted: prediction.mean.clone(),
+            predicted_std: prediction.std(),
+            hyperparameters,
+        });
+    }
+    Ok(gp_diagnostics)
+}
+
+/// Where the report comes from: the version, the command, the files, the designs, the sampler
+/// and how the posteriors were propagated (`propagated_by_surrogate` of the reweighted
+/// posterior's values by the surrogate).
+fn provenance(
+    results: &PipelineResults<'_>,
+    propagated_by_surrogate: usize,
+) -> Vec<(String, String)> {
+    vec![
+        (
+            "iuq version".to_string(),
+            env!("CARGO_PKG_VERSION").to_string(),
+        ),
+        (
+            "command".to_string(),
+            std::env::args().collect::<Vec<_>>().join(" "),
+        ),
+        (
+            "study file".to_string(),
+            results.study.path.display().to_string(),
+        ),
+        ("data".to_string(), results.data.file.display().to_string()),
+        (
+            "training design".to_string(),
+            format!(
+                "maximin LHS, {} runs per run group, seed {} + group index",
+                results.settings.training_runs, results.settings.training_seed
+            ),
+        ),
+        (
+            "test design".to_string(),
+            format!(
+                "scrambled Sobol', {} runs per run group, seed {}",
+                results.settings.test_runs, results.settings.test_seed
+            ),
+        ),
+        (
+            "sampler".to_string(),
+            format!(
+                "BASIS, N = {}, seed {}",
+                results.gp_posterior.run.state.samples.len(),
+                results.gp_posterior.run.state.settings.seed
+            ),
+        ),
+        (
+            "propagation".to_string(),
+            if results.reweighted.is_some() {
+                let mut text = "GP surrogate means at every sample of its posterior; the model's own runs at the members of the model's posterior and at its MAP".to_string();
+                if propagated_by_surrogate > 0 {
+                    text.push_str(&format!(
+                        " ({propagated_by_surrogate} of its values the surrogate's, where a run failed)"
+                    ));
+                }
+                text
+            } else {
+                "GP surrogate means at every posterior sample (both posteriors)".to_string()
+            },
+        ),
+    ]
+}
+
+/// The cell's shape at the model posterior's MAP, per data point, with the elongation traces
+/// at the surrogate posterior's MAP to compare, when they were simulated.
+fn cell_portraits(results: &PipelineResults<'_>, labels: &Labels) -> Option<CellPortraits> {
+    results.portraits.map(|portraits| CellPortraits {
+        source: format!("the {} posterior's MAP", labels.model_source),
+        portraits: portraits
+            .iter()
+            .map(|p| CellPortrait {
+                x: p.stress,
+                elongation_index: p.elongation_index,
+                trace: p.trace.clone(),
+                window: p.window,
+                outline: p.outline.clone(),
+                ellipse: p.ellipse,
+                side: p.side.clone(),
+            })
+            .collect(),
+        compared: results.compared_portraits.map(|compared| ComparedTraces {
+            source: "the GP surrogate posterior's MAP".to_string(),
+            traces: compared
+                .iter()
+                .map(|p| ElongationTrace {
+                    x: p.stress,
+                    elongation_index: p.elongation_index,
+                    trace: p.trace.clone(),
+                })
+                .collect(),
+        }),
+    })
 }
 
 /// A number for JSON, `null` when not finite (a Q2 without test runs).
