@@ -6,7 +6,7 @@
 //! (it runs only the runs it asks for), but `iuq run` runs every pending run, and `iuq status`
 //! counts them. [`cancel_design`] sets such a design's pending runs to `cancelled` (a final
 //! status: nothing runs them); a design that asks for one of them again makes it pending again
-//! ([`revive_cancelled`], called whenever a design is recorded), so that cancelling never
+//! (`revive_cancelled`, called whenever a design is recorded), so that cancelling never
 //! costs a later request its result.
 
 use rusqlite::{Connection, OptionalExtension, params};

@@ -171,7 +171,7 @@ pub fn iuq_executable() -> Option<std::path::PathBuf> {
     (stem == SELF_PROGRAM).then_some(exe)
 }
 
-/// The command word that names the running iuq executable (see [`program`]).
+/// The command word that names the running iuq executable (see `program`).
 pub const SELF_PROGRAM: &str = "iuq";
 
 fn last_line(text: &str) -> Option<&str> {

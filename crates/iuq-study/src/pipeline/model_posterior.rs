@@ -1,7 +1,7 @@
 //! The model's own posterior, beside the surrogate's (`iuq pipeline --model-posterior`).
 //!
 //! By default (`[model_posterior] method = "reweight"`) the surrogate posterior's population is
-//! moved to the model's with the model's own outputs ([`iuq_basis::model_posterior`]):
+//! moved to the model's with the model's own outputs ([`iuq_basis::model_posterior()`]):
 //! `samples` members run through the model in one campaign batch, importance stages certified by
 //! Pareto-smoothed k̂, and delayed-acceptance bridges where one stage does not hold. Every model
 //! evaluation is a campaign run recorded under `model-posterior-<k>` (its k-th batch): runs the

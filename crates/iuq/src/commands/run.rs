@@ -18,7 +18,12 @@ use crate::report_output::emit;
 /// Arguments of `iuq run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// The study file (TOML) with a [model] of kind "command" or "batch-command" and a [design].
+    /// The study file (TOML) with a `[model]` of kind "command" or "batch-command" and a
+    /// `[design]`.
+    // The help text is given here: in a doc comment, rustdoc reads a bare [model] as a link.
+    #[arg(
+        help = "The study file (TOML) with a [model] of kind \"command\" or \"batch-command\" and a [design]"
+    )]
     pub study: PathBuf,
     /// Runs at once (overrides `executor.max_parallel`).
     #[arg(long)]
