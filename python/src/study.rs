@@ -12,9 +12,10 @@ use serde_json::{Value, json};
 
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
+use iuq_core::{Control, Observer};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
 use iuq_study::campaign_runs::{CampaignStatus, campaign_error, load_study, progress_line};
-use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
+use iuq_study::pipeline::{PipelineEvent, PipelineOptions};
 use iuq_study::posterior::{SamplingJob, build_posterior, sample_posterior};
 use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
@@ -74,8 +75,9 @@ impl ProgressObserver {
     }
 }
 
-impl PipelineObserver for ProgressObserver {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
+impl ProgressObserver {
+    /// The event as a line to the callback (if it says anything).
+    pub fn show(&mut self, event: &PipelineEvent<'_>) {
         match event {
             PipelineEvent::Message(line) => self.send(format!("pipeline: {line}")),
             PipelineEvent::CampaignProgress { label, progress } => {
@@ -95,7 +97,7 @@ impl PipelineObserver for ProgressObserver {
                     ));
                 }
             }
-            PipelineEvent::BasisFinished => {}
+            PipelineEvent::BasisFinished | PipelineEvent::Working => {}
         }
     }
 
@@ -110,6 +112,17 @@ impl PipelineObserver for ProgressObserver {
             self.interrupt = true;
         }
         self.interrupt
+    }
+}
+
+impl Observer<PipelineEvent<'_>> for ProgressObserver {
+    fn observe(&mut self, event: &PipelineEvent<'_>) -> Control {
+        self.show(event);
+        if self.interrupted() {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
     }
 }
 
@@ -342,9 +355,7 @@ impl NativeStudy {
                     stop_after: None,
                     marginals: true,
                 };
-                let sampled = sample_posterior(job, &posterior, settings, &mut |_| {
-                    iuq_basis::Control::Continue
-                })?;
+                let sampled = sample_posterior(job, &posterior, settings, &mut iuq_basis::Silent)?;
                 let stages = serde_json::to_string(&sampled.run.state.diagnostics)
                     .map_err(|e| StudyError::Failure(e.to_string()))?;
                 Ok::<_, StudyError>((sampled, stages))

@@ -70,10 +70,10 @@ use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
 use crate::model_posterior::{
-    Best, CorrectedLikelihood, MethodInputs, ModelPosteriorEvent, ModelPosteriorSettings,
-    ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection,
-    SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite, log_ratios,
-    outside_batch, recorded_spread_ratio,
+    Best, CorrectedLikelihood, EventObserver, MethodInputs, ModelPosteriorEvent,
+    ModelPosteriorSettings, ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE,
+    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
+    log_ratios, outside_batch, recorded_spread_ratio, report,
 };
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
@@ -262,7 +262,7 @@ pub(crate) fn noisy_estimate(
     first: Members,
     first_failures: usize,
     best: &mut Best,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut EventObserver<'_>,
 ) -> Result<NoisyEstimate> {
     let settings = inputs.settings;
     let s = first.theta.len();
@@ -314,7 +314,7 @@ pub(crate) fn noisy_estimate(
         )
     });
     if let Some(reason) = &not_corrected {
-        on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
+        report(observer, ModelPosteriorEvent::CorrectionNotMade(reason))?;
     }
     let (members, raw, correction, evaluations, failures) = match accepted {
         Some((candidate, proposal)) => {
@@ -336,7 +336,7 @@ pub(crate) fn noisy_estimate(
                 defensive_normal: matches!(candidate, Candidate::Normal(_)),
                 refused,
             };
-            on_event(ModelPosteriorEvent::Correction(&correction));
+            report(observer, ModelPosteriorEvent::Correction(&correction))?;
             let (members, raw, second_failures) =
                 second_batch(inputs.model, first, &candidate, proposal, best)?;
             (members, raw, Some(correction), s, second_failures)

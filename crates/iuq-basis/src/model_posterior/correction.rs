@@ -9,9 +9,9 @@ use iuq_core::random::stream;
 
 use super::bridge::MethodInputs;
 use super::{
-    BoxedCorrection, CorrectedLikelihood, ModelPosteriorEvent, NEARLY_EQUAL_CV, STREAM_BASE,
-    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
-    log_ratios, outside_batch, recorded_spread_ratio,
+    BoxedCorrection, CorrectedLikelihood, EventObserver, ModelPosteriorEvent, NEARLY_EQUAL_CV,
+    STREAM_BASE, SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate,
+    largest_finite, log_ratios, outside_batch, recorded_spread_ratio, report,
 };
 use crate::annealing::next_step;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
@@ -55,7 +55,7 @@ pub(super) fn correct_first_batch<'a>(
     population: &SurrogatePopulation<'_>,
     first: Members,
     threshold: f64,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut EventObserver<'_>,
 ) -> Result<FirstBatch<'a>> {
     let settings = inputs.settings;
     let n = population.samples.len();
@@ -79,7 +79,7 @@ pub(super) fn correct_first_batch<'a>(
     match accepted {
         Some((mut record, candidate, state)) => {
             record.refused = refused;
-            on_event(ModelPosteriorEvent::Correction(&record));
+            report(observer, ModelPosteriorEvent::Correction(&record))?;
             let corrected = second_batch(inputs, population, first, record, candidate, state)?;
             Ok(FirstBatch::Corrected(Box::new(corrected)))
         }
@@ -88,7 +88,7 @@ pub(super) fn correct_first_batch<'a>(
                 "{}; the stages go on from the first batch",
                 refused.join("; ")
             );
-            on_event(ModelPosteriorEvent::CorrectionNotMade(&reason));
+            report(observer, ModelPosteriorEvent::CorrectionNotMade(&reason))?;
             Ok(FirstBatch::Kept {
                 not_corrected: Some(reason),
             })

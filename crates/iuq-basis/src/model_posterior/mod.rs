@@ -99,6 +99,7 @@ use crate::pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
 };
 use crate::pseudo_marginal::{Members, noisy_estimate};
+use crate::sampler::{Control, Observer};
 use crate::spread_ratio::{widest_spread_ratio, within_proposal_spread};
 
 /// A stage's weights whose CV is at most this are certified whatever their k̂: so nearly equal
@@ -578,8 +579,8 @@ pub fn selected_members(population_size: usize, settings: &ModelPosteriorSetting
     )
 }
 
-/// What [`model_posterior`] reports as it goes, for progress lines: a user watching a batch of
-/// hundreds of model runs learns what the batch is for before it starts.
+/// What [`model_posterior`] reports to its [`Observer`] as it goes, for progress lines: a user
+/// watching a batch of hundreds of model runs learns what the batch is for before it starts.
 #[derive(Debug, Clone, Copy)]
 pub enum ModelPosteriorEvent<'a> {
     /// The surrogate was corrected (or, for a noisy model, tempered); the batch at that
@@ -592,16 +593,33 @@ pub enum ModelPosteriorEvent<'a> {
     Stage(&'a ModelPosteriorStage),
 }
 
+/// The observer of [`model_posterior`]'s events, inside the method.
+pub(crate) type EventObserver<'o> = dyn for<'a> Observer<ModelPosteriorEvent<'a>> + 'o;
+
+/// Tell `observer` of `event` where more work follows it: its [`Control::Stop`] ends the
+/// method with [`BasisError::Interrupted`].
+pub(crate) fn report(
+    observer: &mut EventObserver<'_>,
+    event: ModelPosteriorEvent<'_>,
+) -> Result<()> {
+    match observer.observe(&event) {
+        Control::Continue => Ok(()),
+        Control::Stop => Err(BasisError::Interrupted),
+    }
+}
+
 /// The model's posterior from the surrogate's `population` (see the module documentation):
 /// `surrogate` and `model` are the two log-likelihoods of the same parameters on `space`;
-/// `on_event` sees each correction before its batch and every stage as it ends.
+/// `observer` sees each correction before its batch and every stage as it ends; its
+/// [`Control::Stop`] ends the method with [`BasisError::Interrupted`] (unless the event was its
+/// last stage).
 pub fn model_posterior(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
     surrogate: &dyn LogLikelihood,
     model: &dyn LogLikelihood,
     settings: &ModelPosteriorSettings,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut dyn for<'a> Observer<ModelPosteriorEvent<'a>>,
 ) -> Result<ModelPosterior> {
     settings.check()?;
     check_inputs(space, &population, surrogate, model)?;
@@ -620,7 +638,7 @@ pub fn model_posterior(
             settings,
             widths: &widths,
         };
-        if let Some((likelihood, both)) = state.correct(&inputs, &population, on_event)? {
+        if let Some((likelihood, both)) = state.correct(&inputs, &population, observer)? {
             corrected_holder = likelihood;
             surrogate = &corrected_holder;
             mixture = Some(both);
@@ -637,13 +655,13 @@ pub fn model_posterior(
         widths: &widths,
     };
     let weights = if settings.pseudo_marginal {
-        state.pseudo_marginal(&inputs, population, on_event)?
+        state.pseudo_marginal(&inputs, population, observer)?
     } else if let Some(certified) =
         mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, state.failures))
     {
-        state.adopt_mixture(certified, on_event)
+        state.adopt_mixture(certified, observer)
     } else {
-        state.temper(&inputs, on_event)?
+        state.temper(&inputs, observer)?
     };
     state.into_posterior(space, settings, weights)
 }
@@ -728,7 +746,7 @@ impl MethodState {
         &mut self,
         inputs: &MethodInputs<'a>,
         population: &SurrogatePopulation<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<Option<(CorrectedLikelihood<'a, BoxedCorrection>, BatchMixture)>> {
         let s = inputs.settings.samples.min(population.samples.len());
         let first = Members {
@@ -737,7 +755,7 @@ impl MethodState {
             model: self.members.model.clone(),
             prior: self.members.prior.clone(),
         };
-        match correct_first_batch(inputs, population, first, self.threshold, on_event)? {
+        match correct_first_batch(inputs, population, first, self.threshold, observer)? {
             FirstBatch::Kept { not_corrected } => {
                 self.correction_not_made = not_corrected;
                 Ok(None)
@@ -782,7 +800,7 @@ impl MethodState {
         &mut self,
         inputs: &MethodInputs<'_>,
         population: SurrogatePopulation<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<TemperedWeights> {
         let first = self.take_members();
         let estimate = noisy_estimate(
@@ -791,9 +809,10 @@ impl MethodState {
             first,
             self.failures,
             &mut self.best,
-            on_event,
+            observer,
         )?;
-        on_event(ModelPosteriorEvent::Stage(&estimate.stage));
+        // The method's last stage: nothing is left to stop.
+        observer.observe(&ModelPosteriorEvent::Stage(&estimate.stage));
         self.stages.push(estimate.stage);
         self.members = estimate.members;
         self.ancestor = (0..self.members.theta.len()).collect();
@@ -817,12 +836,13 @@ impl MethodState {
     fn adopt_mixture(
         &mut self,
         (members, raw, smoothing, stage): (Members, Vec<f64>, ParetoSmoothing, ModelPosteriorStage),
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> TemperedWeights {
         self.log_evidence_ratio = log_evidence_increment(&raw, 1.0, largest_finite(&raw));
         self.threshold = pareto_k_threshold(raw.len());
         self.both_batches = true;
-        on_event(ModelPosteriorEvent::Stage(&stage));
+        // The method's last stage: nothing is left to stop.
+        observer.observe(&ModelPosteriorEvent::Stage(&stage));
         self.stages.push(stage);
         self.members = members;
         self.ancestor = (0..self.members.theta.len()).collect();
@@ -838,7 +858,7 @@ impl MethodState {
     fn temper(
         &mut self,
         bridge: &MethodInputs<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<TemperedWeights> {
         let mut tempering = Tempering {
             members: self.take_members(),
@@ -853,7 +873,7 @@ impl MethodState {
             best: std::mem::take(&mut self.best),
         };
         let weights = loop {
-            if let Some(done) = tempering.step(bridge, self.threshold, on_event)? {
+            if let Some(done) = tempering.step(bridge, self.threshold, observer)? {
                 break done;
             }
         };
@@ -1034,7 +1054,7 @@ impl Tempering {
         &mut self,
         bridge: &MethodInputs<'_>,
         threshold: f64,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<Option<TemperedWeights>> {
         let settings = bridge.settings;
         let s = self.members.theta.len();
@@ -1087,7 +1107,7 @@ impl Tempering {
             confirm_acceptance: self.bridge_rates.1,
             spread_ratio: recorded_spread_ratio(&self.members.theta, &smoothing.log_weights, 1),
         };
-        on_event(ModelPosteriorEvent::Stage(&record));
+        let control = observer.observe(&ModelPosteriorEvent::Stage(&record));
         self.stages.push(record);
         let certified_step = holds(&smoothing, step);
         if reaches_one && certified_step {
@@ -1110,6 +1130,10 @@ impl Tempering {
                 ModelPosteriorStop::StepBelowMinimum { beta: self.beta }
             };
             return Ok(Some((rest, last.log_weights, last.pareto_k, stop)));
+        }
+        // A bridge follows: the observer may stop the method here.
+        if control == Control::Stop {
+            return Err(BasisError::Interrupted);
         }
         self.log_evidence_ratio += log_evidence_increment(&r, step, max_r);
         self.beta = next_beta;

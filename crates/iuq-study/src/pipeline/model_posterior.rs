@@ -26,7 +26,7 @@ use iuq_basis::{
     selected_members,
 };
 use iuq_campaign::study_section::StudySection;
-use iuq_core::{Model, Outcome};
+use iuq_core::{Control, Model, Outcome};
 
 use super::model_runs::ModelRuns;
 use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood, bits};
@@ -386,16 +386,21 @@ pub fn reweight_to_model(
         surrogate_posterior.likelihood.as_ref(),
         model_likelihood,
         settings,
-        &mut |event| match event {
-            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
-            ModelPosteriorEvent::Correction(correction) => message(correction_line(
-                correction,
-                groups,
-                replicated_likelihood.is_some(),
-            )),
-            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
-                "model posterior: no correction of the surrogate: {reason}"
-            )),
+        // Progress lines only: a Ctrl-C stops the method through its model runs (the
+        // campaign's interrupt).
+        &mut |event: &ModelPosteriorEvent<'_>| {
+            match event {
+                ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
+                ModelPosteriorEvent::Correction(correction) => message(correction_line(
+                    correction,
+                    groups,
+                    replicated_likelihood.is_some(),
+                )),
+                ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
+                    "model posterior: no correction of the surrogate: {reason}"
+                )),
+            }
+            Control::Continue
         },
     )
     .map_err(method_error)?;
