@@ -143,7 +143,7 @@ pub struct BasisState {
     /// The population θ_i, N vectors.
     pub samples: Vec<Vec<f64>>,
     /// ln f(D | θ_i); −∞ (`null` in JSON) for failed members, which only stage 0 can hold.
-    #[serde(with = "crate::checkpoint::negative_infinity_as_null")]
+    #[serde(with = "crate::json_numbers::negative_infinity_as_null")]
     pub log_likelihood: Vec<f64>,
     /// ln π(θ_i).
     pub log_prior: Vec<f64>,

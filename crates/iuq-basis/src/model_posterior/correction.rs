@@ -8,18 +8,20 @@
 use iuq_core::random::stream;
 
 use super::bridge::MethodInputs;
-use super::{
-    BoxedCorrection, CorrectedLikelihood, EventObserver, ModelPosteriorEvent, NEARLY_EQUAL_CV,
-    STREAM_BASE, SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate,
-    largest_finite, log_ratios, outside_batch, recorded_spread_ratio, report,
+use super::members::{
+    BoxedCorrection, CorrectedLikelihood, Members, coefficient_of_variation, evaluate,
+    largest_finite, log_ratios, outside_batch, recorded_spread_ratio,
 };
+use super::records::{
+    EventObserver, ModelPosteriorEvent, SurrogateCorrection, SurrogatePopulation, report,
+};
+use super::settings::{NEARLY_EQUAL_CV, STREAM_BASE};
 use crate::annealing::next_step;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::Result;
 use crate::member_selection::nested_selection;
 use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio};
 use crate::pareto_smoothing::pareto_smooth;
-use crate::pseudo_marginal::Members;
 use crate::quadratic_regression::QuadraticFit;
 use crate::sampler::{Basis, BasisState, Silent};
 use crate::settings::{BasisSettings, CheckedSettings};
