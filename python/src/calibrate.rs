@@ -24,7 +24,7 @@ use iuq_core::{Control, Observer};
 use iuq_study::pipeline::PipelineEvent;
 
 use crate::callable::PyModel;
-use crate::study::ProgressObserver;
+use crate::progress::ProgressObserver;
 
 /// One run waiting for the caller's thread.
 struct Request {

@@ -18,6 +18,7 @@ mod callable;
 mod design;
 mod errors;
 mod gp;
+mod progress;
 mod sensitivity;
 mod study;
 

@@ -16,12 +16,13 @@ use iuq_core::Expression;
 
 use crate::atomic_file::write_atomically;
 use crate::decoder::{OutputDecoder, check_finite, parse_cell, read_csv_text};
+use crate::duration::check_duration;
 use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, host_name, unix_now};
 use crate::run_directory::{
     RESULT_FILE, STATUS_FILE, STDERR_FILE, STDOUT_FILE, Task, prepare, run_values,
 };
-use crate::study::{CommandKind, CommandSpec, check_duration};
+use crate::study::{CommandKind, CommandSpec};
 use crate::supervised_process::{OutputLogs, run_supervised, signal_name};
 use crate::template::format_value;
 

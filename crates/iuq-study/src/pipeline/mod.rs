@@ -34,6 +34,7 @@
 pub mod adaptive;
 mod adaptive_report;
 mod array_outputs;
+mod campaign_text;
 pub mod cell_model_campaign;
 pub mod cell_portraits;
 pub mod emulator;

@@ -11,7 +11,8 @@ use serde_json::{Value, json};
 
 use iuq_campaign::design::design_points;
 use iuq_campaign::{Campaign, Progress, ResumeSummary, StatusCounts};
-use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign, progress_line};
+use iuq_study::campaign_runs::{campaign_error, open_campaign, progress_line};
+use iuq_study::campaign_study::load_study;
 
 use crate::report_output::emit;
 
