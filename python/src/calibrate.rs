@@ -5,8 +5,8 @@
 //! one run each. Python code, though, is best run on the thread that called `calibrate` (the
 //! main thread): only there does a Ctrl-C raise `KeyboardInterrupt`, also inside the user's
 //! function. So each worker hands its run to that thread ([`Request`]) and waits; the caller's
-//! thread, which the pipeline asks every few milliseconds whether to stop
-//! ([`PipelineObserver::interrupted`]), evaluates every run waiting in one call of the function
+//! thread, which the pipeline asks every few milliseconds whether to stop (its observer, with
+//! [`PipelineEvent::Working`] when nothing else happens), evaluates every run waiting in one call of the function
 //! (a batch of up to `max_parallel` rows) and answers each worker.
 //!
 //! A `KeyboardInterrupt` (in the function or between calls), or an exception of the function
@@ -20,10 +20,11 @@ use pyo3::prelude::*;
 
 use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};
 use iuq_core::Model;
-use iuq_study::pipeline::{PipelineEvent, PipelineObserver};
+use iuq_core::{Control, Observer};
+use iuq_study::pipeline::PipelineEvent;
 
 use crate::callable::PyModel;
-use crate::study::ProgressObserver;
+use crate::progress::ProgressObserver;
 
 /// One run waiting for the caller's thread.
 struct Request {
@@ -141,18 +142,21 @@ impl CalibrationObserver {
     }
 }
 
-impl PipelineObserver for CalibrationObserver {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
-        self.progress.event(event);
-    }
-
-    fn interrupted(&mut self) -> bool {
+impl Observer<PipelineEvent<'_>> for CalibrationObserver {
+    /// The event as a progress line; then the waiting runs are evaluated, and a Ctrl-C or a
+    /// failed model stops the pipeline.
+    fn observe(&mut self, event: &PipelineEvent<'_>) -> Control {
+        self.progress.show(event);
         self.evaluate_waiting();
         if !self.stopped
             && let Err(e) = Python::with_gil(|py| py.check_signals())
         {
             self.stop(Some(e));
         }
-        self.stopped
+        if self.stopped {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
     }
 }

@@ -5,7 +5,7 @@
 //! name them in errors, and wrap the results in documented objects. Every computation calls the
 //! same library functions as the `iuq` command line, so a result for a given seed equals the
 //! CLI's bit for bit. Rust work runs with the GIL released; a Python callable (a model or a
-//! log-likelihood) is called with the GIL held, one 2-D array per batch (see [`callable`]).
+//! log-likelihood) is called with the GIL held, one 2-D array per batch (see the module `callable`).
 
 #![warn(missing_docs)]
 
@@ -18,6 +18,7 @@ mod callable;
 mod design;
 mod errors;
 mod gp;
+mod progress;
 mod sensitivity;
 mod study;
 

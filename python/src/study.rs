@@ -13,8 +13,9 @@ use serde_json::{Value, json};
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions, analyse};
-use iuq_study::campaign_runs::{CampaignStatus, campaign_error, load_study, progress_line};
-use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
+use iuq_study::campaign_runs::{CampaignStatus, campaign_error};
+use iuq_study::campaign_study::load_study;
+use iuq_study::pipeline::PipelineOptions;
 use iuq_study::posterior::{SamplingJob, build_posterior, sample_posterior};
 use iuq_study::sampler_section::{SamplerOverrides, parse_sampler};
 use iuq_study::table_io::write_atomically;
@@ -23,6 +24,7 @@ use iuq_study::{Study, StudyError};
 use crate::calibrate::forwarded_models;
 use crate::callable::{OnError, PyModel};
 use crate::errors::{bad_input, failure, study_error};
+use crate::progress::ProgressObserver;
 
 /// How long a Ctrl-C waits for the pipeline to reach its next check before the
 /// `KeyboardInterrupt` is raised anyway (the pipeline then stops on its own, and the next call
@@ -34,83 +36,6 @@ const INTERRUPT_GRACE: std::time::Duration = std::time::Duration::from_millis(40
 #[pyclass(name = "Study", module = "iuq._native", frozen)]
 pub struct NativeStudy {
     study: Study,
-}
-
-/// Forwards the pipeline's events to a Python callable as text lines (`None`: quiet).
-pub struct ProgressObserver {
-    callback: Option<Py<PyAny>>,
-    error: Option<PyErr>,
-    /// A Ctrl-C was seen.
-    interrupt: bool,
-}
-
-impl ProgressObserver {
-    /// Lines to `callback` (`None`: quiet).
-    pub fn new(callback: Option<Py<PyAny>>) -> Self {
-        Self {
-            callback,
-            error: None,
-            interrupt: false,
-        }
-    }
-
-    /// The exception the callback raised, if any (taken).
-    pub fn take_error(&mut self) -> Option<PyErr> {
-        self.error.take()
-    }
-
-    fn send(&mut self, line: String) {
-        let Some(callback) = &self.callback else {
-            return;
-        };
-        if self.error.is_some() {
-            return;
-        }
-        Python::with_gil(|py| {
-            if let Err(e) = callback.bind(py).call1((line,)) {
-                self.error = Some(e);
-            }
-        });
-    }
-}
-
-impl PipelineObserver for ProgressObserver {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
-        match event {
-            PipelineEvent::Message(line) => self.send(format!("pipeline: {line}")),
-            PipelineEvent::CampaignProgress { label, progress } => {
-                self.send(format!(
-                    "pipeline: {label}: {}",
-                    progress_line("runs", progress)
-                ));
-            }
-            PipelineEvent::BasisStarted { label } => {
-                self.send(format!("basis: sampling the posterior on the {label}"));
-            }
-            PipelineEvent::BasisStage(state) => {
-                if let Some(d) = state.diagnostics.last() {
-                    self.send(format!(
-                        "basis: stage {}: p = {}, ln Z so far {}, evaluations {}",
-                        d.stage, d.exponent, d.log_evidence, state.evaluations
-                    ));
-                }
-            }
-            PipelineEvent::BasisFinished => {}
-        }
-    }
-
-    /// A Ctrl-C (a `KeyboardInterrupt` pending on this thread) stops the pipeline; the
-    /// exception is raised when it has stopped.
-    fn interrupted(&mut self) -> bool {
-        if self.error.is_some() {
-            return self.interrupt;
-        }
-        if let Err(e) = Python::with_gil(|py| py.check_signals()) {
-            self.error = Some(e);
-            self.interrupt = true;
-        }
-        self.interrupt
-    }
 }
 
 fn to_json_text(value: &Value) -> PyResult<String> {
@@ -179,7 +104,7 @@ impl NativeStudy {
         let mut observer = ProgressObserver::new(progress);
         let result =
             py.allow_threads(|| iuq_study::pipeline::run(&self.study, &options, &mut observer));
-        if let Some(error) = observer.error.take() {
+        if let Some(error) = observer.take_error() {
             return Err(error);
         }
         let outcome = result.map_err(study_error)?;
@@ -342,9 +267,7 @@ impl NativeStudy {
                     stop_after: None,
                     marginals: true,
                 };
-                let sampled = sample_posterior(job, &posterior, settings, &mut |_| {
-                    iuq_basis::Control::Continue
-                })?;
+                let sampled = sample_posterior(job, &posterior, settings, &mut iuq_basis::Silent)?;
                 let stages = serde_json::to_string(&sampled.run.state.diagnostics)
                     .map_err(|e| StudyError::Failure(e.to_string()))?;
                 Ok::<_, StudyError>((sampled, stages))

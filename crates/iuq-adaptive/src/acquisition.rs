@@ -5,11 +5,11 @@
 //! ℓ = −(y − f)²/(2s²) − ½ ln(2πs²) is a random variable; with r = y − μ and e = f − μ ~ N(0, v),
 //! (y − f)² = (r − e)² has variance 4r²v + 2v², so
 //!
-//! Var[ℓ] = (r²·v + v²/2)/s⁴.
+//! Var\[ℓ\] = (r²·v + v²/2)/s⁴.
 //!
 //! Summed over independent GPs it is the variance of the whole log-likelihood. What moves the
 //! posterior, though, is the error of the likelihood L = e^ℓ itself: for a small spread,
-//! Var[L] ≈ L²·Var[ℓ]. The acquisition of a candidate θ is therefore
+//! Var\[L\] ≈ L²·Var\[ℓ\]. The acquisition of a candidate θ is therefore
 //!
 //! a(θ) = p_answer(θ) · (L̄(θ)π(θ) / max_θ' L̄(θ')π(θ'))² · Σ_t Var[ℓ_t(θ)],
 //!

@@ -255,7 +255,7 @@ impl ConvergenceCriterion {
     }
 }
 
-/// u = the posterior mean of √(Σ_t Var[ℓ_t]): `variances[i]` is the summed log-likelihood
+/// u = the posterior mean of √(Σ_t Var\[ℓ_t\]): `variances[i]` is the summed log-likelihood
 /// variance at distinct posterior sample i, which stands for `copies[i]` samples of the
 /// population. Zero for no samples.
 pub fn surrogate_log_likelihood_std(variances: &[f64], copies: &[f64]) -> f64 {

@@ -7,10 +7,10 @@
 //! 1. measure the round: fit the surrogate on every run so far, sample its posterior with R
 //!    replicate samplers as [`EngineState::sampling`] says, and measure the surrogate's error
 //!    ε ([`crate::moment_error`]), u ([`crate::acquisition`]) and the check of the sampler
-//!    ([`crate::sampler_agreement`]) — a [`RoundReading`];
+//!    ([`mod@crate::sampler_agreement`]) — a [`RoundReading`];
 //! 2. [`AdaptiveEngine::judge`] the reading against the previous round: the shift of the moments
 //!    and, with [`StoppingRule::Distribution`], the distance between the two posteriors
-//!    ([`crate::posterior_distance`]), each beyond the samplers' noise, and ε
+//!    ([`mod@crate::posterior_distance`]), each beyond the samplers' noise, and ε
 //!    ([`crate::convergence`]); the judgement says whether to stop and why;
 //! 3. where it does not stop, choose the round's runs ([`crate::batch`],
 //!    [`crate::moment_acquisition`]) and make them;
@@ -83,7 +83,7 @@ pub enum MoreSamples {
 #[serde(rename_all = "kebab-case")]
 pub enum StoppingRule {
     /// `"distribution"`: the moments' shift and the sliced distance between the two posteriors
-    /// ([`crate::posterior_distance`]), both beyond the samplers' noise. A round whose previous
+    /// ([`mod@crate::posterior_distance`]), both beyond the samplers' noise. A round whose previous
     /// round's samples are unknown (read back from a store that did not record them) is judged
     /// on its moments, and says so ([`Judgement::distance`] is `None`).
     Distribution,

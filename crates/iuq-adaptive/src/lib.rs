@@ -25,9 +25,9 @@
 //! | [`moment_acquisition`] | the batch that most shrinks the first-order error of the posterior moments |
 //! | [`engine`] | the loop's state and step: judge a round, decide the next (argmin's shape) |
 //! | [`convergence`] | the stopping rule: posterior shift beyond the sampler's noise, surrogate error |
-//! | [`posterior_distance`] | the sliced Wasserstein distance between two rounds' posteriors, beyond noise |
+//! | [`mod@posterior_distance`] | the sliced Wasserstein distance between two rounds' posteriors, beyond noise |
 //! | [`moment_error`] | the error ε of the posterior moments under the GPs' error |
-//! | [`sampler_agreement`] | whether the posterior depends on how it was sampled (replicates with stronger mixing) |
+//! | [`mod@sampler_agreement`] | whether the posterior depends on how it was sampled (replicates with stronger mixing) |
 //! | [`extrapolation`] | the share of posterior samples far from every run, in length scales |
 //! | [`error`] | the crate's error type [`AdaptiveError`] |
 //!

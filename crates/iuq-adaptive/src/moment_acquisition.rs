@@ -9,8 +9,8 @@
 //! over the candidates θ_i (the distinct posterior samples), with g_{M,i} = w_i (θ_ik − μ_k)/σ_k
 //! for the mean of parameter k and w_i ((θ_ik − μ_k)² − σ_k²)/(2σ_k²) for its std, w_i the
 //! posterior mass candidate i stands for (its copies in the population). With δm_t ~ GP(0, C_t),
-//! Var[δM] = Σ_t u_{M,t}ᵀ C_t u_{M,t}. A run at θ_c, taken by the next round's GP with its noise
-//! σ_t², lowers C_t by C_t[·, c] C_t[c, ·]/(C_t[c, c] + σ_t²), so it lowers Var[δM] by
+//! Var\[δM\] = Σ_t u_{M,t}ᵀ C_t u_{M,t}. A run at θ_c, taken by the next round's GP with its noise
+//! σ_t², lowers C_t by C_t[·, c] C_t[c, ·]/(C_t[c, c] + σ_t²), so it lowers Var\[δM\] by
 //!
 //! Δ_M(c) = Σ_t (u_{M,t}ᵀ C_t[·, c])² / (C_t[c, c] + σ_t²),
 //!
@@ -318,7 +318,7 @@ mod tests {
         GaussianProcess::fit(&x, &y, &FitOptions::default().check().unwrap()).unwrap()
     }
 
-    /// Σ_M Var[δM] by the crate's independent first-order form, for latent covariance `c`.
+    /// Σ_M Var\[δM\] by the crate's independent first-order form, for latent covariance `c`.
     fn summed_variance(
         theta: &[Vec<f64>],
         mass: &[f64],

@@ -16,9 +16,8 @@
 //! model's is this when its k̂ holds, and the stages from the corrected batch otherwise
 //! ([`crate::model_posterior`](mod@crate::model_posterior)).
 
-use crate::model_posterior::log_ratios;
+use crate::model_posterior::members::{Members, log_ratios};
 use crate::pareto_smoothing::log_sum_exp;
-use crate::pseudo_marginal::Members;
 
 /// ln(e^a + e^b) without overflow.
 pub(crate) fn log_add_exp(a: f64, b: f64) -> f64 {

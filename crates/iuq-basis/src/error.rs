@@ -64,9 +64,15 @@ pub enum BasisError {
     /// A checkpoint written by a run with other settings or parameters than the resuming one.
     #[error("checkpoint does not match this run: {0}")]
     CheckpointMismatch(String),
-    /// An observer asked to abort with an error (e.g. a checkpoint could not be written).
+    /// An observer's own work failed (e.g. a checkpoint could not be written): it stopped the
+    /// run, and its owner reports this error.
     #[error("observer: {0}")]
     Observer(String),
+    /// The model posterior's observer answered [`iuq_core::Control::Stop`] where more work
+    /// was to follow ([`crate::model_posterior()`]); the BASIS sampler instead ends a stopped
+    /// run with [`crate::StopReason::Interrupted`].
+    #[error("interrupted by its observer before the model posterior was done")]
+    Interrupted,
     /// An error of the core types (priors, expressions, statistics, KDE).
     #[error(transparent)]
     Core(#[from] CoreError),

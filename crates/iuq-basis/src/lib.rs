@@ -52,6 +52,7 @@ pub mod defensive_normal;
 pub mod defensive_tempering;
 pub mod diagnostics;
 pub mod error;
+mod json_numbers;
 pub mod likelihood;
 pub mod member_selection;
 pub mod model_posterior;

@@ -69,12 +69,16 @@ use crate::defensive_tempering::{TemperedLikelihood, defensive_tempering, temper
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::member_selection::nested_selection;
-use crate::model_posterior::{
-    Best, CorrectedLikelihood, MethodInputs, ModelPosteriorEvent, ModelPosteriorSettings,
-    ModelPosteriorStage, ModelPosteriorStop, NEARLY_EQUAL_CV, STREAM_BASE, SurrogateCorrection,
-    SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite, log_ratios,
-    outside_batch, recorded_spread_ratio,
+use crate::model_posterior::bridge::MethodInputs;
+use crate::model_posterior::members::{
+    Best, CorrectedLikelihood, Members, coefficient_of_variation, evaluate, largest_finite,
+    log_ratios, outside_batch, recorded_spread_ratio,
 };
+use crate::model_posterior::records::{
+    EventObserver, ModelPosteriorEvent, ModelPosteriorStage, ModelPosteriorStop,
+    SurrogateCorrection, SurrogatePopulation, report,
+};
+use crate::model_posterior::settings::{ModelPosteriorSettings, NEARLY_EQUAL_CV, STREAM_BASE};
 use crate::moment_matching::{
     DEFENSIVE_WIDENING, GaussianLogRatio, ProposalMismatch, proposal_mismatch,
 };
@@ -82,14 +86,6 @@ use crate::pareto_smoothing::{ParetoSmoothing, pareto_k_threshold, pareto_smooth
 use crate::sampler::{Basis, Silent};
 use crate::settings::BasisSettings;
 use crate::spread_ratio::within_proposal_spread;
-
-/// Members with their surrogate and model log-likelihoods and log-priors.
-pub(crate) struct Members {
-    pub(crate) theta: Vec<Vec<f64>>,
-    pub(crate) surrogate: Vec<f64>,
-    pub(crate) model: Vec<f64>,
-    pub(crate) prior: Vec<f64>,
-}
 
 /// The weighted members of the pseudo-marginal estimate and how they were reached.
 pub(crate) struct NoisyEstimate {
@@ -262,7 +258,7 @@ pub(crate) fn noisy_estimate(
     first: Members,
     first_failures: usize,
     best: &mut Best,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut EventObserver<'_>,
 ) -> Result<NoisyEstimate> {
     let settings = inputs.settings;
     let s = first.theta.len();
@@ -314,7 +310,7 @@ pub(crate) fn noisy_estimate(
         )
     });
     if let Some(reason) = &not_corrected {
-        on_event(ModelPosteriorEvent::CorrectionNotMade(reason));
+        report(observer, ModelPosteriorEvent::CorrectionNotMade(reason))?;
     }
     let (members, raw, correction, evaluations, failures) = match accepted {
         Some((candidate, proposal)) => {
@@ -336,7 +332,7 @@ pub(crate) fn noisy_estimate(
                 defensive_normal: matches!(candidate, Candidate::Normal(_)),
                 refused,
             };
-            on_event(ModelPosteriorEvent::Correction(&correction));
+            report(observer, ModelPosteriorEvent::Correction(&correction))?;
             let (members, raw, second_failures) =
                 second_batch(inputs.model, first, &candidate, proposal, best)?;
             (members, raw, Some(correction), s, second_failures)

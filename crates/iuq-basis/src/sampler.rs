@@ -143,7 +143,7 @@ pub struct BasisState {
     /// The population θ_i, N vectors.
     pub samples: Vec<Vec<f64>>,
     /// ln f(D | θ_i); −∞ (`null` in JSON) for failed members, which only stage 0 can hold.
-    #[serde(with = "crate::checkpoint::negative_infinity_as_null")]
+    #[serde(with = "crate::json_numbers::negative_infinity_as_null")]
     pub log_likelihood: Vec<f64>,
     /// ln π(θ_i).
     pub log_prior: Vec<f64>,
@@ -186,26 +186,21 @@ impl BasisState {
 /// ends the run with [`StopReason::Interrupted`] (unless it had finished anyway).
 pub use iuq_core::Control;
 
-/// Called with the state after every stage (stage 0 included) — to report progress, write a
-/// checkpoint, or stop the run (in the manner of argmin's observers).
-pub trait Observer {
-    /// Look at the state after a stage. An error aborts the run with that error.
-    fn observe(&mut self, state: &BasisState) -> Result<Control>;
-}
-
-impl<F: FnMut(&BasisState) -> Result<Control>> Observer for F {
-    fn observe(&mut self, state: &BasisState) -> Result<Control> {
-        self(state)
-    }
-}
+/// The observer of a run is iuq's one observer shape ([`iuq_core::observer`]): an
+/// `Observer<BasisState>` is called with the state after every stage (stage 0 included) — to
+/// report progress, write a checkpoint, or stop the run (in the manner of argmin's observers).
+/// Any `FnMut(&BasisState) -> Control` is one. An observer whose own work fails (a checkpoint it
+/// cannot write) keeps its error and answers [`Control::Stop`]; whoever owns it returns the error
+/// once the run has stopped.
+pub use iuq_core::Observer;
 
 /// An observer that never stops the run and reports nothing.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Silent;
 
-impl Observer for Silent {
-    fn observe(&mut self, _: &BasisState) -> Result<Control> {
-        Ok(Control::Continue)
+impl Observer<BasisState> for Silent {
+    fn observe(&mut self, _: &BasisState) -> Control {
+        Control::Continue
     }
 }
 
@@ -257,9 +252,9 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
     }
 
     /// Run from the prior to the end, calling `observer` after every stage.
-    pub fn run(&self, observer: &mut dyn Observer) -> Result<BasisRun> {
+    pub fn run(&self, observer: &mut dyn Observer<BasisState>) -> Result<BasisRun> {
         let state = self.initialise()?;
-        if observer.observe(&state)? == Control::Stop && !state.is_finished() {
+        if observer.observe(&state) == Control::Stop && !state.is_finished() {
             return Ok(BasisRun {
                 stop_reason: StopReason::Interrupted { stage: state.stage },
                 state,
@@ -270,12 +265,20 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
 
     /// Continue a run from a state (e.g. read from a checkpoint), calling `observer` after every
     /// new stage. The state must come from a run with the same settings and parameters.
-    pub fn resume(&self, state: BasisState, observer: &mut dyn Observer) -> Result<BasisRun> {
+    pub fn resume(
+        &self,
+        state: BasisState,
+        observer: &mut dyn Observer<BasisState>,
+    ) -> Result<BasisRun> {
         self.check_compatible(&state)?;
         self.continue_run(state, observer)
     }
 
-    fn continue_run(&self, mut state: BasisState, observer: &mut dyn Observer) -> Result<BasisRun> {
+    fn continue_run(
+        &self,
+        mut state: BasisState,
+        observer: &mut dyn Observer<BasisState>,
+    ) -> Result<BasisRun> {
         loop {
             if let Some(reason) = &state.stop_reason {
                 return Ok(BasisRun {
@@ -284,7 +287,7 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
                 });
             }
             state = self.advance(state)?;
-            if observer.observe(&state)? == Control::Stop && !state.is_finished() {
+            if observer.observe(&state) == Control::Stop && !state.is_finished() {
                 return Ok(BasisRun {
                     stop_reason: StopReason::Interrupted { stage: state.stage },
                     state,

@@ -104,7 +104,7 @@ fn resuming_after_every_stage_is_bit_identical() {
     let full = basis
         .run(&mut |s: &BasisState| {
             states.push(s.clone());
-            Ok(Control::Continue)
+            Control::Continue
         })
         .unwrap();
     assert_eq!(full.stop_reason, StopReason::Converged);
@@ -115,11 +115,11 @@ fn resuming_after_every_stage_is_bit_identical() {
         let interrupted = basis
             .run(&mut |s: &BasisState| {
                 seen += 1;
-                Ok(if s.stage == stop_at {
+                if s.stage == stop_at {
                     Control::Stop
                 } else {
                     Control::Continue
-                })
+                }
             })
             .unwrap();
         assert_eq!(seen, stop_at + 1);

@@ -16,7 +16,7 @@ use iuq_basis::{
     ModelPosteriorStop, SurrogatePopulation, model_posterior, pareto_k_threshold,
 };
 use iuq_core::random::stream;
-use iuq_core::{Parameter, ParameterSpace, Prior};
+use iuq_core::{Control, Parameter, ParameterSpace, Prior};
 use rand_distr::{Distribution, StandardNormal};
 
 fn space(d: usize) -> ParameterSpace {
@@ -106,13 +106,18 @@ fn run(
         &surrogate,
         model,
         settings,
-        &mut |event| match event {
-            ModelPosteriorEvent::Stage(s) => stages.push(s.clone()),
-            ModelPosteriorEvent::Correction(c) => {
-                assert!(stages.is_empty(), "a correction comes before every stage");
-                corrections.push(c.clone())
+        &mut |event: &ModelPosteriorEvent<'_>| {
+            match event {
+                ModelPosteriorEvent::Stage(s) => stages.push((*s).clone()),
+                ModelPosteriorEvent::Correction(c) => {
+                    assert!(stages.is_empty(), "a correction comes before every stage");
+                    corrections.push((*c).clone())
+                }
+                ModelPosteriorEvent::CorrectionNotMade(reason) => {
+                    not_made = Some(reason.to_string())
+                }
             }
-            ModelPosteriorEvent::CorrectionNotMade(reason) => not_made = Some(reason.to_string()),
+            Control::Continue
         },
     )
     .unwrap();
@@ -1069,7 +1074,7 @@ fn a_noisy_models_correction_lured_into_a_heavy_tail_is_refused_and_a_defensive_
             &lure.surrogate,
             &lure.model,
             &settings,
-            &mut |_| {},
+            &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
         )
         .unwrap();
         println!(
@@ -1151,7 +1156,7 @@ fn a_noisy_models_batch_narrower_than_the_target_is_corrected_where_k_hat_and_th
             &lure.surrogate,
             &lure.model,
             &settings,
-            &mut |_| {},
+            &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
         )
         .unwrap();
         println!(

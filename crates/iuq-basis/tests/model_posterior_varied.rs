@@ -218,7 +218,7 @@ fn the_model_posterior_is_certified_and_right_on_varied_problems() {
                 &surrogate,
                 &model,
                 &settings,
-                &mut |_| {},
+                &mut |_: &iuq_basis::ModelPosteriorEvent<'_>| iuq_core::Control::Continue,
             )
             .unwrap();
             let what = format!("{}, seed {seed}", problem.name);

@@ -6,10 +6,10 @@
 //! (it runs only the runs it asks for), but `iuq run` runs every pending run, and `iuq status`
 //! counts them. [`cancel_design`] sets such a design's pending runs to `cancelled` (a final
 //! status: nothing runs them); a design that asks for one of them again makes it pending again
-//! ([`revive_cancelled`], called whenever a design is recorded), so that cancelling never
+//! (the store's `revive_cancelled`, called whenever a design is recorded), so that cancelling never
 //! costs a later request its result.
 
-use rusqlite::{Connection, OptionalExtension, params};
+use rusqlite::{OptionalExtension, params};
 use serde::Serialize;
 
 use crate::error::{CampaignError, Result};
@@ -163,26 +163,4 @@ pub fn cancel_design(store: &CampaignStore, design_id: i64) -> Result<CancelledD
             ))
         })?;
     Ok(CancelledDesign { design, cancelled })
-}
-
-/// Make the cancelled runs among `run_ids` pending again: a design asked for them. Writes
-/// nothing when the store has no cancelled run (a replay of a finished study stays a read).
-pub(crate) fn revive_cancelled(connection: &Connection, run_ids: &[i64]) -> rusqlite::Result<()> {
-    let any: i64 = connection.query_row(
-        "SELECT COUNT(*) FROM runs WHERE status = 'cancelled'",
-        [],
-        |r| r.get(0),
-    )?;
-    if any == 0 {
-        return Ok(());
-    }
-    let mut revive = connection.prepare_cached(
-        "UPDATE runs SET status = 'pending', outcome_kind = NULL, reason = NULL, updated_at = ?1 \
-         WHERE id = ?2 AND status = 'cancelled'",
-    )?;
-    let now = unix_now();
-    for id in run_ids {
-        revive.execute(params![now, id])?;
-    }
-    Ok(())
 }

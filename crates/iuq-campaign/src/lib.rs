@@ -9,6 +9,7 @@
 //! | module | what |
 //! |---|---|
 //! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front |
+//! | [`duration`] | durations a study may name (`"1h30m"`, seconds), with their bound |
 //! | [`template`] | `{{ name }}` templates for input files and command arguments |
 //! | [`decoder`] | outputs from a JSON file, a CSV column or a regex over a file |
 //! | [`run_directory`] | run directories: `params.json`, filled templates, batch input CSVs |
@@ -74,6 +75,7 @@ pub mod campaign_model;
 pub mod decoder;
 pub mod design;
 pub mod designs;
+pub mod duration;
 pub mod error;
 pub mod executor;
 pub mod export;

@@ -4,7 +4,7 @@
 //! word that does not resolve on the compute nodes) fails every run in moments: each run is
 //! tried `retry.max_attempts` times and filed as failed, and a campaign of a thousand runs
 //! burns through all of them in a few minutes, leaving failures that say nothing about the
-//! model at those parameters (it never ran). [`StartWatch`] sees every finished attempt of a
+//! model at those parameters (it never ran). `StartWatch` sees every finished attempt of a
 //! coordinator session; once [`UNSTARTED_RUNS_LIMIT`] runs have failed for good without the
 //! model having started even once in the session, the campaign stops with the reason, and the
 //! runs that could not start are pending again ([`crate::store::CampaignStore::restart_unstarted`],

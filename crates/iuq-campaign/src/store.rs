@@ -16,7 +16,6 @@ use std::path::{Path, PathBuf};
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::Serialize;
 
-use crate::designs::revive_cancelled;
 use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, unix_now};
 use crate::retry_policy::RetryPolicy;
@@ -1230,6 +1229,28 @@ impl StoreWriter<'_> {
             .map_err(|e| self.err(e))?;
         Ok(disposition)
     }
+}
+
+/// Make the cancelled runs among `run_ids` pending again: a design asked for them. Writes
+/// nothing when the store has no cancelled run (a replay of a finished study stays a read).
+pub(crate) fn revive_cancelled(connection: &Connection, run_ids: &[i64]) -> rusqlite::Result<()> {
+    let any: i64 = connection.query_row(
+        "SELECT COUNT(*) FROM runs WHERE status = 'cancelled'",
+        [],
+        |r| r.get(0),
+    )?;
+    if any == 0 {
+        return Ok(());
+    }
+    let mut revive = connection.prepare_cached(
+        "UPDATE runs SET status = 'pending', outcome_kind = NULL, reason = NULL, updated_at = ?1 \
+         WHERE id = ?2 AND status = 'cancelled'",
+    )?;
+    let now = unix_now();
+    for id in run_ids {
+        revive.execute(params![now, id])?;
+    }
+    Ok(())
 }
 
 #[cfg(test)]

@@ -10,8 +10,8 @@ use std::sync::LazyLock;
 
 use toml::{Table, Value};
 
+use crate::duration::{check_duration, parse_duration};
 use crate::error::{CampaignError, Result};
-use crate::study::{check_duration, parse_duration};
 
 /// The largest count a study may give (2³¹ − 1): sizes, samples, runs and steps beyond it would
 /// overflow the products made of them or ask for more memory than any machine has.

@@ -16,12 +16,13 @@ use iuq_core::Expression;
 
 use crate::atomic_file::write_atomically;
 use crate::decoder::{OutputDecoder, check_finite, parse_cell, read_csv_text};
+use crate::duration::check_duration;
 use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, host_name, unix_now};
 use crate::run_directory::{
     RESULT_FILE, STATUS_FILE, STDERR_FILE, STDOUT_FILE, Task, prepare, run_values,
 };
-use crate::study::{CommandKind, CommandSpec, check_duration};
+use crate::study::{CommandKind, CommandSpec};
 use crate::supervised_process::{OutputLogs, run_supervised, signal_name};
 use crate::template::format_value;
 
@@ -171,7 +172,7 @@ pub fn iuq_executable() -> Option<std::path::PathBuf> {
     (stem == SELF_PROGRAM).then_some(exe)
 }
 
-/// The command word that names the running iuq executable (see [`program`]).
+/// The command word that names the running iuq executable (see `program`).
 pub const SELF_PROGRAM: &str = "iuq";
 
 fn last_line(text: &str) -> Option<&str> {

@@ -117,7 +117,7 @@ impl ParameterSpace {
     }
 
     /// Map a point of the unit cube through each marginal quantile function, so that a
-    /// space-filling design on [0,1]^d becomes one distributed as the prior.
+    /// space-filling design on \[0,1\]^d becomes one distributed as the prior.
     pub fn from_unit_cube(&self, u: &[f64]) -> Result<Vec<f64>> {
         self.check_dimension(u)?;
         Ok(self

@@ -186,7 +186,7 @@ impl MultiFidelityGp {
     }
 
     /// c ≥ 1, the factor on δ's latent variance: the mean squared standardised leave-one-out
-    /// residual of δ at the high-fidelity runs, where above 1 ([`variance_scale`]).
+    /// residual of δ at the high-fidelity runs, where above 1 (`variance_scale`).
     pub fn discrepancy_variance_scale(&self) -> f64 {
         self.discrepancy_variance_scale
     }

@@ -3,7 +3,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use crate::model::StudyReport;
+use crate::input::StudyReport;
 use crate::statistics::{mean, quantile_sorted};
 
 /// Lower probability of the central 95 % prediction band.

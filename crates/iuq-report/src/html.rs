@@ -4,7 +4,7 @@
 use std::fmt::Write;
 
 use crate::format::format_number;
-use crate::model::StudyReport;
+use crate::input::StudyReport;
 use crate::sections::Section;
 use crate::tables::{Cell, Table};
 

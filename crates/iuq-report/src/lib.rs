@@ -9,7 +9,7 @@
 //! statistics. Every number in an HTML table is formatted by
 //! [`format_number`] and carries its exact value and its JSON pointer into `report.json`.
 //!
-//! - [`model`]: the input structures;
+//! - [`input`]: the input structures;
 //! - [`write_report`]: validation and output;
 //! - the charts (one module per kind) are private; colours are fixed per source (GP surrogate
 //!   blue, cell model and model runs orange, measurements black).
@@ -70,7 +70,7 @@ mod figure;
 mod files;
 mod format;
 mod html;
-pub mod model;
+pub mod input;
 mod report;
 mod report_tables;
 mod sections;
@@ -83,7 +83,7 @@ pub use derived::{DerivedResults, PredictionPoint, SourcePredictions};
 pub use error::{ReportError, Result};
 pub use figure::FigureInfo;
 pub use format::format_number;
-pub use model::{
+pub use input::{
     CellPortrait, CellPortraits, CheckedPoint, ComparedParameter, ComparedTraces, Convergence,
     ConvergenceRound, DataSeries, ElongationTrace, FailureMapPanel, GpDiagnostic, MapRunsAtPoint,
     MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,

@@ -10,7 +10,7 @@ use crate::error::{ReportError, Result};
 use crate::figure::FigureInfo;
 use crate::files::{create_dir, write_atomic};
 use crate::html::render_page;
-use crate::model::StudyReport;
+use crate::input::StudyReport;
 use crate::sections::build_sections;
 use crate::tables::TableInfo;
 use crate::validate::validate;

@@ -4,7 +4,7 @@
 
 use crate::charts::sensitivity::informative;
 use crate::derived::DerivedResults;
-use crate::model::{
+use crate::input::{
     Convergence, DataSeries, ModelPosteriorReport, PosteriorCheckReport, StudyReport,
 };
 use crate::tables::{Cell, Column, Table};

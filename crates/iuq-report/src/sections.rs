@@ -19,7 +19,7 @@ use crate::derived::DerivedResults;
 use crate::error::Result;
 use crate::figure::{Chart, FigureInfo, RenderedFigure, render_png, render_svg};
 use crate::files::write_atomic;
-use crate::model::{Convergence, StudyReport};
+use crate::input::{Convergence, StudyReport};
 use crate::report_tables as build;
 use crate::tables::Table;
 
@@ -417,7 +417,7 @@ fn sampler_section(c: &SectionContext<'_>) -> Result<Section> {
 /// The model run at the posterior beside the surrogate.
 fn posterior_check_section(
     c: &SectionContext<'_>,
-    check: &crate::model::PosteriorCheckReport,
+    check: &crate::input::PosteriorCheckReport,
 ) -> Result<Section> {
     let SectionContext {
         report,
@@ -462,7 +462,7 @@ fn posterior_check_section(
 /// The model's own posterior beside the surrogate's.
 fn model_posterior_section(
     c: &SectionContext<'_>,
-    m: &crate::model::ModelPosteriorReport,
+    m: &crate::input::ModelPosteriorReport,
 ) -> Result<Section> {
     let SectionContext {
         report,
@@ -535,7 +535,7 @@ fn model_posterior_section(
 /// The cell's shapes and elongation traces at the MAP.
 fn cell_shapes_section(
     c: &SectionContext<'_>,
-    portraits: &crate::model::CellPortraits,
+    portraits: &crate::input::CellPortraits,
 ) -> Result<Section> {
     let SectionContext { figures_dir, .. } = *c;
     let mut section = Section::new(
@@ -644,7 +644,7 @@ fn runs_section(c: &SectionContext<'_>, runs_per_point: Option<Table>) -> Sectio
 
 /// Members of the first batch: all of them, or half when both batches of a correction are the
 /// population (the second batch has as many).
-fn first_batch(m: &crate::model::ModelPosteriorReport) -> usize {
+fn first_batch(m: &crate::input::ModelPosteriorReport) -> usize {
     if m.both_batches || m.proposal_mismatch.as_ref().is_some_and(|t| t.corrected) {
         m.samples / 2
     } else {
@@ -653,7 +653,7 @@ fn first_batch(m: &crate::model::ModelPosteriorReport) -> usize {
 }
 
 /// How a reproducible model's first batch corrected the surrogate, or why it did not.
-fn correction_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+fn correction_sentence(m: &crate::input::ModelPosteriorReport) -> String {
     let surrogate = &m.surrogate_source;
     let refused = if m.corrections_refused.is_empty() {
         String::new()
@@ -702,14 +702,14 @@ fn sentence_case(text: &str) -> String {
 /// What the test of a noisy model's first batch found and what followed.
 /// What a noisy likelihood's estimate does not say: its MCSE counts the weights' spread, not
 /// how each member's weight was itself drawn, and its MAP is a lucky run.
-fn noisy_caveat(m: &crate::model::ModelPosteriorReport) -> String {
+fn noisy_caveat(m: &crate::input::ModelPosteriorReport) -> String {
     format!(
         " With a noisy likelihood the MCSE is computed from the weights as drawn: where the {model}'s run-to-run spread is large against the data's std it can understate the spread of a std (about 1.5 times on a test problem whose spread is twice the data's std), and the {model} posterior's MAP is the member whose run landed best, not a maximum of the likelihood averaged over the noise.",
         model = m.model_source
     )
 }
 
-fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+fn mismatch_sentence(m: &crate::input::ModelPosteriorReport) -> String {
     let (model, surrogate) = (&m.model_source, &m.surrogate_source);
     let not_made = m
         .correction_not_made
@@ -759,7 +759,7 @@ fn mismatch_sentence(m: &crate::model::ModelPosteriorReport) -> String {
 
 /// The defensive batch (from a normal fitted to the weights, or from the surrogate's posterior
 /// tempered), and the corrections refused before it.
-fn defensive_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+fn defensive_sentence(m: &crate::input::ModelPosteriorReport) -> String {
     let surrogate = &m.surrogate_source;
     let refused = if m.corrections_refused.is_empty() {
         String::new()
@@ -784,7 +784,7 @@ fn defensive_sentence(m: &crate::model::ModelPosteriorReport) -> String {
 }
 
 /// What the reproducibility probe found, as a sentence of the model posterior's section.
-fn probe_sentence(m: &crate::model::ModelPosteriorReport) -> String {
+fn probe_sentence(m: &crate::input::ModelPosteriorReport) -> String {
     let model = &m.model_source;
     let nudge = "Rerun with every parameter moved by a billionth of its range";
     let one_step = "the weights are those of one importance step (pseudo-marginal: unbiased, with no fit of the log-likelihoods' difference and no bridge, whose fits and Metropolis ratios assume a reproducible likelihood), certified by k̂";

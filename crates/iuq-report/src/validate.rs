@@ -2,7 +2,7 @@
 //! samples, finite values. Every failure names the offending field.
 
 use crate::error::{ReportError, Result};
-use crate::model::{
+use crate::input::{
     Convergence, DataSeries, FailureMapPanel, GpDiagnostic, PosteriorCheckReport, PosteriorResult,
     RunsAtPoint, StudyReport,
 };

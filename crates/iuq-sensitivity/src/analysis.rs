@@ -57,8 +57,8 @@ impl Default for SensitivityOptions {
     }
 }
 
-/// The most bootstrap resamples: each resample's random stream is keyed by its index in 20 bits.
-pub const MAX_RESAMPLES: usize = 1 << 20;
+/// The most bootstrap resamples (defined with the bootstrap).
+pub use crate::confidence::MAX_RESAMPLES;
 
 /// The most independent scramblings for replicate intervals (each a whole Saltelli design).
 pub const MAX_REPLICATES: usize = 1 << 16;

@@ -15,6 +15,9 @@ use iuq_core::random::{stages, stream};
 use crate::error::{Result, SensitivityError};
 use crate::estimator::{SaltelliValues, SobolEstimate, indices_with_variance, pooled_variance};
 
+/// The most bootstrap resamples: each resample's random stream is keyed by its index in 20 bits.
+pub const MAX_RESAMPLES: usize = 1 << 20;
+
 /// Half-widths of the confidence intervals of S_i and S_Ti.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ConfidenceHalfWidths {
@@ -49,10 +52,9 @@ pub fn bootstrap_half_widths(
             "at least 2 bootstrap resamples are needed, got {resamples}"
         )));
     }
-    if resamples > crate::analysis::MAX_RESAMPLES {
+    if resamples > MAX_RESAMPLES {
         return Err(SensitivityError::InvalidOption(format!(
-            "at most {} bootstrap resamples, got {resamples}",
-            crate::analysis::MAX_RESAMPLES
+            "at most {MAX_RESAMPLES} bootstrap resamples, got {resamples}"
         )));
     }
     values.validate()?;

@@ -2,8 +2,6 @@
 //! opening (and resuming) a campaign with this executable as the remote worker, and the log line
 //! of a campaign's progress.
 
-use std::path::Path;
-
 use iuq_campaign::designs::{DesignSummary, design_summaries};
 use iuq_campaign::store::{FailedRun, JournalMode};
 use iuq_campaign::{
@@ -18,26 +16,6 @@ use crate::error::{Result, StudyError, input_error};
 /// work, with the campaign error's message.
 pub fn campaign_error(error: CampaignError) -> StudyError {
     StudyError::from(error)
-}
-
-/// Read and validate a campaign study file, or a pipeline study file (one whose `[likelihood]`
-/// has `data`): then the campaign of its model runs, as `iuq pipeline` writes it into the store.
-pub fn load_study(path: &Path) -> Result<CampaignStudy> {
-    let is_pipeline_study = std::fs::read_to_string(path)
-        .ok()
-        .and_then(|text| text.parse::<toml::Table>().ok())
-        .and_then(|table| {
-            table
-                .get("likelihood")
-                .and_then(toml::Value::as_table)
-                .map(|likelihood| likelihood.contains_key("data"))
-        })
-        .unwrap_or(false);
-    if is_pipeline_study {
-        let study = crate::study::Study::load(path)?;
-        return crate::pipeline::model_runs::pipeline_campaign_study(&study);
-    }
-    CampaignStudy::load(path).map_err(campaign_error)
 }
 
 /// Open the campaign of `study` (resuming it), with the iuq executable as the remote worker

@@ -19,6 +19,7 @@
 //! | [`umbridge_section`] | `[model] kind = "umbridge"`: a model on a UM-Bridge server |
 //! | [`posterior`] | a study's posterior, sampled with BASIS into a results directory |
 //! | [`campaign_runs`] | campaigns of model runs: opening, resuming, progress lines |
+//! | [`campaign_study`] | the campaign a study file stands for (a campaign study, or a pipeline's runs) |
 //! | [`gp_bank_benchmark`] | the benchmark problem of `iuq bench basis-gp-bank` |
 //! | [`gp_file`] | GP files: a GP bank of one output |
 //! | [`pipeline`] | the calibration study end to end, its settings, the report's data |
@@ -63,6 +64,7 @@
 #![warn(missing_docs)]
 
 pub mod campaign_runs;
+pub mod campaign_study;
 pub mod error;
 pub mod gp_bank_benchmark;
 pub mod gp_file;

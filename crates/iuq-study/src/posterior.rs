@@ -115,23 +115,28 @@ pub fn build_posterior_with<M: Model + 'static>(
 }
 
 /// Writes the checkpoint and the stage table after every stage, hands the state to the caller's
-/// observer, and stops after `stop_after`.
+/// observer, and stops after `stop_after`. A checkpoint it cannot write stops the run, and the
+/// run's result is that error (`error`).
 struct StageWriter<'a> {
     out: PathBuf,
     stop_after: Option<usize>,
-    on_stage: &'a mut dyn FnMut(&BasisState) -> Control,
+    on_stage: &'a mut dyn Observer<BasisState>,
+    error: Option<BasisError>,
 }
 
-impl Observer for StageWriter<'_> {
-    fn observe(&mut self, state: &BasisState) -> iuq_basis::Result<Control> {
-        write_checkpoint(&self.out, state).map_err(|e| BasisError::Observer(e.to_string()))?;
-        if (self.on_stage)(state) == Control::Stop {
-            return Ok(Control::Stop);
+impl Observer<BasisState> for StageWriter<'_> {
+    fn observe(&mut self, state: &BasisState) -> Control {
+        if let Err(e) = write_checkpoint(&self.out, state) {
+            self.error = Some(BasisError::Observer(e.to_string()));
+            return Control::Stop;
+        }
+        if self.on_stage.observe(state) == Control::Stop {
+            return Control::Stop;
         }
         if self.stop_after.is_some_and(|s| state.stage >= s) {
-            return Ok(Control::Stop);
+            return Control::Stop;
         }
-        Ok(Control::Continue)
+        Control::Continue
     }
 }
 
@@ -297,7 +302,7 @@ pub fn sample_posterior(
     job: SamplingJob<'_>,
     posterior: &StudyPosterior,
     settings: iuq_basis::CheckedSettings,
-    on_stage: &mut dyn FnMut(&BasisState) -> Control,
+    on_stage: &mut dyn Observer<BasisState>,
 ) -> Result<SampledPosterior> {
     let SamplingJob {
         study_name,
@@ -328,11 +333,17 @@ pub fn sample_posterior(
         out: out.clone(),
         stop_after,
         on_stage,
+        error: None,
     };
     let started = Instant::now();
     let result = match checkpoint {
         Some(state) => basis.resume(state, &mut writer),
         None => basis.run(&mut writer),
+    };
+    // A checkpoint that could not be written ends the run with its error.
+    let result = match writer.error.take() {
+        Some(error) => Err(error),
+        None => result,
     };
     let run = result.context("BASIS run failed")?;
     let state = &run.state;

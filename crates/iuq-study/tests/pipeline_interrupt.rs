@@ -10,7 +10,8 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs, SharedModel};
-use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions, run};
+use iuq_core::{Control, Observer};
+use iuq_study::pipeline::{PipelineEvent, PipelineOptions, run};
 use iuq_study::{Study, StudyError};
 
 const X: [f64; 5] = [0.5, 1.0, 2.0, 4.0, 8.0];
@@ -73,21 +74,25 @@ fn options(dir: &Path, model: &Arc<SlowDecay>, grace: Option<Duration>) -> Pipel
 
 /// Asks the pipeline to stop once `stop_once_called` has been called (inside its first run),
 /// and keeps the pipeline's messages.
-struct Observer {
+struct StopInsideFirstRun {
     stop_once_called: Option<Arc<SlowDecay>>,
     messages: Arc<Mutex<Vec<String>>>,
 }
 
-impl PipelineObserver for Observer {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
+impl Observer<PipelineEvent<'_>> for StopInsideFirstRun {
+    fn observe(&mut self, event: &PipelineEvent<'_>) -> Control {
         if let PipelineEvent::Message(line) = event {
             self.messages.lock().unwrap().push(line.to_string());
         }
-    }
-    fn interrupted(&mut self) -> bool {
-        self.stop_once_called
+        if self
+            .stop_once_called
             .as_ref()
             .is_some_and(|m| m.calls.load(Ordering::SeqCst) > 0)
+        {
+            Control::Stop
+        } else {
+            Control::Continue
+        }
     }
 }
 
@@ -105,7 +110,7 @@ fn a_busy_pipeline_returns_after_the_grace_and_the_next_run_waits_for_it() {
         calls: AtomicUsize::new(0),
     });
     let messages = Arc::new(Mutex::new(Vec::new()));
-    let mut observer = Observer {
+    let mut observer = StopInsideFirstRun {
         stop_once_called: Some(slow.clone()),
         messages: messages.clone(),
     };
@@ -127,7 +132,7 @@ fn a_busy_pipeline_returns_after_the_grace_and_the_next_run_waits_for_it() {
         delay: Duration::ZERO,
         calls: AtomicUsize::new(0),
     });
-    let mut observer = Observer {
+    let mut observer = StopInsideFirstRun {
         stop_once_called: None,
         messages: messages.clone(),
     };

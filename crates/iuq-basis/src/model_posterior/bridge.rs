@@ -12,12 +12,12 @@ use rayon::prelude::*;
 
 use iuq_core::ParameterSpace;
 
-use super::{Best, ModelPosteriorSettings, STREAM_BASE, evaluate};
+use super::members::{Best, Members, evaluate};
+use super::settings::{ModelPosteriorSettings, STREAM_BASE};
 use crate::error::Result;
 use crate::likelihood::LogLikelihood;
 use crate::pareto_smoothing::normalised_weights;
 use crate::proposal::Proposal;
-use crate::pseudo_marginal::Members;
 use crate::quadratic_regression::QuadraticFit;
 use crate::resampling::resample;
 use crate::settings::Resampling;

@@ -8,18 +8,20 @@
 use iuq_core::random::stream;
 
 use super::bridge::MethodInputs;
-use super::{
-    BoxedCorrection, CorrectedLikelihood, ModelPosteriorEvent, NEARLY_EQUAL_CV, STREAM_BASE,
-    SurrogateCorrection, SurrogatePopulation, coefficient_of_variation, evaluate, largest_finite,
-    log_ratios, outside_batch, recorded_spread_ratio,
+use super::members::{
+    BoxedCorrection, CorrectedLikelihood, Members, coefficient_of_variation, evaluate,
+    largest_finite, log_ratios, outside_batch, recorded_spread_ratio,
 };
+use super::records::{
+    EventObserver, ModelPosteriorEvent, SurrogateCorrection, SurrogatePopulation, report,
+};
+use super::settings::{NEARLY_EQUAL_CV, STREAM_BASE};
 use crate::annealing::next_step;
 use crate::batch_mixture::{log_normalising_ratio, mixture_of_batches};
 use crate::error::Result;
 use crate::member_selection::nested_selection;
 use crate::moment_matching::{DEFENSIVE_WIDENING, GaussianLogRatio};
 use crate::pareto_smoothing::pareto_smooth;
-use crate::pseudo_marginal::Members;
 use crate::quadratic_regression::QuadraticFit;
 use crate::sampler::{Basis, BasisState, Silent};
 use crate::settings::{BasisSettings, CheckedSettings};
@@ -55,7 +57,7 @@ pub(super) fn correct_first_batch<'a>(
     population: &SurrogatePopulation<'_>,
     first: Members,
     threshold: f64,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut EventObserver<'_>,
 ) -> Result<FirstBatch<'a>> {
     let settings = inputs.settings;
     let n = population.samples.len();
@@ -79,7 +81,7 @@ pub(super) fn correct_first_batch<'a>(
     match accepted {
         Some((mut record, candidate, state)) => {
             record.refused = refused;
-            on_event(ModelPosteriorEvent::Correction(&record));
+            report(observer, ModelPosteriorEvent::Correction(&record))?;
             let corrected = second_batch(inputs, population, first, record, candidate, state)?;
             Ok(FirstBatch::Corrected(Box::new(corrected)))
         }
@@ -88,7 +90,7 @@ pub(super) fn correct_first_batch<'a>(
                 "{}; the stages go on from the first batch",
                 refused.join("; ")
             );
-            on_event(ModelPosteriorEvent::CorrectionNotMade(&reason));
+            report(observer, ModelPosteriorEvent::CorrectionNotMade(&reason))?;
             Ok(FirstBatch::Kept {
                 not_corrected: Some(reason),
             })

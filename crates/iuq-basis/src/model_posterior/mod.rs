@@ -77,531 +77,55 @@
 //! requests the same model points in the same order, which is what lets a campaign store resume
 //! an interrupted run without repeating a finished model run.
 
-mod bridge;
+pub(crate) mod bridge;
 mod correction;
+pub(crate) mod members;
+pub(crate) mod records;
+pub(crate) mod settings;
 
-pub(crate) use bridge::MethodInputs;
-use bridge::StageWeights;
+use bridge::{MethodInputs, StageWeights};
 use correction::{CorrectedBatch, FirstBatch, correct_first_batch};
-use serde::{Deserialize, Serialize};
+use members::{
+    Best, BoxedCorrection, CorrectedLikelihood, Members, coefficient_of_variation, evaluate,
+    largest_finite, log_ratios, recorded_spread_ratio,
+};
+use records::EventObserver;
+pub use records::{
+    ModelPosterior, ModelPosteriorEvent, ModelPosteriorStage, ModelPosteriorStop,
+    SurrogateCorrection, SurrogatePopulation,
+};
+pub use settings::{
+    MIN_CORRECTED_WITHIN_BATCH, MIN_SAMPLES, ModelPosteriorSettings, NEARLY_EQUAL_CV, STREAM_BASE,
+    selected_members,
+};
 
 use iuq_core::ParameterSpace;
-use iuq_core::random::stream;
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 
 use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
-use crate::likelihood::{LogLikelihood, PointLogLikelihood};
-use crate::member_selection::nested_selection;
+use crate::likelihood::LogLikelihood;
 use crate::moment_matching::ProposalMismatch;
 use crate::pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
 };
-use crate::pseudo_marginal::{Members, noisy_estimate};
-use crate::spread_ratio::{widest_spread_ratio, within_proposal_spread};
-
-/// A stage's weights whose CV is at most this are certified whatever their k̂: so nearly equal
-/// (ESS/S ≥ 0.99) that their tail cannot carry the estimate. k̂ is a shape, blind to the
-/// weights' spread: for a small step the weights exp(Δβ·r) ≈ 1 + Δβ·r keep the tail shape of r
-/// itself, and a few members with a large r would hold k̂ up however small the step.
-pub const NEARLY_EQUAL_CV: f64 = 0.1;
-
-/// A correction whose posterior keeps less than this share of its population inside the range
-/// (minimum to maximum) of some parameter over the batch it was fitted on is not made: most of
-/// its mass would lie where no run informed the fit, and a second batch there is spent on the
-/// fit's extrapolation (the stages go on from the first batch instead, exactly, at the price of
-/// bridges). Parameter by parameter, not the joint box: a correct correction widening a narrow
-/// surrogate posterior in every one of d parameters keeps about p^d inside the box when it
-/// keeps p inside each range (in 10-D, 0.92 each and 0.43 jointly: refused, the stages bridged
-/// from the first batch for 1,200–1,500 model evaluations where the correction and both
-/// batches need 600), whereas an extrapolating fit leaves some range altogether.
-pub const MIN_CORRECTED_WITHIN_BATCH: f64 = 0.5;
-
-/// The smallest population: k̂ needs a tail of 5 weights, ⌈min(0.2·S, 3√S)⌉ ≥ 5 from S = 21.
-pub const MIN_SAMPLES: usize = 25;
-
-/// First stream stage of the model-posterior sampler (stage k uses `STREAM_BASE + k`; the
-/// selection of the surrogate members uses `STREAM_BASE`).
-pub const STREAM_BASE: u64 = iuq_core::random::stages::MODEL_POSTERIOR_BASE;
-
-/// Settings of [`model_posterior`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ModelPosteriorSettings {
-    /// Members of the surrogate population run through the model (the model posterior's sample
-    /// size S).
-    pub samples: usize,
-    /// Seed of every random draw.
-    pub seed: u64,
-    /// The CV target γ of the first stage's step (BASIS's rule; 1 as in BASIS).
-    pub cv_target: f64,
-    /// The CV target of the stages after a bridge, whose population comes from short MCMC
-    /// chains of resampled members and shows its tails less well than an independent sample of
-    /// the surrogate's posterior, so that k̂ alone is not enough there (0.5; with 1 the
-    /// bridged stds of a test problem came out 7 % narrow on average over seeds).
-    pub bridge_cv_target: f64,
-    /// Largest number of stages (each after the first costs a bridge of model runs).
-    pub max_stages: usize,
-    /// Corrections of the surrogate, 0 or 1 (one costs `samples` model evaluations): where the
-    /// first batch's weights do not hold in one stage, the surrogate's log-likelihood is
-    /// corrected by a quadratic fit of r and the corrected surrogate's posterior sampled anew;
-    /// for a noisy model ([`Self::pseudo_marginal`]), where a permutation test finds the
-    /// surrogate off, the step's k̂ does not hold or its spread ratio exceeds
-    /// [`crate::spread_ratio::WIDER_THAN_PROPOSAL`], by the moment-matched log-ratio of
-    /// [`crate::moment_matching`] (or, where that is refused, a defensive batch from a normal
-    /// fitted to the first batch's weights, [`crate::defensive_normal`], or from the
-    /// surrogate's posterior tempered where no such normal can be drawn,
-    /// [`crate::defensive_tempering`]), both batches then weighed as one mixture sample.
-    pub corrections: usize,
-    /// Delayed-acceptance moves per member after a bridging stage.
-    pub moves: usize,
-    /// Surrogate Metropolis steps in each move's subchain.
-    pub subchain: usize,
-    /// Proposal scale β of the surrogate steps (covariance β²·Cov_w(θ)).
-    pub scale: f64,
-    /// Smallest tempering step.
-    pub min_step: f64,
-    /// The probabilities of the reported quantiles.
-    pub probabilities: Vec<f64>,
-    /// The model's log-likelihood is a noisy estimate: a chaotic or stochastic model, whose
-    /// output moves by more than its own reported spread under a negligible change of the
-    /// parameters, so that a run's likelihood L̂ is one draw whose mean over the model's
-    /// irregular part is the likelihood L (pseudo-marginal; Andrieu & Roberts 2009). Importance
-    /// weights L̂/L_s stay unbiased, so the estimate is one full step certified by k̂ (or
-    /// nearly equal weights), after a moment-matched correction (or a defensive batch from a
-    /// normal fitted to the weights, or from the surrogate's posterior tempered where no such
-    /// normal can be drawn) where the first batch shows the surrogate off
-    /// ([`crate::pseudo_marginal`]); no quadratic fit and no bridge, whose
-    /// fits and Metropolis ratios assume a reproducible r (a noisy r makes the chains stick
-    /// where a lucky run landed).
-    #[serde(default)]
-    pub pseudo_marginal: bool,
-}
-
-impl Default for ModelPosteriorSettings {
-    fn default() -> Self {
-        Self {
-            samples: 300,
-            seed: 1,
-            cv_target: 1.0,
-            bridge_cv_target: 0.5,
-            max_stages: 6,
-            corrections: 1,
-            moves: 1,
-            subchain: 20,
-            scale: 0.4,
-            min_step: 1e-4,
-            probabilities: vec![0.025, 0.05, 0.25, 0.5, 0.75, 0.95, 0.975],
-            pseudo_marginal: false,
-        }
-    }
-}
-
-impl ModelPosteriorSettings {
-    /// Refuse settings outside their ranges ([`BasisError::InvalidSettings`], named as the keys).
-    pub fn check(&self) -> Result<()> {
-        let bad = |setting: &'static str, reason: &str| {
-            Err(BasisError::InvalidSettings {
-                setting,
-                reason: reason.to_string(),
-            })
-        };
-        if self.samples < MIN_SAMPLES {
-            return bad(
-                "samples",
-                &format!("must be at least {MIN_SAMPLES} (k̂ needs a tail of 5 weights)"),
-            );
-        }
-        if !(self.cv_target.is_finite() && self.cv_target > 0.0) {
-            return bad("cv_target", "must be a positive number");
-        }
-        if !(self.bridge_cv_target.is_finite() && self.bridge_cv_target > 0.0) {
-            return bad("bridge_cv_target", "must be a positive number");
-        }
-        if self.max_stages == 0 {
-            return bad("max_stages", "must be at least 1");
-        }
-        if self.corrections > 1 {
-            return bad("corrections", "must be 0 or 1");
-        }
-        if self.moves == 0 {
-            return bad("moves", "must be at least 1");
-        }
-        if self.subchain == 0 {
-            return bad("subchain", "must be at least 1");
-        }
-        if !(self.scale.is_finite() && self.scale > 0.0) {
-            return bad("scale", "must be a positive number");
-        }
-        if !(self.min_step.is_finite() && self.min_step > 0.0 && self.min_step < 1.0) {
-            return bad("min_step", "must lie in (0, 1)");
-        }
-        if self.probabilities.iter().any(|p| !(0.0..=1.0).contains(p)) {
-            return bad("probabilities", "must lie in [0, 1]");
-        }
-        Ok(())
-    }
-}
-
-/// The surrogate posterior the method starts from: an equally weighted population with its
-/// surrogate log-likelihoods and log-priors (a BASIS final state).
-#[derive(Debug, Clone, Copy)]
-pub struct SurrogatePopulation<'a> {
-    /// The members θ_i.
-    pub samples: &'a [Vec<f64>],
-    /// ℓ_s(θ_i).
-    pub log_likelihood: &'a [f64],
-    /// ln π(θ_i).
-    pub log_prior: &'a [f64],
-    /// The surrogate posterior's log-evidence ln Z_s.
-    pub log_evidence: f64,
-}
-
-/// One stage of [`model_posterior`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ModelPosteriorStage {
-    /// 1, 2, …
-    pub stage: usize,
-    /// β after the stage.
-    pub beta: f64,
-    /// The step Δβ taken.
-    pub step: f64,
-    /// CV of the stage's incremental weights exp(Δβ·r).
-    pub cv: f64,
-    /// k̂ of those weights.
-    pub pareto_k: f64,
-    /// The step the CV rule alone gave (larger than `step` when k̂ halved it).
-    pub cv_step: f64,
-    /// Effective sample size of the smoothed weights.
-    pub effective_sample_size: f64,
-    /// Model evaluations made before this stage's weights (the initial batch for stage 1, the
-    /// bridge's confirmations for later stages).
-    pub model_evaluations: usize,
-    /// Of those, failed runs.
-    pub failures: usize,
-    /// Share of the bridge's surrogate steps accepted (none for stage 1).
-    pub screen_acceptance: Option<f64>,
-    /// Share of the bridge's model confirmations accepted (none for stage 1).
-    pub confirm_acceptance: Option<f64>,
-    /// The largest ratio, over the parameters, of the step's weighted std to the members'
-    /// unweighted std (for both batches weighed together, to the wider batch's;
-    /// [`crate::spread_ratio`]). Above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] a
-    /// reproducible model's step to β = 1 is not certified (steps short of it are bridged); a
-    /// noisy model's final step is certified by k̂ alone (its first batch's ratio is one of the
-    /// triggers of its correction). 0 where it cannot be computed.
-    #[serde(default)]
-    pub spread_ratio: f64,
-}
-
-impl ModelPosteriorStage {
-    /// The record of one full step (β from 0 to 1) over the members `points` with the weights
-    /// `smoothing` of raw CV `cv`: a noisy model's estimate, or both batches of a correction
-    /// weighed together.
-    pub(crate) fn full_step(
-        points: &[Vec<f64>],
-        batches: usize,
-        smoothing: &ParetoSmoothing,
-        cv: f64,
-        model_evaluations: usize,
-        failures: usize,
-    ) -> Self {
-        Self {
-            stage: 1,
-            beta: 1.0,
-            step: 1.0,
-            cv,
-            pareto_k: smoothing.pareto_k,
-            cv_step: 1.0,
-            effective_sample_size: effective_sample_size(&normalised_weights(
-                &smoothing.log_weights,
-            )),
-            model_evaluations,
-            failures,
-            screen_acceptance: None,
-            confirm_acceptance: None,
-            spread_ratio: recorded_spread_ratio(points, &smoothing.log_weights, batches),
-        }
-    }
-}
-
-/// A correction of the surrogate: the first batch's weights would not hold in one stage (or,
-/// for a noisy model, showed the surrogate off), so the surrogate's log-likelihood became
-/// ℓ_s + r̂ (r̂ a quadratic fit of the batch's r, or the moment-matched log-ratio of
-/// [`crate::moment_matching`]), or for a noisy model whose moment-matched correction was
-/// refused, β·ℓ_s ([`crate::defensive_tempering`], `tempering`), and a new batch was drawn from
-/// that surrogate's posterior.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SurrogateCorrection {
-    /// k̂ of the batch's full-step weights before the correction.
-    pub pareto_k_before: f64,
-    /// CV of those weights.
-    pub cv_before: f64,
-    /// The widest ratio of those weights' std to the batch's, over the parameters
-    /// ([`crate::spread_ratio`]; above [`crate::spread_ratio::WIDER_THAN_PROPOSAL`] the batch is
-    /// corrected whatever k̂ says, for a reproducible model or a noisy one); 0 where it cannot be
-    /// computed.
-    #[serde(default)]
-    pub spread_ratio_before: f64,
-    /// Model evaluations of the batch the correction was fitted on.
-    pub model_evaluations: usize,
-    /// Whether the correction had quadratic terms (else linear; a moment-matched one always
-    /// has; false for a defensive batch, whose log-ratio (β − 1)·ℓ_s is neither).
-    pub quadratic: bool,
-    /// Whether it was the moment-matched log-ratio of the batch's weights
-    /// ([`crate::moment_matching`]; a noisy model's only correction, a reproducible model's
-    /// second candidate) rather than a least-squares fit of r.
-    #[serde(default)]
-    pub moment_matched: bool,
-    /// For a noisy model's defensive batch, the tempering β of the surrogate's posterior it was
-    /// drawn from (π·L_s^β, [`crate::defensive_tempering`]; then neither a fit nor
-    /// moment-matched); `None` for a correction by a log-ratio.
-    #[serde(default)]
-    pub tempering: Option<f64>,
-    /// For a noisy model's defensive batch drawn from a normal fitted to the first batch's
-    /// weights ([`crate::defensive_normal`]; then neither a fit of r nor moment-matched).
-    #[serde(default)]
-    pub defensive_normal: bool,
-    /// The candidates tried before this one and why each was refused (a corrected posterior
-    /// mostly outside the batch, [`MIN_CORRECTED_WITHIN_BATCH`], or one BASIS could not sample).
-    #[serde(default)]
-    pub refused: Vec<String>,
-}
-
-/// A correction of the surrogate's log-likelihood, chosen at run time among the candidates.
-type BoxedCorrection = Box<dyn Fn(&[f64]) -> f64 + Send + Sync>;
-
-/// ℓ_s + r̂: the surrogate corrected by a fit of the model–surrogate difference (a quadratic
-/// fit of r, or the moment-matched log-ratio of a noisy model's weights).
-pub(crate) struct CorrectedLikelihood<'a, F: Fn(&[f64]) -> f64 + Send + Sync> {
-    pub(crate) base: &'a dyn LogLikelihood,
-    pub(crate) correction: F,
-}
-
-impl<F: Fn(&[f64]) -> f64 + Send + Sync> LogLikelihood for CorrectedLikelihood<'_, F> {
-    fn parameter_count(&self) -> usize {
-        self.base.parameter_count()
-    }
-
-    fn log_likelihood_batch(&self, points: &[Vec<f64>]) -> Result<Vec<PointLogLikelihood>> {
-        Ok(self
-            .base
-            .log_likelihood_batch(points)?
-            .into_iter()
-            .zip(points)
-            .map(|(v, x)| v.map(|v| v + (self.correction)(x)))
-            .collect())
-    }
-}
-
-/// Why [`model_posterior`] stopped.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum ModelPosteriorStop {
-    /// β reached 1 with every stage's k̂ below its threshold.
-    Certified,
-    /// `max_stages` stages did not reach β = 1.
-    MaxStages {
-        /// β reached.
-        beta: f64,
-    },
-    /// k̂ stayed above its threshold down to the smallest step (or a step to β = 1 shorter
-    /// than twice the smallest kept its target wider than the population: the spread ratio).
-    StepBelowMinimum {
-        /// β reached.
-        beta: f64,
-    },
-    /// A noisy (pseudo-marginal) model likelihood whose one full step's weights have k̂ above
-    /// the threshold: no bridge can follow a likelihood that does not repeat.
-    NoisyWeightsTail,
-}
-
-impl std::fmt::Display for ModelPosteriorStop {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Certified => write!(
-                f,
-                "certified: every stage's k̂ is below its threshold (or its weights nearly equal)"
-            ),
-            Self::MaxStages { beta } => write!(
-                f,
-                "not certified: max_stages stages reached β = {beta:.4} (raise max_stages, moves or samples)"
-            ),
-            Self::StepBelowMinimum { beta } => write!(
-                f,
-                "not certified: at β = {beta:.4} even the smallest step's weights have k̂ above the threshold, or the last step's weighted std exceeds the population's by more than the spread ratio's bound (the surrogate posterior misses part of the model's; raise samples or improve the surrogate)"
-            ),
-            Self::NoisyWeightsTail => write!(
-                f,
-                "not certified: the model's likelihood is noisy (its output is not reproducible under a negligible change of the parameters) and the one full step's weights have k̂ above the threshold (raise samples; the noise of a single run's likelihood sets the weights' tail)"
-            ),
-        }
-    }
-}
-
-/// The model's posterior as a weighted population, with its diagnostics.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct ModelPosterior {
-    /// Parameter names.
-    pub names: Vec<String>,
-    /// The final population.
-    pub samples: Vec<Vec<f64>>,
-    /// Their normalised smoothed log-weights.
-    pub log_weights: Vec<f64>,
-    /// The final stage's raw log-weights Δβ·r (before smoothing); with `both_batches`, the
-    /// mixture weights of both batches ([`crate::batch_mixture`]).
-    pub raw_log_weights: Vec<f64>,
-    /// ℓ_m of each member (−∞ for a failed run).
-    pub model_log_likelihood: Vec<f64>,
-    /// ℓ_s of each member.
-    pub surrogate_log_likelihood: Vec<f64>,
-    /// ln π of each member.
-    pub log_prior: Vec<f64>,
-    /// Every stage.
-    pub stages: Vec<ModelPosteriorStage>,
-    /// k̂ of the final weights.
-    pub pareto_k: f64,
-    /// Its threshold min(1 − 1/log₁₀ S, 0.7).
-    pub pareto_k_threshold: f64,
-    /// Why it stopped.
-    pub stop: ModelPosteriorStop,
-    /// Effective sample size of the final weights.
-    pub effective_sample_size: f64,
-    /// Weighted posterior mean.
-    pub mean: Vec<f64>,
-    /// Weighted posterior std.
-    pub std: Vec<f64>,
-    /// Monte Carlo standard error of each mean: self-normalised importance sampling's, its
-    /// terms summed within each group of members that descend from one ancestor through a
-    /// bridge's resampling ([`crate::ancestral_variance`]; without a bridge, member by member).
-    pub mcse_mean: Vec<f64>,
-    /// Monte Carlo standard error of each std (the delta method, grouped as `mcse_mean`).
-    pub mcse_std: Vec<f64>,
-    /// Distinct ancestors of the weighted members (S without a bridge; a bridge's resampling
-    /// leaves fewer, and with very few the standard errors are unreliable).
-    #[serde(default)]
-    pub ancestors: usize,
-    /// The quantiles' probabilities.
-    pub probabilities: Vec<f64>,
-    /// `quantiles[k][q]`: weighted quantile q of parameter k.
-    pub quantiles: Vec<Vec<f64>>,
-    /// The model-evaluated point with the largest ℓ_m + ln π.
-    pub map: Vec<f64>,
-    /// ℓ_m there.
-    pub map_log_likelihood: f64,
-    /// ln π there.
-    pub map_log_prior: f64,
-    /// ln(Z_model/Z_surrogate): Σ_k ln mean_i exp(Δβ_k·r_i) over the stages (the evidence
-    /// increments of the tempering, as BASIS accumulates them), plus ln(Z_corrected/Z_s) after a
-    /// correction (from the corrected surrogate's BASIS run); for a noisy model, the log of the
-    /// mean (mixture) weight: the model's log-evidence is the surrogate's plus this.
-    pub log_evidence_ratio: f64,
-    /// The corrections of the surrogate made (see [`ModelPosteriorSettings::corrections`]).
-    pub corrections: Vec<SurrogateCorrection>,
-    /// For a noisy model: the test of the first batch's weights for a mismatch of the
-    /// surrogate's posterior ([`crate::moment_matching::proposal_mismatch`]; `None`: not made,
-    /// with `corrections = 0`, a reproducible model, or too few effective weights).
-    #[serde(default)]
-    pub proposal_mismatch: Option<ProposalMismatch>,
-    /// Why a correction that was wanted was not made: for a noisy model, every candidate (the
-    /// moment-matched correction and the defensive batch) refused or impossible to sample; for
-    /// a reproducible model, a corrected posterior mostly outside the batch its correction was
-    /// fitted on ([`MIN_CORRECTED_WITHIN_BATCH`]). `None` when none was wanted or it was made.
-    #[serde(default)]
-    pub correction_not_made: Option<String>,
-    /// Whether the final population is both batches of a correction, weighed as one sample of
-    /// the mixture of the surrogate's posterior and the corrected one
-    /// ([`crate::batch_mixture`]; always after a noisy model's correction, after a reproducible
-    /// model's when their k̂ holds), rather than the corrected batch's stages alone.
-    #[serde(default)]
-    pub both_batches: bool,
-    /// Model evaluations requested in all (points already stored in a campaign count too).
-    pub model_evaluations: usize,
-    /// Of those, failed runs.
-    pub failures: usize,
-}
-
-impl ModelPosterior {
-    /// Every stage's k̂ below its threshold and β = 1 reached.
-    pub fn certified(&self) -> bool {
-        self.stop == ModelPosteriorStop::Certified
-    }
-
-    /// The normalised smoothed weights.
-    pub fn weights(&self) -> Vec<f64> {
-        normalised_weights(&self.log_weights)
-    }
-}
-
-/// The likelihoods, with batch failures turned into errors naming what was evaluated.
-pub(crate) fn evaluate(
-    likelihood: &dyn LogLikelihood,
-    points: &[Vec<f64>],
-    what: &str,
-) -> Result<Vec<f64>> {
-    if points.is_empty() {
-        return Ok(Vec::new());
-    }
-    let values = likelihood
-        .log_likelihood_batch(points)
-        .map_err(|e| match e {
-            BasisError::ModelInput(_) => e,
-            e => BasisError::ModelBatch(format!("{what}: {e}")),
-        })?;
-    if values.len() != points.len() {
-        return Err(BasisError::ModelBatch(format!(
-            "{what}: {} values for {} points",
-            values.len(),
-            points.len()
-        )));
-    }
-    Ok(values
-        .into_iter()
-        .map(|v| match v {
-            Ok(v) if v.is_finite() => v,
-            _ => f64::NEG_INFINITY,
-        })
-        .collect())
-}
-
-/// The indices (ascending) of the members of a surrogate population of `population_size` that
-/// [`model_posterior`] runs through the model first: `min(samples, population_size)` of them,
-/// drawn without replacement by `seed`, nested in `samples` ([`crate::member_selection`]: a
-/// larger `samples` keeps these members and adds others, so their model runs are reused). A
-/// caller that probes the model at the same members (e.g. whether its output is reproducible)
-/// gets the points the method will request anyway.
-pub fn selected_members(population_size: usize, settings: &ModelPosteriorSettings) -> Vec<usize> {
-    let s = settings.samples.min(population_size);
-    nested_selection(
-        &mut stream(settings.seed, STREAM_BASE, 0),
-        population_size,
-        s,
-    )
-}
-
-/// What [`model_posterior`] reports as it goes, for progress lines: a user watching a batch of
-/// hundreds of model runs learns what the batch is for before it starts.
-#[derive(Debug, Clone, Copy)]
-pub enum ModelPosteriorEvent<'a> {
-    /// The surrogate was corrected (or, for a noisy model, tempered); the batch at that
-    /// surrogate's posterior (this many model evaluations,
-    /// [`SurrogateCorrection::model_evaluations`]) starts now.
-    Correction(&'a SurrogateCorrection),
-    /// A correction was wanted but not made (the clause says why); the method goes on without.
-    CorrectionNotMade(&'a str),
-    /// A stage ended.
-    Stage(&'a ModelPosteriorStage),
-}
+use crate::pseudo_marginal::noisy_estimate;
+use crate::sampler::{Control, Observer};
+use crate::spread_ratio::within_proposal_spread;
 
 /// The model's posterior from the surrogate's `population` (see the module documentation):
 /// `surrogate` and `model` are the two log-likelihoods of the same parameters on `space`;
-/// `on_event` sees each correction before its batch and every stage as it ends.
+/// `observer` sees each correction before its batch and every stage as it ends; its
+/// [`Control::Stop`] ends the method with [`BasisError::Interrupted`] (unless the event was its
+/// last stage).
 pub fn model_posterior(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
     surrogate: &dyn LogLikelihood,
     model: &dyn LogLikelihood,
     settings: &ModelPosteriorSettings,
-    on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+    observer: &mut dyn for<'a> Observer<ModelPosteriorEvent<'a>>,
 ) -> Result<ModelPosterior> {
     settings.check()?;
     check_inputs(space, &population, surrogate, model)?;
@@ -620,7 +144,7 @@ pub fn model_posterior(
             settings,
             widths: &widths,
         };
-        if let Some((likelihood, both)) = state.correct(&inputs, &population, on_event)? {
+        if let Some((likelihood, both)) = state.correct(&inputs, &population, observer)? {
             corrected_holder = likelihood;
             surrogate = &corrected_holder;
             mixture = Some(both);
@@ -637,13 +161,13 @@ pub fn model_posterior(
         widths: &widths,
     };
     let weights = if settings.pseudo_marginal {
-        state.pseudo_marginal(&inputs, population, on_event)?
+        state.pseudo_marginal(&inputs, population, observer)?
     } else if let Some(certified) =
         mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, state.failures))
     {
-        state.adopt_mixture(certified, on_event)
+        state.adopt_mixture(certified, observer)
     } else {
-        state.temper(&inputs, on_event)?
+        state.temper(&inputs, observer)?
     };
     state.into_posterior(space, settings, weights)
 }
@@ -728,7 +252,7 @@ impl MethodState {
         &mut self,
         inputs: &MethodInputs<'a>,
         population: &SurrogatePopulation<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<Option<(CorrectedLikelihood<'a, BoxedCorrection>, BatchMixture)>> {
         let s = inputs.settings.samples.min(population.samples.len());
         let first = Members {
@@ -737,7 +261,7 @@ impl MethodState {
             model: self.members.model.clone(),
             prior: self.members.prior.clone(),
         };
-        match correct_first_batch(inputs, population, first, self.threshold, on_event)? {
+        match correct_first_batch(inputs, population, first, self.threshold, observer)? {
             FirstBatch::Kept { not_corrected } => {
                 self.correction_not_made = not_corrected;
                 Ok(None)
@@ -782,7 +306,7 @@ impl MethodState {
         &mut self,
         inputs: &MethodInputs<'_>,
         population: SurrogatePopulation<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<TemperedWeights> {
         let first = self.take_members();
         let estimate = noisy_estimate(
@@ -791,9 +315,10 @@ impl MethodState {
             first,
             self.failures,
             &mut self.best,
-            on_event,
+            observer,
         )?;
-        on_event(ModelPosteriorEvent::Stage(&estimate.stage));
+        // The method's last stage: nothing is left to stop.
+        observer.observe(&ModelPosteriorEvent::Stage(&estimate.stage));
         self.stages.push(estimate.stage);
         self.members = estimate.members;
         self.ancestor = (0..self.members.theta.len()).collect();
@@ -817,12 +342,13 @@ impl MethodState {
     fn adopt_mixture(
         &mut self,
         (members, raw, smoothing, stage): (Members, Vec<f64>, ParetoSmoothing, ModelPosteriorStage),
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> TemperedWeights {
         self.log_evidence_ratio = log_evidence_increment(&raw, 1.0, largest_finite(&raw));
         self.threshold = pareto_k_threshold(raw.len());
         self.both_batches = true;
-        on_event(ModelPosteriorEvent::Stage(&stage));
+        // The method's last stage: nothing is left to stop.
+        observer.observe(&ModelPosteriorEvent::Stage(&stage));
         self.stages.push(stage);
         self.members = members;
         self.ancestor = (0..self.members.theta.len()).collect();
@@ -838,7 +364,7 @@ impl MethodState {
     fn temper(
         &mut self,
         bridge: &MethodInputs<'_>,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<TemperedWeights> {
         let mut tempering = Tempering {
             members: self.take_members(),
@@ -853,7 +379,7 @@ impl MethodState {
             best: std::mem::take(&mut self.best),
         };
         let weights = loop {
-            if let Some(done) = tempering.step(bridge, self.threshold, on_event)? {
+            if let Some(done) = tempering.step(bridge, self.threshold, observer)? {
                 break done;
             }
         };
@@ -1034,7 +560,7 @@ impl Tempering {
         &mut self,
         bridge: &MethodInputs<'_>,
         threshold: f64,
-        on_event: &mut dyn FnMut(ModelPosteriorEvent<'_>),
+        observer: &mut EventObserver<'_>,
     ) -> Result<Option<TemperedWeights>> {
         let settings = bridge.settings;
         let s = self.members.theta.len();
@@ -1087,7 +613,7 @@ impl Tempering {
             confirm_acceptance: self.bridge_rates.1,
             spread_ratio: recorded_spread_ratio(&self.members.theta, &smoothing.log_weights, 1),
         };
-        on_event(ModelPosteriorEvent::Stage(&record));
+        let control = observer.observe(&ModelPosteriorEvent::Stage(&record));
         self.stages.push(record);
         let certified_step = holds(&smoothing, step);
         if reaches_one && certified_step {
@@ -1110,6 +636,10 @@ impl Tempering {
                 ModelPosteriorStop::StepBelowMinimum { beta: self.beta }
             };
             return Ok(Some((rest, last.log_weights, last.pareto_k, stop)));
+        }
+        // A bridge follows: the observer may stop the method here.
+        if control == Control::Stop {
+            return Err(BasisError::Interrupted);
         }
         self.log_evidence_ratio += log_evidence_increment(&r, step, max_r);
         self.beta = next_beta;
@@ -1161,106 +691,4 @@ fn certified_mixture(
     let stage =
         ModelPosteriorStage::full_step(&members.theta, 2, &smoothing, cv, 2 * batch, failures);
     Some((members, raw, smoothing, stage))
-}
-
-/// A step's [`ModelPosteriorStage::spread_ratio`]: the widest ratio of weighted std to the
-/// proposal's over `points` (`batches` batches), 0 where it cannot be computed.
-pub(crate) fn recorded_spread_ratio(
-    points: &[Vec<f64>],
-    log_weights: &[f64],
-    batches: usize,
-) -> f64 {
-    widest_spread_ratio(points, log_weights, batches).map_or(0.0, |(_, ratio)| ratio)
-}
-
-/// Why a corrected posterior's `samples` are refused against the `batch` its correction was
-/// fitted on ("keeps N % of its population inside the range of P …"), where less than
-/// [`MIN_CORRECTED_WITHIN_BATCH`] of them lie inside the batch's range of some parameter P;
-/// `None` when they do not.
-pub(crate) fn outside_batch(
-    space: &ParameterSpace,
-    samples: &[Vec<f64>],
-    batch: &[Vec<f64>],
-) -> Option<String> {
-    let (parameter, within) = least_share_within_ranges(samples, batch);
-    (within < MIN_CORRECTED_WITHIN_BATCH).then(|| {
-        format!(
-            "keeps {:.0} % of its population inside the range of {} over the batch it was \
-             fitted on (at least {:.0} % needed)",
-            100.0 * within,
-            space.names()[parameter],
-            100.0 * MIN_CORRECTED_WITHIN_BATCH
-        )
-    })
-}
-
-/// The parameter whose range over `batch` (minimum to maximum) holds the smallest share of
-/// `samples`, and that share (parameter 0 and share 0 for an empty batch).
-fn least_share_within_ranges(samples: &[Vec<f64>], batch: &[Vec<f64>]) -> (usize, f64) {
-    let Some(d) = batch.first().map(Vec::len) else {
-        return (0, 0.0);
-    };
-    (0..d)
-        .map(|k| {
-            let (lo, hi) = batch
-                .iter()
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| {
-                    (lo.min(t[k]), hi.max(t[k]))
-                });
-            let inside = samples.iter().filter(|t| t[k] >= lo && t[k] <= hi).count();
-            (k, inside as f64 / samples.len().max(1) as f64)
-        })
-        .fold((0, f64::INFINITY), |least, (k, share)| {
-            if share < least.1 { (k, share) } else { least }
-        })
-}
-
-/// The largest finite value (−∞ when there is none: every model run failed).
-pub(crate) fn largest_finite(values: &[f64]) -> f64 {
-    values
-        .iter()
-        .copied()
-        .filter(|v| v.is_finite())
-        .fold(f64::NEG_INFINITY, f64::max)
-}
-
-/// r_i = ℓ_m,i − ℓ_s,i, −∞ where it is not finite (a failed model run).
-pub(crate) fn log_ratios(model: &[f64], surrogate: &[f64]) -> Vec<f64> {
-    model
-        .iter()
-        .zip(surrogate)
-        .map(|(m, s)| {
-            let r = m - s;
-            if r.is_finite() { r } else { f64::NEG_INFINITY }
-        })
-        .collect()
-}
-
-/// CV (population std / mean) of the weights exp(lw − max lw), as BASIS's rule measures it;
-/// failed members count as 0.
-pub(crate) fn coefficient_of_variation(log_weights: &[f64]) -> f64 {
-    crate::annealing::coefficient_of_variation(&normalised_weights(log_weights))
-}
-
-/// The best model-evaluated point so far (largest ℓ_m + ln π; the first one on ties).
-#[derive(Default)]
-pub(crate) struct Best {
-    point: Option<(Vec<f64>, f64, f64)>,
-}
-
-impl Best {
-    pub(crate) fn offer(&mut self, points: &[Vec<f64>], lm: &[f64], lp: &[f64]) {
-        for ((p, &m), &q) in points.iter().zip(lm).zip(lp) {
-            if !(m + q).is_finite() {
-                continue;
-            }
-            let better = match &self.point {
-                Some((_, bm, bq)) => m + q > bm + bq,
-                None => true,
-            };
-            if better {
-                self.point = Some((p.clone(), m, q));
-            }
-        }
-    }
 }

@@ -9,7 +9,7 @@ use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::CellPortraits;
+use crate::input::CellPortraits;
 use crate::statistics::extent;
 use crate::style::{
     AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, MODEL_COLOUR, SURROGATE_COLOUR, TICK_SIZE,

@@ -11,7 +11,7 @@ use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::{format_log_tick, format_tick};
-use crate::model::{Convergence, ConvergenceRound};
+use crate::input::{Convergence, ConvergenceRound};
 use crate::statistics::{extent, padded};
 use crate::style::{DATA_COLOUR, FONT, GRID_COLOUR, MODEL_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
 

@@ -9,7 +9,7 @@ use crate::axis::linear_tick_label;
 use crate::charts::contour::{contour_lines, level_for_mass};
 use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
-use crate::model::StudyReport;
+use crate::input::StudyReport;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, FONT, TICK_SIZE, source_colour};
 

@@ -8,7 +8,7 @@ use crate::axis::{DataAxis, Padding, linear_tick_label};
 use crate::charts::{LegendMark, draw_error_bars, header};
 use crate::derived::DerivedResults;
 use crate::figure::{Chart, DrawResult};
-use crate::model::DataSeries;
+use crate::input::DataSeries;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 

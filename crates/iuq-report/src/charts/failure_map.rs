@@ -8,7 +8,7 @@ use plotters::prelude::*;
 use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
-use crate::model::FailureMapPanel;
+use crate::input::FailureMapPanel;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, SURROGATE_COLOUR, TICK_SIZE};
 

@@ -9,7 +9,7 @@ use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_number;
-use crate::model::GpDiagnostic;
+use crate::input::GpDiagnostic;
 use crate::statistics::{extent, padded};
 use crate::style::{FONT, GRID_COLOUR, SURROGATE_COLOUR, TICK_SIZE};
 

@@ -9,7 +9,7 @@ use crate::charts::{LegendMark, header};
 use crate::derived::DerivedResults;
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::DataSeries;
+use crate::input::DataSeries;
 use crate::statistics::extent;
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 

@@ -7,7 +7,7 @@ use plotters::prelude::*;
 use crate::axis::{DataAxis, Padding, linear_tick_label};
 use crate::charts::{LegendMark, draw_error_bars, header};
 use crate::figure::{Chart, DrawResult};
-use crate::model::{DataSeries, ModelPosteriorReport};
+use crate::input::{DataSeries, ModelPosteriorReport};
 use crate::statistics::{extent, padded};
 use crate::style::{
     AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, MODEL_COLOUR, SURROGATE_COLOUR, TICK_SIZE,

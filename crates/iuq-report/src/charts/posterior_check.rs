@@ -10,7 +10,7 @@ use crate::axis::{CategoryAxis, category_label, linear_tick_label};
 use crate::charts::{LegendMark, header};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::{CheckedPoint, PosteriorCheckReport};
+use crate::input::{CheckedPoint, PosteriorCheckReport};
 use crate::statistics::{extent, padded, quantile_sorted};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE};
 

@@ -8,7 +8,7 @@ use crate::axis::linear_tick_label;
 use crate::charts::{LegendMark, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::{PosteriorResult, SamplerStage};
+use crate::input::{PosteriorResult, SamplerStage};
 use crate::statistics::{extent, padded};
 use crate::style::{FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 

@@ -9,7 +9,7 @@ use crate::axis::{CategoryAxis, category_label};
 use crate::charts::{LegendMark, draw_error_bars, header, panel_grid};
 use crate::figure::{Chart, DrawResult};
 use crate::format::format_tick;
-use crate::model::{SensitivityResult, StudyReport};
+use crate::input::{SensitivityResult, StudyReport};
 use crate::statistics::extent;
 use crate::style::{AXIS_LABEL_SIZE, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 

@@ -10,7 +10,7 @@ use crate::axis::{DataAxis, Padding, linear_tick_label};
 use crate::charts::{LegendMark, draw_error_bars, header};
 use crate::error::{ReportError, Result};
 use crate::figure::{Chart, DrawResult};
-use crate::model::StudyReport;
+use crate::input::StudyReport;
 use crate::statistics::{extent, padded};
 use crate::style::{AXIS_LABEL_SIZE, DATA_COLOUR, FONT, GRID_COLOUR, TICK_SIZE, source_colour};
 

@@ -19,7 +19,7 @@ use toml::{Table, Value};
 use iuq_campaign::{InProcessError, InProcessModel, InProcessOutputs};
 use iuq_rbc::{RbcShearModel, run_shear};
 
-use super::model_runs::campaign_text;
+use super::campaign_text::campaign_text;
 use crate::error::{Result, input_error};
 use crate::study::{ModelSection, Study};
 

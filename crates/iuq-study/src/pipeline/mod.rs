@@ -13,10 +13,11 @@
 //! 5. posterior summaries and the propagation of the posterior to the outputs;
 //! 6. the report: `DIR/report.html` with every figure as SVG and PNG and every table as CSV/JSON.
 //!
-//! While it works, the pipeline reports to a [`PipelineObserver`]: news, the progress of the
-//! campaign's model runs and every BASIS stage ([`PipelineEvent`]). The stages run on a thread
-//! of their own and the events reach the observer on the caller's thread, so an observer need
-//! not be `Send`.
+//! While it works, the pipeline reports to a [`PipelineObserver`] (iuq's one observer shape,
+//! [`iuq_core::Observer`], of [`PipelineEvent`]s): news, the progress of the campaign's model
+//! runs and every BASIS stage; the observer's [`Control`] says whether the pipeline goes on. The
+//! stages run on a thread of their own and the events reach the observer on the caller's thread,
+//! so an observer need not be `Send`.
 //!
 //! | module | what |
 //! |---|---|
@@ -33,6 +34,7 @@
 pub mod adaptive;
 mod adaptive_report;
 mod array_outputs;
+mod campaign_text;
 pub mod cell_model_campaign;
 pub mod cell_portraits;
 pub mod emulator;
@@ -57,7 +59,7 @@ use serde_json::Value;
 use iuq_basis::BasisState;
 use iuq_campaign::campaign_model::ProgressObserver;
 use iuq_campaign::{Interrupt, Progress, SharedModel};
-use iuq_core::ParameterSpace;
+use iuq_core::{Control, Observer, ParameterSpace};
 use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
 use iuq_sensitivity::{IntervalMethod, SensitivityOptions};
 
@@ -131,31 +133,28 @@ pub enum PipelineEvent<'a> {
     BasisStage(&'a BasisState),
     /// The BASIS run is over (converged, stopped or failed).
     BasisFinished,
+    /// No news: the pipeline is at work. The observer sees it whenever [`POLL_INTERVAL`] passes
+    /// without another event, so that it can stop the pipeline or serve a model evaluated on
+    /// its thread.
+    Working,
 }
 
-/// Receives the [`PipelineEvent`]s of a pipeline, on the thread that called [`run`]. Any
-/// `FnMut(&PipelineEvent<'_>)` is one.
-pub trait PipelineObserver {
-    /// Look at one event.
-    fn event(&mut self, event: &PipelineEvent<'_>);
+/// Receives the [`PipelineEvent`]s of a pipeline on the thread that called [`run`] and says
+/// whether the pipeline goes on: an [`iuq_core::Observer`] of every `PipelineEvent`, which any
+/// `FnMut(&PipelineEvent<'_>) -> Control` is.
+///
+/// It is called after every event and at least every [`POLL_INTERVAL`]
+/// ([`PipelineEvent::Working`]) while the pipeline works, and asked again after it answered
+/// [`Control::Stop`]. `Stop` stops the pipeline at its next check (between model runs, sampler
+/// stages and adaptive rounds), which then returns [`StudyError::Interrupted`] with every
+/// finished model run stored. An embedding program looks for a Ctrl-C here.
+pub trait PipelineObserver: for<'a> Observer<PipelineEvent<'a>> {}
 
-    /// Asked after every event and at least every [`POLL_INTERVAL`] while the pipeline works,
-    /// on the caller's thread: `true` stops the pipeline at its next check (between model runs,
-    /// sampler stages and adaptive rounds), which then returns [`StudyError::Interrupted`] with
-    /// every finished model run stored. An embedding program looks for a Ctrl-C here.
-    fn interrupted(&mut self) -> bool {
-        false
-    }
-}
+impl<T: for<'a> Observer<PipelineEvent<'a>> + ?Sized> PipelineObserver for T {}
 
-/// How often the pipeline asks its observer whether to stop ([`PipelineObserver::interrupted`]).
+/// How often the pipeline asks its observer whether to stop when nothing else happens
+/// ([`PipelineEvent::Working`]).
 pub const POLL_INTERVAL: std::time::Duration = std::time::Duration::from_millis(5);
-
-impl<F: FnMut(&PipelineEvent<'_>)> PipelineObserver for F {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
-        self(event)
-    }
-}
 
 /// What the pipeline did: the numbers `iuq pipeline` prints.
 #[derive(Debug, Clone, PartialEq)]
@@ -263,14 +262,14 @@ pub fn run(
     // Ends when the stages are done and every sender (the campaign's progress observer's too)
     // is dropped.
     loop {
-        match receiver.recv_timeout(POLL_INTERVAL) {
-            Ok(event) => observer.event(&event.borrowed()),
-            Err(mpsc::RecvTimeoutError::Timeout) => {}
-            Err(mpsc::RecvTimeoutError::Disconnected) => break,
-        }
-        // Asked every time, also once raised: the observer may serve the model (a Python
+        // Asked every time, also once it said stop: the observer may serve the model (a Python
         // function evaluated on this thread) and must go on answering the runs under way.
-        if observer.interrupted() {
+        let control = match receiver.recv_timeout(POLL_INTERVAL) {
+            Ok(event) => observer.observe(&event.borrowed()),
+            Err(mpsc::RecvTimeoutError::Timeout) => observer.observe(&PipelineEvent::Working),
+            Err(mpsc::RecvTimeoutError::Disconnected) => break,
+        };
+        if control == Control::Stop {
             interrupt.raise();
             asked_to_stop.get_or_insert_with(std::time::Instant::now);
         }
@@ -305,7 +304,8 @@ fn wait_for_interrupted_pipelines(observer: &mut dyn PipelineObserver) {
         .drain(..)
         .collect();
     if waiting.iter().any(|t| !t.is_finished()) {
-        observer.event(&PipelineEvent::Message(
+        // Nothing runs yet that a stop could end: the run's first check takes the answer.
+        let _ = observer.observe(&PipelineEvent::Message(
             "waiting for the interrupted pipeline to reach its next check and stop",
         ));
     }
@@ -395,12 +395,12 @@ impl Events {
             // A round's replicates are read for their moments and populations only.
             marginals: label != adaptive::ROUND_LABEL,
         };
-        let sampled = sample_posterior(job, posterior, settings, &mut |state| {
+        let sampled = sample_posterior(job, posterior, settings, &mut |state: &BasisState| {
             self.send(OwnedEvent::BasisStage(Box::new(state.clone())));
             if self.interrupt.is_raised() {
-                iuq_basis::Control::Stop
+                Control::Stop
             } else {
-                iuq_basis::Control::Continue
+                Control::Continue
             }
         });
         self.send(OwnedEvent::BasisFinished);

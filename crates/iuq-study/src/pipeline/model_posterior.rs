@@ -1,7 +1,7 @@
 //! The model's own posterior, beside the surrogate's (`iuq pipeline --model-posterior`).
 //!
 //! By default (`[model_posterior] method = "reweight"`) the surrogate posterior's population is
-//! moved to the model's with the model's own outputs ([`iuq_basis::model_posterior`]):
+//! moved to the model's with the model's own outputs ([`iuq_basis::model_posterior()`]):
 //! `samples` members run through the model in one campaign batch, importance stages certified by
 //! Pareto-smoothed k̂, and delayed-acceptance bridges where one stage does not hold. Every model
 //! evaluation is a campaign run recorded under `model-posterior-<k>` (its k-th batch): runs the
@@ -26,7 +26,7 @@ use iuq_basis::{
     selected_members,
 };
 use iuq_campaign::study_section::StudySection;
-use iuq_core::{Model, Outcome};
+use iuq_core::{Control, Model, Outcome};
 
 use super::model_runs::ModelRuns;
 use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood, bits};
@@ -44,15 +44,17 @@ pub const MODEL_POSTERIOR_DESIGN: &str = "model-posterior";
 /// How `--model-posterior` samples the model's posterior (`[model_posterior] method`).
 #[derive(Debug, Clone, PartialEq)]
 pub enum ModelPosteriorMethod {
-    /// From the surrogate's posterior by certified importance stages (the default).
-    Reweight(ReweightSettings),
+    /// From the surrogate's posterior by certified importance stages (the default; named as
+    /// the study file names it, `method = "reweight"`).
+    Reweight(ModelPosteriorOptions),
     /// Plain BASIS on the model with `[model_sampler]`.
     Basis,
 }
 
-/// `[model_posterior]` with `method = "reweight"`.
+/// `[model_posterior]` with `method = "reweight"`: the model posterior's settings and the
+/// study's options around the method (the probe, a noisy model, replicates).
 #[derive(Debug, Clone, PartialEq)]
-pub struct ReweightSettings {
+pub struct ModelPosteriorOptions {
     /// The method's settings (`pseudo_marginal` is set from `noisy` or the probe).
     pub method: ModelPosteriorSettings,
     /// Members of the first batch rerun with nudged parameters to see whether the model's
@@ -65,6 +67,9 @@ pub struct ReweightSettings {
     /// included ([`super::replicated_likelihood`]; 1: none repeated).
     pub replicates: usize,
 }
+
+/// The former name of [`ModelPosteriorOptions`].
+pub type ReweightSettings = ModelPosteriorOptions;
 
 /// Members probed by default.
 pub const DEFAULT_PROBE: usize = 4;
@@ -110,7 +115,7 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
     if let Err(iuq_basis::BasisError::InvalidSettings { setting, reason }) = settings.check() {
         return Err(s.error(setting, reason).into());
     }
-    Ok(ModelPosteriorMethod::Reweight(ReweightSettings {
+    Ok(ModelPosteriorMethod::Reweight(ModelPosteriorOptions {
         method: settings,
         probe,
         noisy,
@@ -304,14 +309,17 @@ fn stage_json(s: &ModelPosteriorStage) -> Value {
     })
 }
 
-/// The model's posterior from the surrogate's `gp_posterior` (`settings`), through the campaign
+/// The former name of [`model_posterior_from_surrogate`].
+pub use self::model_posterior_from_surrogate as reweight_to_model;
+
+/// The model's posterior from the surrogate's `gp_posterior` (`options`), through the campaign
 /// of `model_runs`; writes `out/model-posterior/`; `message` receives a line per stage.
-pub fn reweight_to_model(
+pub fn model_posterior_from_surrogate(
     study: &Study,
     gp_posterior: &SampledPosterior,
     surrogate: &Surrogate,
     model_runs: &ModelRuns,
-    reweight: &ReweightSettings,
+    options: &ModelPosteriorOptions,
     out: &Path,
     message: &mut dyn FnMut(String),
 ) -> Result<ModelPosteriorOutcome> {
@@ -322,22 +330,22 @@ pub fn reweight_to_model(
         LikelihoodSection::Data(data) => Some(data),
         LikelihoodSection::LogDensity(_) => None,
     };
-    let probe = probe_first_members(study, state, model_runs, reweight, data.as_ref())?;
-    let pseudo_marginal = reweight
+    let probe = probe_first_members(study, state, model_runs, options, data.as_ref())?;
+    let pseudo_marginal = options
         .noisy
         .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
     if let Some(probe) = &probe {
         message(probe_line(probe, pseudo_marginal));
     }
-    if reweight.replicates > 1 && !pseudo_marginal {
+    if options.replicates > 1 && !pseudo_marginal {
         message(format!(
             "replicates = {} goes unused: the model's likelihood is not noisy (its outputs repeat, or `noisy = false`)",
-            reweight.replicates
+            options.replicates
         ));
     }
     let settings = &ModelPosteriorSettings {
         pseudo_marginal,
-        ..reweight.method.clone()
+        ..options.method.clone()
     };
     let surrogate_posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
     let model = LabelledModel {
@@ -345,7 +353,7 @@ pub fn reweight_to_model(
         batches: Mutex::new(0),
     };
     let model_posterior_likelihood = build_posterior_with(study, || Ok(model))?;
-    let replicated = match (pseudo_marginal && reweight.replicates > 1, data) {
+    let replicated = match (pseudo_marginal && options.replicates > 1, data) {
         (true, Some(data)) => {
             let irregular = irregular_outputs(probe.as_ref(), model_runs.output_names().len());
             Some((data, irregular))
@@ -359,14 +367,14 @@ pub fn reweight_to_model(
             data,
             irregular,
             Replication {
-                replicates: reweight.replicates,
+                replicates: options.replicates,
                 ranges: study.space.ranges(),
                 probe: probe.as_ref(),
             },
         )
     });
     if let Some(r) = &replicated_likelihood {
-        let members = reweight.method.samples.min(state.samples.len());
+        let members = options.method.samples.min(state.samples.len());
         message(replicates_line(r, model_runs, members));
     }
     let model_likelihood: &dyn LogLikelihood = match &replicated_likelihood {
@@ -386,16 +394,21 @@ pub fn reweight_to_model(
         surrogate_posterior.likelihood.as_ref(),
         model_likelihood,
         settings,
-        &mut |event| match event {
-            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
-            ModelPosteriorEvent::Correction(correction) => message(correction_line(
-                correction,
-                groups,
-                replicated_likelihood.is_some(),
-            )),
-            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
-                "model posterior: no correction of the surrogate: {reason}"
-            )),
+        // Progress lines only: a Ctrl-C stops the method through its model runs (the
+        // campaign's interrupt).
+        &mut |event: &ModelPosteriorEvent<'_>| {
+            match event {
+                ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
+                ModelPosteriorEvent::Correction(correction) => message(correction_line(
+                    correction,
+                    groups,
+                    replicated_likelihood.is_some(),
+                )),
+                ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
+                    "model posterior: no correction of the surrogate: {reason}"
+                )),
+            }
+            Control::Continue
         },
     )
     .map_err(method_error)?;
@@ -425,7 +438,7 @@ pub fn reweight_to_model(
         replicate_runs,
         replicate_failures,
         replicates: if replicated_likelihood.is_some() {
-            reweight.replicates
+            options.replicates
         } else {
             1
         },
@@ -438,22 +451,22 @@ pub fn reweight_to_model(
     Ok(outcome)
 }
 
-/// The reproducibility probe at the first `reweight.probe` members of the method's first batch
+/// The reproducibility probe at the first `options.probe` members of the method's first batch
 /// (`None` without a probe), judged against the data's error scales.
 fn probe_first_members(
     study: &Study,
     state: &BasisState,
     model_runs: &ModelRuns,
-    reweight: &ReweightSettings,
+    options: &ModelPosteriorOptions,
     data: Option<&DataLikelihood>,
 ) -> Result<Option<ReproducibilityProbe>> {
-    if reweight.probe == 0 {
+    if options.probe == 0 {
         return Ok(None);
     }
     let d = model_runs.parameters().len();
-    let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &reweight.method)
+    let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &options.method)
         .into_iter()
-        .take(reweight.probe)
+        .take(options.probe)
         .map(|i| state.samples[i][..d].to_vec())
         .collect();
     let scales = data.map(error_scales).unwrap_or_default();

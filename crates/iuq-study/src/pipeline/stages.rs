@@ -717,7 +717,7 @@ impl<'a> PipelineRun<'a> {
             "the model's posterior from the surrogate's: {members} samples, {} runs at first (results already stored are reused)",
             members * self.model_runs.groups()
         ));
-        let outcome = model_posterior::reweight_to_model(
+        let outcome = model_posterior::model_posterior_from_surrogate(
             self.study,
             &calibration.gp_posterior,
             &calibration.surrogate,

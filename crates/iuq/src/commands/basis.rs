@@ -178,7 +178,7 @@ pub fn run(args: &BasisArgs, json_output: bool) -> Result<()> {
         stop_after: args.stop_after,
         marginals: true,
     };
-    let sampled = sample_posterior(job, &posterior, settings, &mut |state| {
+    let sampled = sample_posterior(job, &posterior, settings, &mut |state: &BasisState| {
         progress.report(state);
         iuq_basis::Control::Continue
     });

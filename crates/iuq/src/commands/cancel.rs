@@ -7,7 +7,8 @@ use clap::Args;
 use serde_json::json;
 
 use iuq_campaign::designs::cancel_design;
-use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign};
+use iuq_study::campaign_runs::{campaign_error, open_campaign};
+use iuq_study::campaign_study::load_study;
 
 use crate::report_output::emit;
 

@@ -9,7 +9,8 @@ use serde_json::json;
 
 use iuq_campaign::export::{export_csv, export_json, export_rows};
 use iuq_campaign::{CampaignStore, store_path};
-use iuq_study::campaign_runs::{campaign_error, load_study};
+use iuq_study::campaign_runs::campaign_error;
+use iuq_study::campaign_study::load_study;
 use iuq_study::table_io::write_atomically;
 
 use crate::report_output::emit;

@@ -8,9 +8,10 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 
+use iuq_core::{Control, Observer};
 use iuq_study::Study;
 use iuq_study::campaign_runs::progress_line;
-use iuq_study::pipeline::{PipelineEvent, PipelineObserver, PipelineOptions};
+use iuq_study::pipeline::{PipelineEvent, PipelineOptions};
 
 use crate::commands::basis::StageProgress;
 use crate::report_output::emit;
@@ -48,14 +49,14 @@ pub struct PipelineArgs {
     pub recompute_rounds: bool,
 }
 
-/// Prints the pipeline's events on stderr.
+/// Prints the pipeline's events on stderr (a Ctrl-C ends the process).
 #[derive(Default)]
 struct StderrObserver {
     basis: Option<StageProgress>,
 }
 
-impl PipelineObserver for StderrObserver {
-    fn event(&mut self, event: &PipelineEvent<'_>) {
+impl Observer<PipelineEvent<'_>> for StderrObserver {
+    fn observe(&mut self, event: &PipelineEvent<'_>) -> Control {
         match event {
             PipelineEvent::Message(line) => eprintln!("pipeline: {line}"),
             PipelineEvent::CampaignProgress { label, progress } => {
@@ -72,7 +73,9 @@ impl PipelineObserver for StderrObserver {
                     basis.finish();
                 }
             }
+            PipelineEvent::Working => {}
         }
+        Control::Continue
     }
 }
 

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 
-use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign};
+use iuq_study::campaign_runs::{campaign_error, open_campaign};
+use iuq_study::campaign_study::load_study;
 
 use crate::commands::run::{drive, summary, summary_text};
 use crate::report_output::emit;

@@ -11,14 +11,20 @@ use serde_json::{Value, json};
 
 use iuq_campaign::design::design_points;
 use iuq_campaign::{Campaign, Progress, ResumeSummary, StatusCounts};
-use iuq_study::campaign_runs::{campaign_error, load_study, open_campaign, progress_line};
+use iuq_study::campaign_runs::{campaign_error, open_campaign, progress_line};
+use iuq_study::campaign_study::load_study;
 
 use crate::report_output::emit;
 
 /// Arguments of `iuq run`.
 #[derive(Debug, Args)]
 pub struct RunArgs {
-    /// The study file (TOML) with a [model] of kind "command" or "batch-command" and a [design].
+    /// The study file (TOML) with a `[model]` of kind "command" or "batch-command" and a
+    /// `[design]`.
+    // The help text is given here: in a doc comment, rustdoc reads a bare [model] as a link.
+    #[arg(
+        help = "The study file (TOML) with a [model] of kind \"command\" or \"batch-command\" and a [design]"
+    )]
     pub study: PathBuf,
     /// Runs at once (overrides `executor.max_parallel`).
     #[arg(long)]

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 
-use iuq_study::campaign_runs::{CampaignStatus, human_duration, load_study};
+use iuq_study::campaign_runs::{CampaignStatus, human_duration};
+use iuq_study::campaign_study::load_study;
 
 use crate::report_output::{emit, short};
 
