@@ -24,8 +24,10 @@
 //! per-output GPs are as cheap and exact.
 
 use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::matmul;
 use faer::linalg::svd::{ComputeSvdVectors, svd, svd_scratch};
-use faer::{Mat, Par};
+use faer::{Accum, Mat, MatMut, MatRef, Par};
+use rayon::prelude::*;
 
 use iuq_core::model::{Evaluation, EvaluationFailure, Model, Outcome};
 
@@ -34,6 +36,9 @@ use crate::error::{GpError, Result};
 use crate::fit::{CheckedFitOptions, FitOptions};
 use crate::gaussian_process::GaussianProcess;
 use crate::prediction::Prediction;
+
+/// Points combined per parallel task by [`ReducedBasis`]'s `evaluate_batch`.
+const COMBINE_BLOCK: usize = 64;
 
 /// How the basis is chosen and its GPs fitted.
 #[derive(Debug, Clone)]
@@ -430,7 +435,9 @@ impl Model for ReducedBasis {
     /// the components' noise unless latent) as the computational std. A point of the wrong
     /// dimension or with a non-finite coordinate is a per-point failure.
     fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
-        self.outcomes(points, |probe| self.predict(probe))
+        self.outcomes(points, |probe| {
+            self.gps.iter().map(|gp| gp.predict(probe)).collect()
+        })
     }
 
     /// Per point: every output's mean, with the std of the truncation and the components'
@@ -439,8 +446,7 @@ impl Model for ReducedBasis {
     /// exactly where [`ReducedBasis::evaluate_batch`] does.
     fn screening_batch(&self, points: &[Vec<f64>]) -> Option<iuq_core::Result<Vec<Outcome>>> {
         Some(self.outcomes(points, |probe| {
-            let components: Vec<Prediction> = self
-                .gps
+            self.gps
                 .iter()
                 .map(|gp| {
                     let mean = gp.predict_mean(probe)?;
@@ -451,15 +457,18 @@ impl Model for ReducedBasis {
                         noise_variance: s * s * gp.hyperparameters.noise_variance,
                     })
                 })
-                .collect::<Result<_>>()?;
-            Ok(self.combine(&components, probe.len()))
+                .collect::<Result<_>>()
         }))
     }
 }
 
 impl ReducedBasis {
-    /// One outcome per point from `predict`'s per-output predictions at the valid points; a
-    /// point of the wrong dimension or with a non-finite coordinate is a per-point failure.
+    /// One outcome per point from the components' predictions (`predict`) at the valid points,
+    /// combined a block of points at a time by two matrix products (blocks in parallel, each
+    /// product sequential, so that the result does not depend on the threads): mean_j = μ_j + Σ_k a_jk c_k, variance_j =
+    /// Σ_k a_jk² Var c_k + τ_j² + Σ_k a_jk² σ_k² (the last where the noise counts), with
+    /// a_jk = [`ReducedBasis::loading`]. A point of the wrong dimension or with a non-finite
+    /// coordinate is a per-point failure.
     fn outcomes(
         &self,
         points: &[Vec<f64>],
@@ -470,8 +479,68 @@ impl ReducedBasis {
             .filter(|&i| points[i].len() == d && points[i].iter().all(|v| v.is_finite()))
             .collect();
         let probe: Vec<Vec<f64>> = valid.iter().map(|&i| points[i].clone()).collect();
-        let predictions =
+        let components =
             predict(&probe).map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
+        let (m, q) = (self.output_names.len(), components.len());
+        // a_jk column-major (m × q), and a_jk².
+        let loadings: Vec<f64> = (0..q)
+            .flat_map(|k| (0..m).map(move |j| self.loading(j, k)))
+            .collect();
+        let squared: Vec<f64> = loadings.iter().map(|a| a * a).collect();
+        // Per output, the components' noise variance where it counts (θ does not change it).
+        let noise_variance: Vec<f64> = (0..m)
+            .map(|j| {
+                let noise = components.iter().enumerate().fold(0.0, |acc, (k, p)| {
+                    acc + squared[k * m + j] * p.noise_variance
+                });
+                self.predictive_std.added_noise_variance(noise)
+            })
+            .collect();
+        let a = MatRef::from_column_major_slice(&loadings, m, q);
+        let a2 = MatRef::from_column_major_slice(&squared, m, q);
+        let combined: Vec<Evaluation> = (0..valid.len())
+            .collect::<Vec<_>>()
+            .par_chunks(COMBINE_BLOCK)
+            .flat_map_iter(|slots| {
+                let b = slots.len();
+                // The block's coefficients and their variances, q × b column-major.
+                let (mut c, mut v) = (vec![0.0; q * b], vec![0.0; q * b]);
+                for (t, &slot) in slots.iter().enumerate() {
+                    for (k, p) in components.iter().enumerate() {
+                        c[t * q + k] = p.mean[slot];
+                        v[t * q + k] = p.variance[slot];
+                    }
+                }
+                let (mut mean, mut variance) = (vec![0.0; m * b], vec![0.0; m * b]);
+                for (out, coefficients, weights) in [(&mut mean, &c, a), (&mut variance, &v, a2)] {
+                    matmul::matmul(
+                        MatMut::from_column_major_slice_mut(out, m, b),
+                        Accum::Replace,
+                        weights,
+                        MatRef::from_column_major_slice(coefficients, q, b),
+                        1.0,
+                        Par::Seq,
+                    );
+                }
+                (0..b)
+                    .map(|t| {
+                        let column = t * m..(t + 1) * m;
+                        let means = mean[column.clone()]
+                            .iter()
+                            .zip(&self.centre)
+                            .map(|(x, c)| c + x)
+                            .collect();
+                        let stds = variance[column]
+                            .iter()
+                            .zip(&self.truncation_variance)
+                            .zip(&noise_variance)
+                            .map(|((v, t), n)| (v + t + n).sqrt())
+                            .collect();
+                        Evaluation::with_std(means, stds)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
         let mut outcomes: Vec<Outcome> = points
             .iter()
             .map(|p| {
@@ -482,19 +551,8 @@ impl ReducedBasis {
                 }))
             })
             .collect();
-        for (slot, &i) in valid.iter().enumerate() {
-            let mean = predictions.iter().map(|p| p.mean[slot]).collect();
-            let std = predictions
-                .iter()
-                .zip(&self.truncation_variance)
-                .map(|(p, t)| {
-                    (p.variance[slot]
-                        + t
-                        + self.predictive_std.added_noise_variance(p.noise_variance))
-                    .sqrt()
-                })
-                .collect();
-            outcomes[i] = Ok(Evaluation::with_std(mean, std));
+        for (evaluation, &i) in combined.into_iter().zip(&valid) {
+            outcomes[i] = Ok(evaluation);
         }
         Ok(outcomes)
     }
