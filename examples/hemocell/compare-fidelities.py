@@ -8,8 +8,9 @@ with the native cell model as a cheap second fidelity, and the native cell model
 Each study is replayed from its shipped store with `iuq pipeline --json` (no model run where the
 store is complete; a study whose campaign is still under way runs on from where it stopped, so
 run this only where HemoCell is installed or the stores are complete). Printed per study: runs of
-each fidelity (succeeded/failed), the model time they cost (the sum of the runs' wall times, one
-core each, from the stores' attempts), the rounds, whether the engine converged, and every
+each fidelity (succeeded/failed; of the expensive model, the runs the study used, which its
+report lists — the two-fidelity store began as a copy of the HemoCell-only one), the model time
+they cost (the sum of the runs' wall times, one core each, from the stores' attempts), the rounds, whether the engine converged, and every
 parameter's posterior mean ± std with its 90 % interval. The table is also written as CSV.
 """
 
@@ -30,17 +31,29 @@ STUDIES = [
 ]
 
 
-def store_runs(store: Path):
-    """(succeeded, failed, model hours) of a campaign store, or None where there is none."""
+def store_runs(store: Path, used=None):
+    """(succeeded, failed, model hours) of a campaign store's runs, or None where there is none;
+    with `used` (parameter vectors), of the succeeded runs at those parameters alone (a store
+    may hold runs another campaign made that this study did not ask for)."""
     if not store.is_file():
         return None
     with sqlite3.connect(f"file:{store}?mode=ro", uri=True) as db:
-        counts = dict(db.execute("SELECT status, COUNT(*) FROM runs GROUP BY status").fetchall())
-        seconds = db.execute(
-            "SELECT COALESCE(SUM(finished_at - started_at), 0) FROM attempts "
-            "WHERE started_at IS NOT NULL AND finished_at IS NOT NULL"
-        ).fetchone()[0]
-    return counts.get("succeeded", 0), counts.get("failed", 0), seconds / 3600.0
+        runs = db.execute("SELECT id, parameters, status FROM runs").fetchall()
+        seconds = dict(db.execute(
+            "SELECT run_id, SUM(finished_at - started_at) FROM attempts "
+            "WHERE started_at IS NOT NULL AND finished_at IS NOT NULL GROUP BY run_id"
+        ).fetchall())
+    if used is not None:
+        runs = [r for r in runs if r[2] == "succeeded" and tuple(json.loads(r[1])) in used]
+    succeeded = sum(1 for r in runs if r[2] == "succeeded")
+    failed = sum(1 for r in runs if r[2] == "failed")
+    return succeeded, failed, sum(seconds.get(r[0], 0.0) for r in runs) / 3600.0
+
+
+def used_points(report: Path, names):
+    """The parameter vectors of the model runs a replayed study's report lists."""
+    with open(report / "model-runs.csv", newline="") as f:
+        return {tuple(float(row[n]) for n in names) for row in csv.DictReader(f)}
 
 
 def replay(stem: str, out: Path) -> dict:
@@ -64,10 +77,16 @@ def main():
     for label, stem in STUDIES:
         summary = replay(stem, args.reports.resolve())
         campaign = HERE / f"{stem}.campaign"
-        expensive = store_runs(campaign / "campaign.sqlite")
-        cheap = store_runs(campaign / "low-fidelity" / "campaign.sqlite")
+        names = [p["parameter"] for p in summary["posterior"][0]["parameters"] if p["parameter"] != "sigma_m"]
+        # The study's own runs: its succeeded model runs (as its report lists them) and, from the
+        # summary, the failed ones it met.
         if stem.startswith("native"):
-            expensive, cheap = None, expensive
+            expensive, cheap = None, store_runs(campaign / "campaign.sqlite")
+        else:
+            used = used_points(args.reports.resolve() / f"{stem}-report", names)
+            expensive = store_runs(campaign / "campaign.sqlite", used)
+            expensive = (expensive[0], summary.get("failed", 0), expensive[2])
+            cheap = store_runs(campaign / "low-fidelity" / "campaign.sqlite")
         row = {
             "study": label,
             "hemocell_runs": f"{expensive[0]} + {expensive[1]} failed" if expensive else "0",
