@@ -14,8 +14,11 @@
 //!    ([`crate::convergence`]); the judgement says whether to stop and why;
 //! 3. where it does not stop, choose the round's runs ([`crate::batch`],
 //!    [`crate::moment_acquisition`]) and make them;
-//! 4. [`AdaptiveEngine::step`] the state: the reading becomes the previous round, the next
-//!    round's population doubles where the samplers' noise left the shift unresolved, the chains
+//! 4. [`AdaptiveEngine::step`] the state: the reading becomes the previous round; the next
+//!    round samples the smaller exploring population while the posterior is still far from
+//!    where it settles (shift, distance or ε above [`FAR`] tolerances: early rounds, whose
+//!    posterior moves by stds anyway, need no precise sample), else at least the full
+//!    population, which doubles where the samplers' noise left the shift unresolved; the chains
 //!    mix harder where the check of the sampler failed, the candidates widen where no run was
 //!    worth making.
 //!
@@ -61,6 +64,14 @@ use crate::convergence::{ConvergenceCriterion, PosteriorMoments, RoundAssessment
 use crate::error::Result;
 use crate::posterior_distance::{PosteriorDistance, posterior_distance};
 use crate::sampler_agreement::SamplerAgreement;
+
+/// How far from settled a round's posterior is, in tolerances, for the next round to sample with
+/// [`EngineSettings::exploring_samples`]: its shift or distance from the round before, or the
+/// surrogate's error ε, above `FAR × tolerance` (1 posterior std at the default tolerance 0.1).
+/// Such a round's posterior moves by more than the noise of a population a quarter the size
+/// (twice the noise, so 0.2 std at most where the full population's is 0.1) could hide, so the
+/// smaller population decides the same runs.
+pub const FAR: f64 = 10.0;
 
 /// How many times the candidates may widen (×[`CANDIDATE_WIDENING`] each) when no run is worth
 /// making, before the engine gives up with the reason.
@@ -114,8 +125,13 @@ pub struct EngineSettings {
     pub max_runs: usize,
     /// Rounds at most.
     pub max_rounds: usize,
-    /// Each replicate's population at first.
+    /// Each replicate's population once the posterior has settled within [`FAR`] tolerances.
     pub samples: usize,
+    /// Each replicate's population while the posterior is still far from where it settles
+    /// (module docs): the first round, and every round after one whose shift, distance or
+    /// surrogate error exceeded [`FAR`] tolerances. Equal to `samples`: every round samples
+    /// `samples` (the engine before 2026-12).
+    pub exploring_samples: usize,
     /// The population a replicate may grow to.
     pub max_samples: usize,
     /// Candidates scored at first.
@@ -129,8 +145,9 @@ pub struct EngineSettings {
 }
 
 impl EngineSettings {
-    /// The defaults beside the given criterion and limits: the distribution rule, up to 16 ×
-    /// `samples`, 1000 candidates, more samples when noisy, mixing up to level 3, runs made.
+    /// The defaults beside the given criterion and limits: the distribution rule, `samples`
+    /// from the first round (no smaller exploring population), up to 16 × `samples`, 1000
+    /// candidates, more samples when noisy, mixing up to level 3, runs made.
     pub fn new(
         criterion: ConvergenceCriterion,
         max_runs: usize,
@@ -143,6 +160,7 @@ impl EngineSettings {
             max_runs,
             max_rounds,
             samples,
+            exploring_samples: samples,
             max_samples: 16 * samples,
             candidates: 1000,
             more_samples: MoreSamples::WhenNoisy,
@@ -277,7 +295,7 @@ impl AdaptiveEngine {
             None => (
                 None,
                 RoundSampling {
-                    samples: self.settings.samples,
+                    samples: self.settings.exploring_samples,
                     candidates: self.settings.candidates,
                     mixing_level: 0,
                 },
@@ -373,9 +391,19 @@ impl AdaptiveEngine {
             record(state);
             return Next::Stop;
         }
-        if judgement.sampler_disagrees {
+        // Far from settled, the next round explores with the smaller population, and a sampler
+        // check that fails there (a posterior of the early surrogates, often of several modes,
+        // sampled by few chains) does not make the chains mix harder: its runs are chosen the
+        // same either way, and the check decides once the posterior has settled.
+        let far = Self::far_from_settled(judgement, tolerance);
+        if judgement.sampler_disagrees && !far {
             state.sampling.mixing_level = (state.sampling.mixing_level + 1).min(s.max_mixing_level);
         }
+        state.sampling.samples = if far {
+            s.exploring_samples
+        } else {
+            state.sampling.samples.max(s.samples)
+        };
         let no_candidate = new_runs == 0;
         let widest = s.candidates * CANDIDATE_WIDENING * CANDIDATE_WIDENING;
         if no_candidate && !judgement.sampler_disagrees {
@@ -408,6 +436,18 @@ impl AdaptiveEngine {
             return Next::Stop;
         }
         Next::Continue
+    }
+
+    /// Whether the judged round's posterior is still far from where it settles: its shift,
+    /// its distance or ε above [`FAR`] tolerances.
+    fn far_from_settled(judgement: &Judgement, tolerance: f64) -> bool {
+        let far = FAR * tolerance;
+        judgement.assessment.surrogate_error > far
+            || judgement.assessment.shift.is_some_and(|v| v > far)
+            || judgement
+                .distance
+                .as_ref()
+                .is_some_and(|d| d.distance > far)
     }
 
     fn no_candidate_reason(&self, state: &EngineState, u: f64, judgement: &Judgement) -> String {
@@ -520,6 +560,44 @@ mod tests {
     }
 
     #[test]
+    fn rounds_far_from_settled_sample_the_exploring_population() {
+        let e = engine(|s| s.exploring_samples = 125);
+        assert_eq!(
+            e.start(1, None).sampling.samples,
+            125,
+            "the first round explores"
+        );
+        // ε = 2 posterior stds (20 tolerances): still exploring.
+        let s = drive(&e, vec![reading(0.0, 0.01, 2.0, 10)], 2);
+        assert_eq!(s.sampling.samples, 125);
+        // A shift of 3 stds with ε small: still exploring.
+        let s = drive(
+            &e,
+            vec![reading(0.0, 0.01, 0.05, 10), reading(3.0, 0.01, 0.05, 12)],
+            2,
+        );
+        assert_eq!(s.sampling.samples, 125);
+        // A shift of 0.5 std (5 tolerances), ε small: the full population.
+        let s = drive(
+            &e,
+            vec![reading(0.0, 0.01, 2.0, 10), reading(0.5, 0.01, 0.05, 12)],
+            2,
+        );
+        assert_eq!(s.sampling.samples, 500);
+        // Moving far again after settling: back to exploring.
+        let s = drive(
+            &e,
+            vec![
+                reading(0.0, 0.01, 0.05, 10),
+                reading(0.3, 0.01, 0.05, 12),
+                reading(5.0, 0.01, 0.05, 14),
+            ],
+            2,
+        );
+        assert_eq!(s.sampling.samples, 125);
+    }
+
+    #[test]
     fn the_limits_stop_with_their_reason() {
         let e = engine(|_| {});
         let s = drive(
@@ -613,5 +691,14 @@ mod tests {
         }
         assert_eq!(state.sampling.mixing_level, 1);
         assert!(stopped.unwrap().contains("strongest mixing"));
+        // Far from settled (ε = 2 posterior stds) the same check leaves the mixing as it is.
+        let mut state = e.start(1, None);
+        for k in 0..3 {
+            let mut r = reading(0.0, 0.01, 2.0, 10 + k);
+            r.sampler_agreement = Some(&agreement);
+            let j = e.judge(&state, &r).unwrap();
+            assert_eq!(e.step(&mut state, r, &j, 2), Next::Continue);
+        }
+        assert_eq!(state.sampling.mixing_level, 0);
     }
 }

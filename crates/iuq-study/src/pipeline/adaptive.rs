@@ -1606,6 +1606,7 @@ fn engine_settings(settings: &AdaptiveSettings) -> EngineSettings {
         max_runs: settings.max_runs,
         max_rounds: settings.max_rounds,
         samples: settings.samples,
+        exploring_samples: settings.exploring_samples,
         max_samples: settings.max_samples,
         candidates: settings.candidates,
         more_samples: settings.more_samples,

@@ -7,7 +7,8 @@
 //! test = { kind = "sobol", n = 8, seed = 12 }    # independent test runs per group (n = 0: none)
 //! # refine where the posterior lies (see `pipeline::adaptive`); absent: one-shot design
 //! adaptive = { batch = 2, max_runs = 300, tolerance = 0.1, log_likelihood_tolerance = 0.05,
-//!              samples = 2000, replicates = 4, max_samples = 32000, max_rounds = 30,
+//!              samples = 2000, exploring_samples = 500, replicates = 4, max_samples = 32000,
+//!              max_rounds = 30,
 //!              candidates = 1000, sampling = "sequential", stopping_rule = "distribution",
 //!              more_samples = "when-resolving" }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
@@ -54,21 +55,64 @@ pub struct PipelineSettings {
     pub adaptive: Option<AdaptiveSettings>,
     /// The model run at the posterior, when `[surrogate] posterior_check` is given.
     pub posterior_check: Option<PosteriorCheckSettings>,
-    /// A reduced basis of the whole curve instead of a GP per data point, when
-    /// `[surrogate] reduced_basis` is given.
-    pub reduced_basis: Option<ReducedBasisSettings>,
+    /// A reduced basis of the whole curve instead of a GP per data point: as
+    /// `[surrogate] reduced_basis` says, or where it is absent as [`ReducedBasisChoice::resolve`]
+    /// decides.
+    pub reduced_basis: ReducedBasisChoice,
+}
+
+/// Data rows from which a whole-curve model is emulated on a reduced basis when
+/// `[surrogate] reduced_basis` is absent: there a GP per row would make every evaluation of the
+/// surrogate cost `rows` predictions, where the basis costs one per component (at most
+/// `max_components`, 30 by default) and a product with the loadings. On a 200-point damped
+/// oscillation (4 parameters, 9 components) a round's surrogate evaluations cost about a third
+/// of the per-row GPs' (docs/adaptive-engine.md, "Long curves").
+pub const AUTOMATIC_REDUCED_BASIS_ROWS: usize = 50;
+
+/// What `[surrogate] reduced_basis` says.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReducedBasisChoice {
+    /// Absent: a reduced basis with the default settings for a whole-curve model of at least
+    /// [`AUTOMATIC_REDUCED_BASIS_ROWS`] data rows without a second fidelity, else a GP per row.
+    Automatic,
+    /// `false`: a GP per data row.
+    Off,
+    /// `true` or a table: a reduced basis with these settings.
+    On(ReducedBasisSettings),
+}
+
+impl ReducedBasisChoice {
+    /// The reduced basis to emulate with (`None`: a GP per data row), for a model that returns
+    /// the whole curve (`whole_curve`) or runs once per row, `rows` data rows, and whether a
+    /// second fidelity is given (emulated with a GP per row).
+    pub fn resolve(
+        self,
+        whole_curve: bool,
+        rows: usize,
+        low_fidelity: bool,
+    ) -> Option<ReducedBasisSettings> {
+        match self {
+            ReducedBasisChoice::On(settings) => Some(settings),
+            ReducedBasisChoice::Off => None,
+            ReducedBasisChoice::Automatic => {
+                (whole_curve && !low_fidelity && rows >= AUTOMATIC_REDUCED_BASIS_ROWS)
+                    .then(ReducedBasisSettings::default)
+            }
+        }
+    }
 }
 
 /// Read `[surrogate] reduced_basis = { explained_variance, max_components }` (`true` for the
-/// defaults).
+/// defaults, `false` for a GP per data row, absent for [`ReducedBasisChoice::Automatic`]).
 fn parse_reduced_basis(
     surrogate: &mut StudySection<'_>,
     study: &Study,
-) -> Result<Option<ReducedBasisSettings>> {
+) -> Result<ReducedBasisChoice> {
     let defaults = ReducedBasisSettings::default();
     let settings = match surrogate.value("reduced_basis") {
-        None => return Ok(None),
-        Some(toml::Value::Boolean(false)) => return Ok(None),
+        None => return Ok(ReducedBasisChoice::Automatic),
+        Some(toml::Value::Boolean(false)) => return Ok(ReducedBasisChoice::Off),
         Some(toml::Value::Boolean(true)) => defaults,
         Some(_) => {
             let Some(mut s) = surrogate.section(
@@ -76,7 +120,7 @@ fn parse_reduced_basis(
                 "{ explained_variance = 0.9999, max_components = 30 }",
             )?
             else {
-                return Ok(None);
+                return Ok(ReducedBasisChoice::Automatic);
             };
             let explained_variance = s
                 .positive("explained_variance")?
@@ -109,7 +153,7 @@ fn parse_reduced_basis(
             )
             .into());
     }
-    Ok(Some(settings))
+    Ok(ReducedBasisChoice::On(settings))
 }
 
 /// `[surrogate] posterior_check = { samples, seed, significance, retrain }`: the model itself
@@ -185,6 +229,12 @@ pub struct AdaptiveSettings {
     /// BASIS population of each replicate of a round's posterior at first (`samples`,
     /// default 2000).
     pub samples: usize,
+    /// BASIS population of each replicate while the posterior is still far from where it
+    /// settles (`exploring_samples`, default `samples / 4`, at least 10; at most `samples`): the
+    /// first round, and each round after one whose posterior moved, or whose surrogate error
+    /// was, more than 10 tolerances (`iuq_adaptive::engine::FAR`). `exploring_samples = samples`
+    /// samples every round fully (the engine before 2026-12, which the shipped studies name).
+    pub exploring_samples: usize,
     /// Independent BASIS runs per round (`replicates`, default 4): their pooled population is the
     /// round's posterior, their spread the Monte Carlo error of its moments (1: error unknown,
     /// taken as zero).
@@ -260,6 +310,9 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         tolerance: s.positive("tolerance")?.unwrap_or(0.1),
         log_likelihood_tolerance: s.positive("log_likelihood_tolerance")?.unwrap_or(0.05),
         samples,
+        exploring_samples: s
+            .count_in("exploring_samples", 10, samples)?
+            .unwrap_or((samples / 4).max(10)),
         replicates: s.count_in("replicates", 1, 64)?.unwrap_or(4),
         max_samples: s.count("max_samples", samples)?.unwrap_or(16 * samples),
         max_rounds: s.count("max_rounds", 1)?.unwrap_or(30),

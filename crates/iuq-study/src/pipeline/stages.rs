@@ -17,7 +17,7 @@ use super::model_runs::{ModelRuns, RunShape};
 use super::posterior_check::{self, PosteriorCheck};
 use super::report_data::{PipelineResults, PointRuns, write_pipeline_report};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::{PipelineSettings, parse_pipeline_settings};
+use super::settings::{PipelineSettings, ReducedBasisChoice, parse_pipeline_settings};
 use super::surrogate::{Emulation, Surrogate};
 use super::{
     Events, MODEL_POSTERIOR_MCSE, PIPELINE_FINAL_SAMPLES, PipelineOptions, PipelineOutcome,
@@ -222,7 +222,9 @@ impl<'a> PipelineRun<'a> {
             settings.adaptive.as_ref().map_or(0, |a| a.max_runs),
             settings.training_seed,
         )?;
-        if low_fidelity_section.is_some() && settings.reduced_basis.is_some() {
+        if low_fidelity_section.is_some()
+            && matches!(settings.reduced_basis, ReducedBasisChoice::On(_))
+        {
             return Err(input_error(format!(
                 "{}: key `low_fidelity`: a second fidelity is emulated with a GP per data point; remove `[surrogate] reduced_basis`",
                 study.path.display()
@@ -247,7 +249,14 @@ impl<'a> PipelineRun<'a> {
             )?),
             None => None,
         };
-        let emulation = Emulation::of(settings.reduced_basis, &data);
+        let whole_curve = study.abscissa.is_none()
+            && !matches!(study.model, crate::study::ModelSection::RbcShear { .. });
+        let emulation = Emulation::of(
+            settings
+                .reduced_basis
+                .resolve(whole_curve, data.x.len(), low_fidelity.is_some()),
+            &data,
+        );
         Ok(Self {
             study,
             options,
