@@ -8,8 +8,7 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front |
-//! | [`duration`] | durations a study may name (`"1h30m"`, seconds), with their bound |
+//! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front (read with `iuq_study_file::StudySection`) |
 //! | [`template`] | `{{ name }}` templates for input files and command arguments |
 //! | [`decoder`] | outputs from a JSON file, a CSV column or a regex over a file |
 //! | [`run_directory`] | run directories: `params.json`, filled templates, batch input CSVs |
@@ -75,7 +74,6 @@ pub mod campaign_model;
 pub mod decoder;
 pub mod design;
 pub mod designs;
-pub mod duration;
 pub mod error;
 pub mod executor;
 pub mod export;
@@ -87,7 +85,6 @@ pub mod run_directory;
 pub mod start_watch;
 pub mod store;
 pub mod study;
-pub mod study_section;
 pub mod supervised_process;
 pub mod template;
 pub mod worker;
@@ -103,4 +100,3 @@ pub use redecode::RedecodeSummary;
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};
 pub use study::{CampaignStudy, CommandSpec, DesignSpec, ExecutorKind};
-pub use study_section::StudySection;
