@@ -15,7 +15,8 @@
 //! | [`supervised_process`] | process groups, timeouts (SIGTERM, then SIGKILL) |
 //! | [`in_process`] | models evaluated in this process (formulas, UM-Bridge, the cell model) |
 //! | [`worker`] | executes one task, writes `result.json`/`status.json` atomically (`iuq worker`) |
-//! | [`store`] | the SQLite campaign store |
+//! | [`store`] | the SQLite campaign store, whose connection is its own: every query is one of its methods |
+//! | [`store::recorded_designs`] | the designs a store has recorded, how far each got, setting one aside (`iuq cancel`) |
 //! | [`executor`] | local, Slurm and HyperQueue executors |
 //! | [`campaign`] | the coordinator: submit, ingest, retry, resume |
 //! | [`campaign_model`] | a campaign as a batch `Model` |
@@ -24,7 +25,6 @@
 //! | [`start_watch`] | a campaign whose model command cannot start stops early |
 //! | [`outcome`] | outcome kinds and worker reports |
 //! | [`design`] | the points of `iuq run` |
-//! | [`designs`] | the designs of a store, how far each got, setting one aside (`iuq cancel`) |
 //! | [`export`] | tidy CSV/JSON of parameters and outputs |
 //! | [`atomic_file`] | atomic file writes |
 //! | [`error`] | the crate's error type [`CampaignError`] |
@@ -73,7 +73,6 @@ pub mod campaign;
 pub mod campaign_model;
 pub mod decoder;
 pub mod design;
-pub mod designs;
 pub mod error;
 pub mod executor;
 pub mod export;
