@@ -24,7 +24,7 @@
 //! | [`retry_policy`] | which failures are retried |
 //! | [`start_watch`] | a campaign whose model command cannot start stops early |
 //! | [`outcome`] | outcome kinds and worker reports |
-//! | [`design`] | the points of `iuq run` |
+//! | [`study_design`] | the study's `[design]` ([`StudyDesign`]) and the points it makes for `iuq run` |
 //! | [`export`] | tidy CSV/JSON of parameters and outputs |
 //! | [`atomic_file`] | atomic file writes |
 //! | [`error`] | the crate's error type [`CampaignError`] |
@@ -72,7 +72,6 @@ pub mod atomic_file;
 pub mod campaign;
 pub mod campaign_model;
 pub mod decoder;
-pub mod design;
 pub mod error;
 pub mod executor;
 pub mod export;
@@ -84,6 +83,7 @@ pub mod run_directory;
 pub mod start_watch;
 pub mod store;
 pub mod study;
+pub mod study_design;
 pub mod supervised_process;
 pub mod template;
 pub mod worker;
@@ -98,4 +98,5 @@ pub use outcome::{OutcomeKind, RunResult, TaskReport};
 pub use redecode::RedecodeSummary;
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};
-pub use study::{CampaignStudy, CommandSpec, DesignSpec, ExecutorKind};
+pub use study::{CampaignStudy, CommandSpec, ExecutorKind};
+pub use study_design::StudyDesign;

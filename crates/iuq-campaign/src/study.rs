@@ -50,6 +50,7 @@ use crate::decoder::{CsvRow, DecoderFormat, DecoderSpec, OutputDecoder};
 use crate::error::{CampaignError, Result};
 use crate::outcome::OutcomeKind;
 use crate::retry_policy::RetryPolicy;
+use crate::study_design::StudyDesign;
 use crate::template::{Segment, Template};
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
@@ -159,31 +160,6 @@ impl CommandSpec {
     }
 }
 
-/// How the points of `iuq run` are chosen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DesignSpec {
-    /// A maximin Latin hypercube of `n` points mapped through the priors.
-    Lhs {
-        /// Points.
-        n: usize,
-        /// Seed.
-        seed: u64,
-    },
-    /// `n` scrambled Sobol' points mapped through the priors.
-    Sobol {
-        /// Points.
-        n: usize,
-        /// Seed of the scrambling.
-        seed: u64,
-    },
-    /// Points read from a CSV file whose columns are named as the parameters.
-    File {
-        /// The file (absolute, or relative to the study's folder when written).
-        path: PathBuf,
-    },
-}
-
 /// Which executor runs the tasks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -247,7 +223,7 @@ pub struct CampaignStudy {
     /// The command model.
     pub model: CommandSpec,
     /// The design of `iuq run`, when the file has one.
-    pub design: Option<DesignSpec>,
+    pub design: Option<StudyDesign>,
     /// The executor.
     pub executor: ExecutorSpec,
 }
@@ -766,7 +742,7 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
     Ok(spec)
 }
 
-fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<DesignSpec> {
+fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<StudyDesign> {
     let mut s = StudySection::new(table, "design", file);
     let kind = s.string("kind")?.unwrap_or_else(|| "lhs".into());
     let seed = match s.value("seed") {
@@ -784,16 +760,16 @@ fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<Des
                 .count("n", 1)?
                 .ok_or_else(|| s.error("n", "missing: the number of points"))?;
             if kind == "lhs" {
-                DesignSpec::Lhs { n, seed }
+                StudyDesign::Lhs { n, seed }
             } else {
-                DesignSpec::Sobol { n, seed }
+                StudyDesign::Sobol { n, seed }
             }
         }
         "file" => {
             let p = s.string("file")?.ok_or_else(|| {
                 s.error("file", "missing: a CSV file with one column per parameter")
             })?;
-            DesignSpec::File {
+            StudyDesign::File {
                 path: relative_to(study_dir, &p),
             }
         }
@@ -925,7 +901,7 @@ retry = { max_attempts = 2, on = ["lost", "timeout"] }
         let s = parse(STUDY).unwrap();
         assert_eq!(s.model.timeout, Some(90.0));
         assert_eq!(s.model.derived.len(), 2);
-        assert_eq!(s.design, Some(DesignSpec::Lhs { n: 20, seed: 3 }));
+        assert_eq!(s.design, Some(StudyDesign::Lhs { n: 20, seed: 3 }));
         assert_eq!(s.executor.max_parallel, Some(2));
         assert_eq!(s.executor.directory, PathBuf::from("/tmp/study.campaign"));
         assert_eq!(

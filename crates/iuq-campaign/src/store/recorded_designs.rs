@@ -1,7 +1,7 @@
 //! The designs recorded in a campaign store — each batch of points a coordinator asked for,
 //! under its label — with how far each got, and setting a design aside: the store's methods
 //! [`CampaignStore::design_summaries`] and [`CampaignStore::cancel_design`] and what they return.
-//! (The `[design]` a study file asks for is [`crate::design`].)
+//! (The `[design]` a study file asks for is [`crate::study_design`].)
 //!
 //! A pipeline that changes course (a posterior check stopped half-way, a batch found useless)
 //! leaves the pending runs of the design it abandoned in the store. A pipeline never runs them
