@@ -7,6 +7,7 @@
 
 use std::path::PathBuf;
 
+use iuq_study_file::StudyFileError;
 use thiserror::Error;
 
 /// Errors of campaigns: bad study files, and failures of the store, file system or scheduler.
@@ -129,6 +130,16 @@ fn store_reason(error: &rusqlite::Error) -> String {
             reports it corrupt; restore it from a copy, or move it aside to start afresh)"
             .to_string(),
         _ => error.to_string(),
+    }
+}
+
+/// A study-file error of the section reader is a [`CampaignError::Study`] with the same file,
+/// key and reason (and so the same message).
+impl From<StudyFileError> for CampaignError {
+    fn from(error: StudyFileError) -> Self {
+        match error {
+            StudyFileError::Key { file, key, reason } => Self::Study { file, key, reason },
+        }
     }
 }
 

@@ -8,15 +8,15 @@
 //!
 //! | module | what |
 //! |---|---|
-//! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front |
-//! | [`duration`] | durations a study may name (`"1h30m"`, seconds), with their bound |
+//! | [`study`] | campaign study files: `[model]` (`command`, `batch-command`), `[design]`, `[executor]`, validated up front (read with `iuq_study_file::StudySection`) |
 //! | [`template`] | `{{ name }}` templates for input files and command arguments |
 //! | [`decoder`] | outputs from a JSON file, a CSV column or a regex over a file |
 //! | [`run_directory`] | run directories: `params.json`, filled templates, batch input CSVs |
 //! | [`supervised_process`] | process groups, timeouts (SIGTERM, then SIGKILL) |
 //! | [`in_process`] | models evaluated in this process (formulas, UM-Bridge, the cell model) |
 //! | [`worker`] | executes one task, writes `result.json`/`status.json` atomically (`iuq worker`) |
-//! | [`store`] | the SQLite campaign store |
+//! | [`store`] | the SQLite campaign store, whose connection is its own: every query is one of its methods |
+//! | [`store::recorded_designs`] | the designs a store has recorded, how far each got, setting one aside (`iuq cancel`) |
 //! | [`executor`] | local, Slurm and HyperQueue executors |
 //! | [`campaign`] | the coordinator: submit, ingest, retry, resume |
 //! | [`campaign_model`] | a campaign as a batch `Model` |
@@ -24,8 +24,7 @@
 //! | [`retry_policy`] | which failures are retried |
 //! | [`start_watch`] | a campaign whose model command cannot start stops early |
 //! | [`outcome`] | outcome kinds and worker reports |
-//! | [`design`] | the points of `iuq run` |
-//! | [`designs`] | the designs of a store, how far each got, setting one aside (`iuq cancel`) |
+//! | [`study_design`] | the study's `[design]` ([`StudyDesign`]) and the points it makes for `iuq run` |
 //! | [`export`] | tidy CSV/JSON of parameters and outputs |
 //! | [`atomic_file`] | atomic file writes |
 //! | [`error`] | the crate's error type [`CampaignError`] |
@@ -73,9 +72,6 @@ pub mod atomic_file;
 pub mod campaign;
 pub mod campaign_model;
 pub mod decoder;
-pub mod design;
-pub mod designs;
-pub mod duration;
 pub mod error;
 pub mod executor;
 pub mod export;
@@ -87,7 +83,7 @@ pub mod run_directory;
 pub mod start_watch;
 pub mod store;
 pub mod study;
-pub mod study_section;
+pub mod study_design;
 pub mod supervised_process;
 pub mod template;
 pub mod worker;
@@ -102,5 +98,5 @@ pub use outcome::{OutcomeKind, RunResult, TaskReport};
 pub use redecode::RedecodeSummary;
 pub use retry_policy::RetryPolicy;
 pub use store::{CampaignStore, RunStatus, StatusCounts};
-pub use study::{CampaignStudy, CommandSpec, DesignSpec, ExecutorKind};
-pub use study_section::StudySection;
+pub use study::{CampaignStudy, CommandSpec, ExecutorKind};
+pub use study_design::StudyDesign;

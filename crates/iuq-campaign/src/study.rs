@@ -44,16 +44,14 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use iuq_core::{Expression, Parameter, ParameterSpace, Prior};
+use iuq_study_file::StudySection;
 
 use crate::decoder::{CsvRow, DecoderFormat, DecoderSpec, OutputDecoder};
 use crate::error::{CampaignError, Result};
 use crate::outcome::OutcomeKind;
 use crate::retry_policy::RetryPolicy;
-use crate::study_section::StudySection;
+use crate::study_design::StudyDesign;
 use crate::template::{Segment, Template};
-
-/// Durations a study may name (kept here, where they were first read).
-pub use crate::duration::{MAX_DURATION_SECONDS, check_duration, parse_duration};
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
 pub const TOP_LEVEL_KEYS: [&str; 13] = [
@@ -162,31 +160,6 @@ impl CommandSpec {
     }
 }
 
-/// How the points of `iuq run` are chosen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum DesignSpec {
-    /// A maximin Latin hypercube of `n` points mapped through the priors.
-    Lhs {
-        /// Points.
-        n: usize,
-        /// Seed.
-        seed: u64,
-    },
-    /// `n` scrambled Sobol' points mapped through the priors.
-    Sobol {
-        /// Points.
-        n: usize,
-        /// Seed of the scrambling.
-        seed: u64,
-    },
-    /// Points read from a CSV file whose columns are named as the parameters.
-    File {
-        /// The file (absolute, or relative to the study's folder when written).
-        path: PathBuf,
-    },
-}
-
 /// Which executor runs the tasks.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -250,7 +223,7 @@ pub struct CampaignStudy {
     /// The command model.
     pub model: CommandSpec,
     /// The design of `iuq run`, when the file has one.
-    pub design: Option<DesignSpec>,
+    pub design: Option<StudyDesign>,
     /// The executor.
     pub executor: ExecutorSpec,
 }
@@ -301,18 +274,18 @@ impl CampaignStudy {
         ))?;
         let name = match top.string("name")? {
             Some(s) if !s.trim().is_empty() => s,
-            Some(_) => return Err(top.error("name", "expected a non-empty string")),
-            None => return Err(top.error("name", "missing")),
+            Some(_) => return Err(top.error("name", "expected a non-empty string").into()),
+            None => return Err(top.error("name", "missing").into()),
         };
         let Some(parameters) = top.sub_table("parameters")? else {
-            return Err(top.error("parameters", "missing"));
+            return Err(top.error("parameters", "missing").into());
         };
         let space = parse_parameters(parameters, &file)?;
         let Some(model_table) = top.sub_table("model")? else {
             return Err(top.error(
                 "model",
                 "missing: a campaign needs [model] with kind = \"command\" or \"batch-command\"",
-            ));
+            ).into());
         };
         let model = parse_model(model_table, &space, &file, &study_dir)?;
         let design = top
@@ -419,7 +392,7 @@ fn parse_model(
     let outputs = parse_output_names(&mut s)?;
     let timeout = s.duration("timeout")?;
     if timeout == Some(0.0) {
-        return Err(s.error("timeout", "must be positive"));
+        return Err(s.error("timeout", "must be positive").into());
     }
     let kill_grace = s.duration("kill_grace")?.unwrap_or(10.0);
     let env = parse_env(&mut s)?;
@@ -483,11 +456,11 @@ fn parse_model_kind(s: &mut StudySection) -> Result<bool> {
         "expression" | "rbc-shear" | "umbridge" => Err(s.error(
             "kind",
             format!("a campaign runs a model of kind \"command\" or \"batch-command\", not `{kind_name}`"),
-        )),
+        ).into()),
         other => Err(s.error(
             "kind",
             format!("unknown kind `{other}` (\"command\" or \"batch-command\")"),
-        )),
+        ).into()),
     }
 }
 
@@ -501,7 +474,7 @@ fn parse_command_text(s: &mut StudySection, study_dir: &Path) -> Result<Vec<Stri
         )
     })?;
     if command_text.is_empty() || command_text[0].trim().is_empty() {
-        return Err(s.error("command", "must name a program"));
+        return Err(s.error("command", "must name a program").into());
     }
     if command_text[0].contains('/') && !Path::new(&command_text[0]).is_absolute() {
         command_text[0] = study_dir.join(&command_text[0]).display().to_string();
@@ -520,10 +493,12 @@ fn parse_derived(s: &mut StudySection, known: &mut Vec<String>) -> Result<Vec<(S
                 .as_str()
                 .ok_or_else(|| s.error(&key, "expected a formula string"))?;
             if known.contains(name) || name == "run_id" {
-                return Err(s.error(
-                    &key,
-                    "the name is already taken by a parameter or derived value",
-                ));
+                return Err(s
+                    .error(
+                        &key,
+                        "the name is already taken by a parameter or derived value",
+                    )
+                    .into());
             }
             Expression::parse(formula, known).map_err(|e| s.error(&key, e.to_string()))?;
             known.push(name.clone());
@@ -545,10 +520,12 @@ fn parse_command(
         let key = format!("command[{i}]");
         let t = Template::parse(arg).map_err(|e| s.error(&key, e.reason))?;
         if let Some((name, _)) = t.unknown_names(is_known).into_iter().next() {
-            return Err(s.error(
-                &key,
-                format!("unknown name `{name}` (known: {})", known.join(", ")),
-            ));
+            return Err(s
+                .error(
+                    &key,
+                    format!("unknown name `{name}` (known: {})", known.join(", ")),
+                )
+                .into());
         }
         command.push(t);
     }
@@ -577,14 +554,16 @@ fn parse_templates(
         let template = Template::parse(&text)
             .map_err(|e| s.error(&key, format!("{}: {e}", source_path.display())))?;
         if let Some((name, line)) = template.unknown_names(is_known).into_iter().next() {
-            return Err(s.error(
-                &key,
-                format!(
-                    "{} line {line}: unknown name `{name}` (known: {})",
-                    source_path.display(),
-                    known.join(", ")
-                ),
-            ));
+            return Err(s
+                .error(
+                    &key,
+                    format!(
+                        "{} line {line}: unknown name `{name}` (known: {})",
+                        source_path.display(),
+                        known.join(", ")
+                    ),
+                )
+                .into());
         }
         let target = if Path::new(source).is_absolute() {
             source_path
@@ -597,10 +576,12 @@ fn parse_templates(
             .components()
             .any(|c| matches!(c, std::path::Component::ParentDir))
         {
-            return Err(s.error(
-                &key,
-                "a template must lie in or below the study's folder (no `..`)",
-            ));
+            return Err(s
+                .error(
+                    &key,
+                    "a template must lie in or below the study's folder (no `..`)",
+                )
+                .into());
         }
         templates.push(TemplateFile { target, template });
     }
@@ -616,14 +597,16 @@ fn parse_output_names(s: &mut StudySection) -> Result<Vec<String>> {
         )
     })?;
     if outputs.is_empty() {
-        return Err(s.error("outputs", "at least one output is needed"));
+        return Err(s.error("outputs", "at least one output is needed").into());
     }
     for (i, o) in outputs.iter().enumerate() {
         if o.trim().is_empty() || outputs[..i].contains(o) {
-            return Err(s.error(
-                &format!("outputs[{i}]"),
-                "output names must be non-empty and distinct",
-            ));
+            return Err(s
+                .error(
+                    &format!("outputs[{i}]"),
+                    "output names must be non-empty and distinct",
+                )
+                .into());
         }
     }
     Ok(outputs)
@@ -639,7 +622,11 @@ fn parse_env(s: &mut StudySection) -> Result<Vec<(String, String)>> {
                 toml::Value::Integer(x) => x.to_string(),
                 toml::Value::Float(x) => x.to_string(),
                 toml::Value::Boolean(x) => x.to_string(),
-                _ => return Err(s.error(&format!("env.{k}"), "expected a string or number")),
+                _ => {
+                    return Err(s
+                        .error(&format!("env.{k}"), "expected a string or number")
+                        .into());
+                }
             };
             env.push((k.clone(), value));
         }
@@ -664,7 +651,7 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
                 return Err(s.error(
                     "array",
                     "give either `array` (one array holds every output) or `keys` (a pointer per output)",
-                ));
+                ).into());
             }
             let pointer = s.string("array")?.unwrap_or_default();
             let pointer = if pointer.starts_with('/') {
@@ -687,25 +674,26 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
                         )),
                         None => Ok(format!("/{o}")),
                     })
-                    .collect::<Result<Vec<_>>>()?,
+                    .collect::<iuq_study_file::Result<Vec<_>>>()?,
                 None => outputs.iter().map(|o| format!("/{o}")).collect(),
             };
             DecoderFormat::Json { pointers }
         }
         "csv" => {
             let column = s.string("column")?;
-            let row = match s.value("row") {
-                None => CsvRow::Last,
-                Some(toml::Value::String(r)) if r == "last" => CsvRow::Last,
-                Some(toml::Value::String(r)) if r == "first" => CsvRow::First,
-                Some(toml::Value::Integer(i)) if *i >= 0 => CsvRow::Index(*i as usize),
-                Some(other) => {
-                    return Err(s.error(
+            let row =
+                match s.value("row") {
+                    None => CsvRow::Last,
+                    Some(toml::Value::String(r)) if r == "last" => CsvRow::Last,
+                    Some(toml::Value::String(r)) if r == "first" => CsvRow::First,
+                    Some(toml::Value::Integer(i)) if *i >= 0 => CsvRow::Index(*i as usize),
+                    Some(other) => {
+                        return Err(s.error(
                         "row",
                         format!("expected \"first\", \"last\" or a row index ≥ 0, found `{other}`"),
-                    ));
-                }
-            };
+                    ).into());
+                    }
+                };
             match column {
                 Some(column) => DecoderFormat::CsvColumn { column },
                 None => DecoderFormat::CsvColumns { row },
@@ -717,7 +705,7 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
                     let re = regex::Regex::new(&p).map_err(|e| s.error("pattern", e.to_string()))?;
                     for o in outputs {
                         if re.capture_names().flatten().all(|n| n != o) {
-                            return Err(s.error("pattern", format!("no named group `(?P<{o}>…)` for output `{o}`")));
+                            return Err(s.error("pattern", format!("no named group `(?P<{o}>…)` for output `{o}`")).into());
                         }
                     }
                     vec![p; outputs.len()]
@@ -728,16 +716,18 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
                         Some(toml::Value::String(p)) => Ok(p.clone()),
                         _ => Err(s.error(&format!("patterns.{o}"), "missing: a regular expression whose first group is the value")),
                     })
-                    .collect::<Result<Vec<_>>>()?,
-                _ => return Err(s.error("pattern", "give either `pattern` (named groups per output) or `patterns = { output = 'regex' }`")),
+                    .collect::<iuq_study_file::Result<Vec<_>>>()?,
+                _ => return Err(s.error("pattern", "give either `pattern` (named groups per output) or `patterns = { output = 'regex' }`").into()),
             };
             DecoderFormat::Regex { patterns }
         }
         other => {
-            return Err(s.error(
-                "format",
-                format!("unknown format `{other}` (\"json\", \"csv\" or \"regex\")"),
-            ));
+            return Err(s
+                .error(
+                    "format",
+                    format!("unknown format `{other}` (\"json\", \"csv\" or \"regex\")"),
+                )
+                .into());
         }
     };
     s.finish_with_hint(
@@ -752,14 +742,16 @@ fn parse_decoder(table: &toml::Table, outputs: &[String], file: &str) -> Result<
     Ok(spec)
 }
 
-fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<DesignSpec> {
+fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<StudyDesign> {
     let mut s = StudySection::new(table, "design", file);
     let kind = s.string("kind")?.unwrap_or_else(|| "lhs".into());
     let seed = match s.value("seed") {
         None => 0,
         Some(toml::Value::Integer(i)) if *i >= 0 => *i as u64,
         Some(other) => {
-            return Err(s.error("seed", format!("expected an integer ≥ 0, found `{other}`")));
+            return Err(s
+                .error("seed", format!("expected an integer ≥ 0, found `{other}`"))
+                .into());
         }
     };
     let spec = match kind.as_str() {
@@ -768,24 +760,26 @@ fn parse_design(table: &toml::Table, file: &str, study_dir: &Path) -> Result<Des
                 .count("n", 1)?
                 .ok_or_else(|| s.error("n", "missing: the number of points"))?;
             if kind == "lhs" {
-                DesignSpec::Lhs { n, seed }
+                StudyDesign::Lhs { n, seed }
             } else {
-                DesignSpec::Sobol { n, seed }
+                StudyDesign::Sobol { n, seed }
             }
         }
         "file" => {
             let p = s.string("file")?.ok_or_else(|| {
                 s.error("file", "missing: a CSV file with one column per parameter")
             })?;
-            DesignSpec::File {
+            StudyDesign::File {
                 path: relative_to(study_dir, &p),
             }
         }
         other => {
-            return Err(s.error(
-                "kind",
-                format!("unknown design `{other}` (\"lhs\", \"sobol\" or \"file\")"),
-            ));
+            return Err(s
+                .error(
+                    "kind",
+                    format!("unknown design `{other}` (\"lhs\", \"sobol\" or \"file\")"),
+                )
+                .into());
         }
     };
     s.finish_with_hint("kind, n, seed, file")?;
@@ -804,10 +798,12 @@ fn parse_executor(
         Some("slurm") => ExecutorKind::Slurm,
         Some("hyperqueue") => ExecutorKind::Hyperqueue,
         Some(other) => {
-            return Err(s.error(
-                "kind",
-                format!("unknown executor `{other}` (\"local\", \"slurm\" or \"hyperqueue\")"),
-            ));
+            return Err(s
+                .error(
+                    "kind",
+                    format!("unknown executor `{other}` (\"local\", \"slurm\" or \"hyperqueue\")"),
+                )
+                .into());
         }
     };
     let max_parallel = s.count("max_parallel", 1)?;
@@ -843,7 +839,7 @@ fn parse_executor(
                             )
                         })
                 })
-                .collect::<Result<Vec<_>>>()?;
+                .collect::<iuq_study_file::Result<Vec<_>>>()?;
         }
         r.finish_with_hint("max_attempts, on")?;
     }
@@ -854,7 +850,7 @@ fn parse_executor(
     let hq = s.string("hq")?;
     let worker = s.strings("worker")?;
     if worker.as_ref().is_some_and(Vec::is_empty) {
-        return Err(s.error("worker", "must name a program"));
+        return Err(s.error("worker", "must name a program").into());
     }
     s.finish_with_hint("kind, max_parallel, directory, retry, poll_interval, array_chunk, sbatch_args, submit_args, hq, worker")?;
     Ok(ExecutorSpec {
@@ -905,7 +901,7 @@ retry = { max_attempts = 2, on = ["lost", "timeout"] }
         let s = parse(STUDY).unwrap();
         assert_eq!(s.model.timeout, Some(90.0));
         assert_eq!(s.model.derived.len(), 2);
-        assert_eq!(s.design, Some(DesignSpec::Lhs { n: 20, seed: 3 }));
+        assert_eq!(s.design, Some(StudyDesign::Lhs { n: 20, seed: 3 }));
         assert_eq!(s.executor.max_parallel, Some(2));
         assert_eq!(s.executor.directory, PathBuf::from("/tmp/study.campaign"));
         assert_eq!(
@@ -988,15 +984,5 @@ retry = { max_attempts = 2, on = ["lost", "timeout"] }
                 "{m}"
             );
         }
-    }
-
-    #[test]
-    fn durations() {
-        assert_eq!(parse_duration("30m").unwrap(), 1800.0);
-        assert_eq!(parse_duration("1h30m").unwrap(), 5400.0);
-        assert_eq!(parse_duration("500ms").unwrap(), 0.5);
-        assert_eq!(parse_duration("12").unwrap(), 12.0);
-        assert!(parse_duration("3 parsecs").is_err());
-        assert!(parse_duration("").is_err());
     }
 }

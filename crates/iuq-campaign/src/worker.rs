@@ -16,7 +16,6 @@ use iuq_core::Expression;
 
 use crate::atomic_file::write_atomically;
 use crate::decoder::{OutputDecoder, check_finite, parse_cell, read_csv_text};
-use crate::duration::check_duration;
 use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, host_name, unix_now};
 use crate::run_directory::{
@@ -25,6 +24,7 @@ use crate::run_directory::{
 use crate::study::{CommandKind, CommandSpec};
 use crate::supervised_process::{OutputLogs, run_supervised, signal_name};
 use crate::template::format_value;
+use iuq_study_file::check_duration;
 
 /// Bytes of standard error kept with each attempt.
 pub const STDERR_TAIL_BYTES: u64 = 2000;

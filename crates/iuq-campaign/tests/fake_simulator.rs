@@ -63,6 +63,12 @@ fn open(path: &Path) -> Campaign {
         .0
 }
 
+/// A connection of the test's own to the campaign store `store` (the store keeps its own
+/// private), to look at its tables.
+fn sql(store: &iuq_campaign::CampaignStore) -> rusqlite::Connection {
+    rusqlite::Connection::open(store.path()).unwrap()
+}
+
 #[test]
 fn every_outcome_is_recorded_with_its_reason_and_failures_reach_the_caller() {
     let dir = scratch("outcomes");
@@ -96,8 +102,7 @@ fn every_outcome_is_recorded_with_its_reason_and_failures_reach_the_caller() {
 
     let campaign = model.into_campaign().unwrap();
     let store = campaign.store();
-    let kinds: Vec<AttemptRow> = store
-        .connection()
+    let kinds: Vec<AttemptRow> = sql(store)
         .prepare("SELECT run_id, outcome_kind, exit_code, signal, COALESCE(stderr_tail, '') FROM attempts ORDER BY run_id")
         .unwrap()
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?, r.get(3)?, r.get(4)?)))
@@ -179,9 +184,7 @@ fn identical_vectors_are_not_run_twice_across_batches_and_sessions() {
     assert_eq!(second[1], first[3]);
     assert_eq!(second[2].as_ref().unwrap().outputs[0], 3.0);
     let campaign = model.into_campaign().unwrap();
-    let attempts: i64 = campaign
-        .store()
-        .connection()
+    let attempts: i64 = sql(campaign.store())
         .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
         .unwrap();
     assert_eq!(attempts, 4);
@@ -194,9 +197,7 @@ fn a_run_whose_stored_parameters_do_not_parse_is_an_error_not_a_run_without_para
     let path = write_study(&dir, "");
     let mut campaign = open(&path);
     campaign.add_points("design", &[vec![0.0, 4.0]]).unwrap();
-    campaign
-        .store()
-        .connection()
+    sql(campaign.store())
         .execute("UPDATE runs SET parameters = 'four'", [])
         .unwrap();
     let error = campaign
@@ -208,9 +209,7 @@ fn a_run_whose_stored_parameters_do_not_parse_is_an_error_not_a_run_without_para
         "{error}"
     );
     // Nothing ran: no attempt, no run directory.
-    let attempts: i64 = campaign
-        .store()
-        .connection()
+    let attempts: i64 = sql(campaign.store())
         .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
         .unwrap();
     assert_eq!(attempts, 0);
@@ -345,9 +344,7 @@ retry = { max_attempts = 2 }
     let out = model.evaluate_batch(&[vec![0.5]]).unwrap();
     assert!(out[0].as_ref().unwrap_err().reason.contains("cannot start"));
     let campaign = model.into_campaign().unwrap();
-    let attempts: i64 = campaign
-        .store()
-        .connection()
+    let attempts: i64 = sql(campaign.store())
         .query_row(
             "SELECT COUNT(*) FROM attempts WHERE outcome_kind = 'spawn_failed'",
             [],

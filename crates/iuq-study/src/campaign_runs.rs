@@ -2,8 +2,7 @@
 //! opening (and resuming) a campaign with this executable as the remote worker, and the log line
 //! of a campaign's progress.
 
-use iuq_campaign::designs::{DesignSummary, design_summaries};
-use iuq_campaign::store::{FailedRun, JournalMode};
+use iuq_campaign::store::{DesignSummary, FailedRun, JournalMode};
 use iuq_campaign::{
     Campaign, CampaignError, CampaignOptions, CampaignStore, CampaignStudy, Progress,
     ResumeSummary, StatusCounts, store_path,
@@ -113,7 +112,7 @@ impl CampaignStatus {
             counts: store.counts(None).map_err(campaign_error)?,
             attempts: store.attempt_kinds().map_err(campaign_error)?,
             failures: store.failures().map_err(campaign_error)?,
-            designs: design_summaries(&store).map_err(campaign_error)?,
+            designs: store.design_summaries().map_err(campaign_error)?,
             parameter_names: study.space.names(),
             store: path,
         })

@@ -15,6 +15,7 @@ use std::fmt::Display;
 use thiserror::Error;
 
 use iuq_campaign::CampaignError;
+use iuq_study_file::StudyFileError;
 
 /// An error of a study: bad input or a failure of the work, with its whole message.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
@@ -61,8 +62,8 @@ impl StudyError {
         }
     }
 
-    /// Any error as a study error: a [`StudyError`] stays what it is, a [`CampaignError`] is bad
-    /// input when it says so, as is a model that cannot run as its study describes it
+    /// Any error as a study error: a [`StudyError`] stays what it is, a [`StudyFileError`] is
+    /// bad input, a [`CampaignError`] is bad input when it says so, as is a model that cannot run as its study describes it
     /// (`CoreError::ModelInput`, `BasisError::ModelInput`); anything else is a failure; the
     /// message is the error's text followed by its sources'.
     pub fn from_error<E: StdError + 'static>(error: E) -> Self {
@@ -79,6 +80,9 @@ impl StudyError {
             any.downcast_ref::<iuq_basis::BasisError>()
         {
             return Self::BadInput(reason.clone());
+        }
+        if let Some(study_file) = any.downcast_ref::<StudyFileError>() {
+            return Self::BadInput(study_file.to_string());
         }
         if let Some(campaign) = any.downcast_ref::<CampaignError>() {
             if matches!(campaign, CampaignError::Interrupted) {
@@ -122,6 +126,7 @@ macro_rules! failures_from {
 }
 
 failures_from!(
+    StudyFileError,
     CampaignError,
     iuq_core::CoreError,
     iuq_doe::DoeError,
@@ -192,6 +197,8 @@ mod tests {
         assert_eq!(e.to_string(), "writing: outer: disk full");
         let campaign = StudyError::from(CampaignError::study("c.toml", "model", "missing"));
         assert!(campaign.is_bad_input());
+        let study_file = StudyError::from(StudyFileError::key("c.toml", "model", "missing"));
+        assert_eq!(study_file, campaign);
         assert_eq!(
             "no".parse::<f64>().bad_input(|| "--n".into()).unwrap_err(),
             input_error("--n: invalid float literal")

@@ -40,7 +40,7 @@ use std::path::{Path, PathBuf};
 use iuq_basis::{ComputationalError, Observations};
 use iuq_core::Prior;
 
-use iuq_campaign::StudySection;
+use iuq_study_file::StudySection;
 
 use crate::error::{BadInput, Result, input_error};
 use crate::study::Study;

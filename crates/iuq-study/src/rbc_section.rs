@@ -22,7 +22,7 @@ use iuq_rbc::model::{CellParameters, PARAMETER_NAMES, RbcShearModel, RbcShearSet
 use iuq_rbc::protocol::{DEFAULT_LATTICE_SHEAR_RATE, Protocol};
 use iuq_rbc::{MeshOrientation, PastSingularity, RbcError};
 
-use iuq_campaign::StudySection;
+use iuq_study_file::StudySection;
 
 use crate::error::{Result, input_error};
 use crate::table_io::read_numeric_csv;

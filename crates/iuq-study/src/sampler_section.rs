@@ -20,7 +20,7 @@
 
 use iuq_basis::{BasisError, BasisSettings, CheckedSettings, MinStepAction, Mixing, Resampling};
 
-use iuq_campaign::StudySection;
+use iuq_study_file::StudySection;
 
 use crate::error::{Result, input_error};
 use crate::study::Study;

@@ -9,8 +9,8 @@
 
 use std::path::{Path, PathBuf};
 
-use iuq_campaign::StudySection;
 use iuq_core::{ExpressionModel, Parameter, ParameterSpace, Prior};
+use iuq_study_file::StudySection;
 
 use crate::error::{BadInput, Result, input_error};
 

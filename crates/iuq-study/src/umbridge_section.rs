@@ -24,7 +24,7 @@ use std::time::Duration;
 
 use iuq_umbridge::{ClientOptions, UmBridgeModel};
 
-use iuq_campaign::StudySection;
+use iuq_study_file::StudySection;
 
 use crate::error::{Result, StudyError, input_error};
 

@@ -76,6 +76,18 @@ fn store_of(dir: &Path) -> iuq_campaign::CampaignStore {
     iuq_campaign::CampaignStore::open_existing(&dir.join("study.campaign/campaign.sqlite")).unwrap()
 }
 
+/// A connection of the test's own to the campaign store in `dir` (the store keeps its own
+/// private), to look at its tables.
+fn store_sql(dir: &Path) -> rusqlite::Connection {
+    rusqlite::Connection::open(dir.join("study.campaign/campaign.sqlite")).unwrap()
+}
+
+/// A connection of the test's own to the campaign store `store` (the store keeps its own
+/// private), to look at its tables.
+fn sql(store: &iuq_campaign::CampaignStore) -> rusqlite::Connection {
+    rusqlite::Connection::open(store.path()).unwrap()
+}
+
 #[test]
 fn run_status_export_and_retry_of_a_misbehaving_simulator() {
     let dir = scratch("cli-campaign", "verbs");
@@ -148,8 +160,7 @@ fn run_status_export_and_retry_of_a_misbehaving_simulator() {
     let v = json_of(&iuq(&["retry", p, "--failed", "--json"]));
     assert_eq!(v["retried"], 6);
     assert_eq!(v["counts"]["failed"], 6);
-    let attempts: i64 = store_of(&dir)
-        .connection()
+    let attempts: i64 = store_sql(&dir)
         .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
         .unwrap();
     assert_eq!(attempts, 13);
@@ -175,8 +186,7 @@ fn status_gives_what_each_designs_runs_cost_since_it_was_recorded() {
         .unwrap();
     // Each attempt's start and finish, straight from the store.
     let attempt = |run_id: i64| -> (f64, f64) {
-        store_of(&dir)
-            .connection()
+        store_sql(&dir)
             .query_row(
                 "SELECT started_at, finished_at FROM attempts WHERE run_id = ?1",
                 [run_id],
@@ -239,11 +249,7 @@ fn cancel_sets_an_abandoned_designs_pending_runs_aside_until_a_design_asks_again
                 &[vec![0.0, 7.0], vec![0.0, 8.0], vec![0.0, 1.0]],
             )
             .unwrap();
-        iuq_campaign::designs::design_summaries(&store)
-            .unwrap()
-            .last()
-            .unwrap()
-            .id
+        store.design_summaries().unwrap().last().unwrap().id
     };
     let v = json_of(&iuq(&["status", p, "--json"]));
     let designs = v["designs"].as_array().unwrap();
@@ -281,8 +287,7 @@ fn cancel_sets_an_abandoned_designs_pending_runs_aside_until_a_design_asks_again
     assert_eq!(v["counts"]["pending"], 0, "{v}");
     assert_eq!(v["counts"]["cancelled"], 2);
     assert_eq!(v["counts"]["succeeded"], 2);
-    let reason: String = store_of(&dir)
-        .connection()
+    let reason: String = store_sql(&dir)
         .query_row(
             "SELECT reason FROM runs WHERE status = 'cancelled' LIMIT 1",
             [],
@@ -338,8 +343,7 @@ fn a_model_command_that_cannot_start_stops_the_campaign_and_leaves_its_runs_pend
         (counts.pending, counts.failed, counts.succeeded),
         (12, 0, 0)
     );
-    let attempts: i64 = store
-        .connection()
+    let attempts: i64 = sql(&store)
         .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
         .unwrap();
     assert!(attempts < 3 * 12, "{attempts} attempts");
@@ -376,8 +380,7 @@ fn redecode_reads_the_run_directories_again_and_keeps_what_it_cannot_read() {
     let v = json_of(&iuq(&["run", p, "--json"]));
     assert_eq!(v["counts"]["succeeded"], 3);
     let stored = |run_id: i64| -> (f64, Option<f64>) {
-        store_of(&dir)
-            .connection()
+        store_sql(&dir)
             .query_row(
                 "SELECT value, std FROM outputs WHERE run_id = ?1",
                 [run_id],
@@ -538,8 +541,7 @@ fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results
     child.wait().unwrap();
     assert!((40..200).contains(&before), "killed after {before} results");
     let store = store_of(&dir);
-    let committed: Vec<(i64, f64, i64)> = store
-        .connection()
+    let committed: Vec<(i64, f64, i64)> = sql(&store)
         .prepare("SELECT o.run_id, o.value, o.attempt_id FROM outputs o ORDER BY o.run_id")
         .unwrap()
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
@@ -559,8 +561,7 @@ fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results
     );
     let store = store_of(&dir);
     assert_eq!(store.integrity_check().unwrap(), "ok");
-    let per_run: Vec<(i64, i64)> = store
-        .connection()
+    let per_run: Vec<(i64, i64)> = sql(&store)
         .prepare("SELECT r.id, (SELECT COUNT(*) FROM attempts a WHERE a.run_id = r.id AND a.outcome_kind = 'succeeded') FROM runs r")
         .unwrap()
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
@@ -572,8 +573,7 @@ fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results
         per_run.iter().all(|(_, n)| *n == 1),
         "every run has exactly one successful execution"
     );
-    let open: i64 = store
-        .connection()
+    let open: i64 = sql(&store)
         .query_row(
             "SELECT COUNT(*) FROM attempts WHERE outcome_kind IS NULL",
             [],
@@ -582,8 +582,7 @@ fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results
         .unwrap();
     assert_eq!(open, 0);
     for (run_id, value, attempt_id) in committed {
-        let (v2, a2): (f64, i64) = store
-            .connection()
+        let (v2, a2): (f64, i64) = sql(&store)
             .query_row(
                 "SELECT value, attempt_id FROM outputs WHERE run_id = ?1",
                 [run_id],
@@ -597,8 +596,7 @@ fn a_coordinator_killed_mid_campaign_resumes_without_losing_or_repeating_results
         );
     }
     for (run_id, _) in &per_run {
-        let x: f64 = store
-            .connection()
+        let x: f64 = sql(&store)
             .query_row(
                 "SELECT value FROM outputs WHERE run_id = ?1",
                 [run_id],
@@ -691,8 +689,7 @@ fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_
     );
     assert!(arrays[3].contains("--array=0-0%2"), "{log}");
     let store = store_of(&dir);
-    let kinds: Vec<(String, Option<String>, Option<String>)> = store
-        .connection()
+    let kinds: Vec<(String, Option<String>, Option<String>)> = sql(&store)
         .prepare("SELECT outcome_kind, external_id, host FROM attempts WHERE run_id = 12 ORDER BY number")
         .unwrap()
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))
@@ -707,8 +704,7 @@ fn slurm_executor_with_fake_sbatch_chunks_arrays_retries_lost_tasks_and_records_
         "a Slurm array id: {:?}",
         kinds[1].1
     );
-    let failed: String = store
-        .connection()
+    let failed: String = sql(&store)
         .query_row("SELECT reason FROM runs WHERE status = 'failed'", [], |r| {
             r.get(0)
         })
@@ -758,8 +754,7 @@ fn a_coordinator_killed_while_slurm_runs_its_arrays_reattaches_without_resubmitt
     assert_eq!(v["resumed"]["lost"], 0, "{v}");
     let log = std::fs::read_to_string(state.join("sbatch.log")).unwrap();
     assert_eq!(log.lines().count(), 1, "one array, not resubmitted: {log}");
-    let attempts: i64 = store_of(&dir)
-        .connection()
+    let attempts: i64 = store_sql(&dir)
         .query_row("SELECT COUNT(*) FROM attempts", [], |r| r.get(0))
         .unwrap();
     assert_eq!(attempts, 5);
@@ -847,8 +842,7 @@ fn hyperqueue_campaign(hq: &Path, state: Option<&Path>, dir: &Path) -> Vec<Strin
             .unwrap()
             .contains("exited with status 3")
     );
-    let ids: Vec<Option<String>> = store_of(dir)
-        .connection()
+    let ids: Vec<Option<String>> = store_sql(dir)
         .prepare("SELECT external_id FROM attempts ORDER BY id")
         .unwrap()
         .query_map([], |r| r.get(0))
@@ -1213,8 +1207,7 @@ fn an_interrupted_coordinator_takes_its_running_model_commands_with_it() {
         let store = store_of(&dir);
         // Each stopped execution is lost (retried by the default policy), not a failed run;
         // whether the coordinator filed it before it died or the next run found it unfinished.
-        let first: Vec<(String, String)> = store
-            .connection()
+        let first: Vec<(String, String)> = sql(&store)
             .prepare("SELECT outcome_kind, COALESCE(reason, '') FROM attempts WHERE number = 1")
             .unwrap()
             .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
@@ -1230,8 +1223,7 @@ fn an_interrupted_coordinator_takes_its_running_model_commands_with_it() {
                 "{first:?}"
             );
         }
-        let values: Vec<f64> = store
-            .connection()
+        let values: Vec<f64> = sql(&store)
             .prepare("SELECT value FROM outputs ORDER BY value")
             .unwrap()
             .query_map([], |r| r.get(0))
@@ -1323,8 +1315,7 @@ fn a_copied_store_leaves_the_original_campaigns_runs_alone() {
     let copy = scratch("cli-campaign", "copy");
     std::fs::create_dir_all(copy.join("study.campaign")).unwrap();
     let backup = copy.join("study.campaign/campaign.sqlite");
-    store_of(&dir)
-        .connection()
+    store_sql(&dir)
         .execute("VACUUM INTO ?1", [backup.to_str().unwrap()])
         .unwrap();
     // The copy's own model does not wait (its hold file does not exist).
@@ -1345,8 +1336,7 @@ fn a_copied_store_leaves_the_original_campaigns_runs_alone() {
         "the copy stopped the original's models"
     );
     let store = iuq_campaign::CampaignStore::open_existing(&backup).unwrap();
-    let reasons: Vec<String> = store
-        .connection()
+    let reasons: Vec<String> = sql(&store)
         .prepare("SELECT reason FROM attempts WHERE number = 1")
         .unwrap()
         .query_map([], |r| r.get(0))

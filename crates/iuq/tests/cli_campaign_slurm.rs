@@ -46,6 +46,12 @@ fn write(path: &Path, text: &str) {
     std::fs::write(path, text).unwrap();
 }
 
+/// A connection of the test's own to the campaign store `store` (the store keeps its own
+/// private), to look at its tables.
+fn sql(store: &iuq_campaign::CampaignStore) -> rusqlite::Connection {
+    rusqlite::Connection::open(store.path()).unwrap()
+}
+
 #[test]
 fn twenty_runs_with_one_failure_on_a_real_single_node_slurm() {
     if !slurm_available() {
@@ -114,8 +120,7 @@ poll_interval = "500ms"
     let store =
         iuq_campaign::CampaignStore::open_existing(&dir.join("study.campaign/campaign.sqlite"))
             .unwrap();
-    let rows: Vec<(String, String, f64)> = store
-        .connection()
+    let rows: Vec<(String, String, f64)> = sql(&store)
         .prepare("SELECT a.external_id, a.host, o.value FROM attempts a JOIN outputs o ON o.attempt_id = a.id ORDER BY a.run_id")
         .unwrap()
         .query_map([], |r| Ok((r.get(0)?, r.get(1)?, r.get(2)?)))

@@ -114,6 +114,12 @@ fn assert_exact_within_errors(
     (em, es)
 }
 
+/// A connection of the test's own to the campaign store `store` (the store keeps its own
+/// private), to look at its tables.
+fn sql(store: &iuq_campaign::CampaignStore) -> rusqlite::Connection {
+    rusqlite::Connection::open(store.path()).unwrap()
+}
+
 #[test]
 fn a_poor_surrogates_posterior_is_corrected_to_the_exact_one() {
     let dir = cooling("exact");
@@ -956,8 +962,7 @@ fn kill_and_rerun(
     std::thread::sleep(Duration::from_millis(600));
     let db = dir.join("resume.campaign/campaign.sqlite");
     let succeeded = |store: &iuq_campaign::CampaignStore| -> Vec<(i64, i64)> {
-        store
-            .connection()
+        sql(store)
             .prepare("SELECT r.id, (SELECT COUNT(*) FROM attempts a WHERE a.run_id = r.id AND a.outcome_kind = 'succeeded') FROM runs r ORDER BY r.id")
             .unwrap()
             .query_map([], |r| Ok((r.get(0)?, r.get(1)?)))
@@ -982,8 +987,7 @@ fn kill_and_rerun(
     // The designs (batches) the store held at the kill.
     let designs_before: Vec<String> = {
         let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
-        store
-            .connection()
+        sql(&store)
             .prepare("SELECT label FROM designs ORDER BY id")
             .unwrap()
             .query_map([], |r| r.get(0))
@@ -1003,8 +1007,7 @@ fn kill_and_rerun(
     // The runs the model posterior reports are the store's distinct runs of its batches,
     // bridges, probe (whose members are the first batch's runs) and replicates, not the two MAP
     // runs.
-    let stored: i64 = store
-        .connection()
+    let stored: i64 = sql(&store)
         .query_row(
             "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
              WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",

@@ -39,9 +39,9 @@ use std::sync::Mutex;
 use serde_json::json;
 use toml::{Table, Value};
 
-use iuq_campaign::StudySection;
 use iuq_doe::{LhsMethod, latin_hypercube};
 use iuq_gp::MultiFidelityBank;
+use iuq_study_file::StudySection;
 
 use super::Events;
 use super::model_runs::{ModelRuns, RunRequests};

@@ -25,8 +25,8 @@ use iuq_basis::{
     ModelPosteriorSettings, ModelPosteriorStage, SurrogatePopulation, model_posterior,
     selected_members,
 };
-use iuq_campaign::study_section::StudySection;
 use iuq_core::{Control, Model, Outcome};
+use iuq_study_file::StudySection;
 
 use super::model_runs::ModelRuns;
 use super::replicated_likelihood::{MAX_REPLICATES, ReplicatedLikelihood, bits};

@@ -21,7 +21,7 @@
 //! seed = 3
 //! ```
 
-use iuq_campaign::StudySection;
+use iuq_study_file::StudySection;
 
 use super::emulator::ReducedBasisSettings;
 

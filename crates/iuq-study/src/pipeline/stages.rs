@@ -179,7 +179,7 @@ impl<'a> PipelineRun<'a> {
         {
             // The members are drawn from the surrogate's population: refuse before any run.
             let file = study.path.display().to_string();
-            return Err(iuq_campaign::StudySection::optional(
+            return Err(iuq_study_file::StudySection::optional(
                 study.sampler.as_ref(),
                 "sampler",
                 &file,

@@ -6,7 +6,6 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use iuq_campaign::designs::cancel_design;
 use iuq_study::campaign_runs::{campaign_error, open_campaign};
 use iuq_study::campaign_study::load_study;
 
@@ -28,19 +27,24 @@ pub struct CancelArgs {
 pub fn run(args: &CancelArgs, json: bool) -> Result<()> {
     let study = load_study(&args.study)?;
     let (campaign, _) = open_campaign(study, None)?;
-    let known =
-        iuq_campaign::designs::design_summaries(campaign.store()).map_err(campaign_error)?;
+    let known = campaign
+        .store()
+        .design_summaries()
+        .map_err(campaign_error)?;
     if let Some(missing) = args
         .designs
         .iter()
         .find(|id| !known.iter().any(|d| d.id == **id))
     {
         // The same error as cancelling it would give, before anything changed.
-        cancel_design(campaign.store(), *missing).map_err(campaign_error)?;
+        campaign
+            .store()
+            .cancel_design(*missing)
+            .map_err(campaign_error)?;
     }
     let mut done = Vec::new();
     for &id in &args.designs {
-        done.push(cancel_design(campaign.store(), id).map_err(campaign_error)?);
+        done.push(campaign.store().cancel_design(id).map_err(campaign_error)?);
     }
     let value = json!({ "cancelled": done });
     emit(json, &value, || {

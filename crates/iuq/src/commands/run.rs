@@ -9,7 +9,7 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::{Value, json};
 
-use iuq_campaign::design::design_points;
+use iuq_campaign::study_design::design_points;
 use iuq_campaign::{Campaign, Progress, ResumeSummary, StatusCounts};
 use iuq_study::campaign_runs::{campaign_error, open_campaign, progress_line};
 use iuq_study::campaign_study::load_study;

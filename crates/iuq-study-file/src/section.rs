@@ -2,7 +2,7 @@
 //!
 //! A [`StudySection`] reads the keys of one TOML table with their types checked; every error
 //! names the file, the whole key (`surrogate.adaptive.batch`) and the reason
-//! ([`CampaignError::Study`], exit code 2 in the command line). It remembers which keys it was
+//! ([`StudyFileError`], exit code 2 in the command line). It remembers which keys it was
 //! asked for, so that [`StudySection::finish`] reports a key it never read — a misspelling —
 //! as unknown, listing the keys it knows.
 
@@ -11,7 +11,7 @@ use std::sync::LazyLock;
 use toml::{Table, Value};
 
 use crate::duration::{check_duration, parse_duration};
-use crate::error::{CampaignError, Result};
+use crate::error::{Result, StudyFileError};
 
 /// The largest count a study may give (2³¹ − 1): sizes, samples, runs and steps beyond it would
 /// overflow the products made of them or ask for more memory than any machine has.
@@ -54,7 +54,7 @@ impl<'a> StudySection<'a> {
         let prefix = prefix.into();
         match value {
             Value::Table(table) => Ok(Self::new(table, prefix, file)),
-            other => Err(CampaignError::study(
+            other => Err(StudyFileError::key(
                 file,
                 prefix,
                 format!("expected a table such as {example}, found `{other}`"),
@@ -77,13 +77,13 @@ impl<'a> StudySection<'a> {
     }
 
     /// An error about `key` of this section.
-    pub fn error(&self, key: &str, reason: impl Into<String>) -> CampaignError {
-        CampaignError::study(self.file, self.full_key(key), reason)
+    pub fn error(&self, key: &str, reason: impl Into<String>) -> StudyFileError {
+        StudyFileError::key(self.file, self.full_key(key), reason)
     }
 
     /// An error about the section as a whole.
-    pub fn section_error(&self, reason: impl Into<String>) -> CampaignError {
-        CampaignError::study(self.file, self.prefix.clone(), reason)
+    pub fn section_error(&self, reason: impl Into<String>) -> StudyFileError {
+        StudyFileError::key(self.file, self.prefix.clone(), reason)
     }
 
     /// The table itself (keys not read through the section are not checked by `finish`).
@@ -349,7 +349,7 @@ mod tests {
         assert_eq!(s.count("absent", 1).unwrap(), None);
         s.finish().unwrap();
 
-        let message = |e: CampaignError| e.to_string();
+        let message = |e: StudyFileError| e.to_string();
         let mut s = StudySection::new(&t, "surrogate", "s.toml");
         assert_eq!(
             message(s.count("n", 5).unwrap_err()),
@@ -362,7 +362,10 @@ mod tests {
         let mut inner = s.section("inner", "{ seed = 1 }").unwrap().unwrap();
         assert!(message(inner.string("seed").unwrap_err()).contains("`surrogate.inner.seed`"));
         assert!(message(s.section("n", "{ seed = 1 }").unwrap_err()).contains("{ seed = 1 }"));
-        assert!(s.error("n", "why").is_bad_input());
+        assert_eq!(
+            s.error("n", "why"),
+            StudyFileError::key("s.toml", "surrogate.n", "why")
+        );
     }
 
     #[test]

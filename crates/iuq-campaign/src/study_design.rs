@@ -1,11 +1,43 @@
-//! The points of `iuq run`: the study's `[design]` built on the unit cube and mapped through the
-//! priors (so non-uniform priors get designs distributed as the prior), or read from a file.
+//! The study file's `[design]`: what it asks for ([`StudyDesign`], read with the rest of the
+//! study by [`crate::study`]) and the points it makes for `iuq run` ([`design_points`]): built on
+//! the unit cube and mapped through the priors (so non-uniform priors get designs distributed as
+//! the prior), or read from a file. (The designs a campaign store has recorded, whoever asked for
+//! them, are [`crate::store::recorded_designs`].)
+
+use std::path::PathBuf;
+
+use serde::{Deserialize, Serialize};
 
 use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
 
 use crate::decoder::read_csv_text;
 use crate::error::{CampaignError, Result};
-use crate::study::{CampaignStudy, DesignSpec};
+use crate::study::CampaignStudy;
+
+/// The study's `[design]`: how the points of `iuq run` are chosen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StudyDesign {
+    /// A maximin Latin hypercube of `n` points mapped through the priors.
+    Lhs {
+        /// Points.
+        n: usize,
+        /// Seed.
+        seed: u64,
+    },
+    /// `n` scrambled Sobol' points mapped through the priors.
+    Sobol {
+        /// Points.
+        n: usize,
+        /// Seed of the scrambling.
+        seed: u64,
+    },
+    /// Points read from a CSV file whose columns are named as the parameters.
+    File {
+        /// The file (absolute, or relative to the study's folder when written).
+        path: PathBuf,
+    },
+}
 
 /// The points of the study's design (an input error when the study has none).
 pub fn design_points(study: &CampaignStudy) -> Result<Vec<Vec<f64>>> {
@@ -19,9 +51,9 @@ pub fn design_points(study: &CampaignStudy) -> Result<Vec<Vec<f64>>> {
     })?;
     let d = study.space.dimension();
     let unit = match spec {
-        DesignSpec::Lhs { n, seed } => latin_hypercube(*n, d, LhsMethod::maximin(), *seed)
+        StudyDesign::Lhs { n, seed } => latin_hypercube(*n, d, LhsMethod::maximin(), *seed)
             .map_err(|e| CampaignError::study(&file, "design", e.to_string()))?,
-        DesignSpec::Sobol { n, seed } => sobol_points(
+        StudyDesign::Sobol { n, seed } => sobol_points(
             d,
             *n,
             Scrambling::LinearMatrixWithShift {
@@ -30,7 +62,7 @@ pub fn design_points(study: &CampaignStudy) -> Result<Vec<Vec<f64>>> {
             },
         )
         .map_err(|e| CampaignError::study(&file, "design", e.to_string()))?,
-        DesignSpec::File { path } => return read_design_file(study, path),
+        StudyDesign::File { path } => return read_design_file(study, path),
     };
     unit.iter()
         .enumerate()

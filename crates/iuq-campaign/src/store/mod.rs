@@ -10,6 +10,10 @@
 //!
 //! Runs are keyed by the exact bits of their parameter vector, so identical vectors are run
 //! once, whichever design asks for them.
+//!
+//! The SQLite connection is the store's own: every query of its tables is a method of
+//! [`CampaignStore`] (the recorded designs' in [`recorded_designs`]), and nothing outside this
+//! module reads or writes them except through those methods.
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +24,10 @@ use crate::error::{CampaignError, Result};
 use crate::outcome::{OutcomeKind, RunResult, TaskReport, unix_now};
 use crate::retry_policy::RetryPolicy;
 use crate::study::CampaignStudy;
+
+pub mod recorded_designs;
+
+pub use recorded_designs::{CancelledDesign, DesignSummary};
 
 /// Version of the schema below, kept in the `meta` table.
 pub const SCHEMA_VERSION: i64 = 1;
@@ -1018,11 +1026,6 @@ impl CampaignStore {
         self.connection
             .query_row("PRAGMA integrity_check", [], |r| r.get(0))
             .map_err(|e| self.err(e))
-    }
-
-    /// The underlying connection, for queries this API does not offer (tests, tools).
-    pub fn connection(&self) -> &Connection {
-        &self.connection
     }
 }
 
