@@ -10,8 +10,9 @@ store is complete; a study whose campaign is still under way runs on from where 
 run this only where HemoCell is installed or the stores are complete). Printed per study: runs of
 each fidelity (succeeded/failed; of the expensive model, the runs the study used, which its
 report lists — the two-fidelity store began as a copy of the HemoCell-only one), the model time
-they cost (the sum of the runs' wall times, one core each, from the stores' attempts), the rounds, whether the engine converged, and every
-parameter's posterior mean ± std with its 90 % interval. The table is also written as CSV.
+they cost (the sum of the runs' wall times on one core each, of each run's last attempt), the
+rounds, whether the engine converged, and every parameter's posterior mean ± std with its 90 %
+interval. The table is also written as CSV.
 """
 
 import argparse
@@ -39,9 +40,12 @@ def store_runs(store: Path, used=None):
         return None
     with sqlite3.connect(f"file:{store}?mode=ro", uri=True) as db:
         runs = db.execute("SELECT id, parameters, status FROM runs").fetchall()
+        # Each run's last attempt, the one whose answer it holds (an attempt interrupted when its
+        # machine went away counts until the campaign noticed, hours that were no model time).
         seconds = dict(db.execute(
-            "SELECT run_id, SUM(finished_at - started_at) FROM attempts "
-            "WHERE started_at IS NOT NULL AND finished_at IS NOT NULL GROUP BY run_id"
+            "SELECT a.run_id, a.finished_at - a.started_at FROM attempts a "
+            "WHERE a.started_at IS NOT NULL AND a.finished_at IS NOT NULL AND a.number = "
+            "(SELECT MAX(b.number) FROM attempts b WHERE b.run_id = a.run_id)"
         ).fetchall())
     if used is not None:
         runs = [r for r in runs if r[2] == "succeeded" and tuple(json.loads(r[1])) in used]
