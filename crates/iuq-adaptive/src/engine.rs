@@ -129,8 +129,9 @@ pub struct EngineSettings {
     pub samples: usize,
     /// Each replicate's population while the posterior is still far from where it settles
     /// (module docs): the first round, and every round after one whose shift, distance or
-    /// surrogate error exceeded [`FAR`] tolerances. Equal to `samples`: every round samples
-    /// `samples` (the engine before 2026-12).
+    /// surrogate error exceeded [`FAR`] tolerances; those rounds also leave the mixing as it is
+    /// when the sampler check fails. Equal to `samples`: every round samples `samples` and a
+    /// failing check always mixes harder (the engine before 2026-12).
     pub exploring_samples: usize,
     /// The population a replicate may grow to.
     pub max_samples: usize,
@@ -394,8 +395,11 @@ impl AdaptiveEngine {
         // Far from settled, the next round explores with the smaller population, and a sampler
         // check that fails there (a posterior of the early surrogates, often of several modes,
         // sampled by few chains) does not make the chains mix harder: its runs are chosen the
-        // same either way, and the check decides once the posterior has settled.
-        let far = Self::far_from_settled(judgement, tolerance);
+        // same either way, and the check decides once the posterior has settled. Without a
+        // smaller exploring population, every round is sampled and checked as before exploring
+        // rounds existed (the shipped studies' stores were recorded so).
+        let exploring = s.exploring_samples < s.samples;
+        let far = exploring && Self::far_from_settled(judgement, tolerance);
         if judgement.sampler_disagrees && !far {
             state.sampling.mixing_level = (state.sampling.mixing_level + 1).min(s.max_mixing_level);
         }
@@ -691,14 +695,19 @@ mod tests {
         }
         assert_eq!(state.sampling.mixing_level, 1);
         assert!(stopped.unwrap().contains("strongest mixing"));
-        // Far from settled (ε = 2 posterior stds) the same check leaves the mixing as it is.
-        let mut state = e.start(1, None);
-        for k in 0..3 {
-            let mut r = reading(0.0, 0.01, 2.0, 10 + k);
+        // Far from settled (ε = 2 posterior stds), with a smaller exploring population, the
+        // same check leaves the mixing as it is; without one it mixes harder as before.
+        for (exploring, level) in [(125, 0), (500, 1)] {
+            let e = engine(|s| {
+                s.max_mixing_level = 3;
+                s.exploring_samples = exploring;
+            });
+            let mut state = e.start(1, None);
+            let mut r = reading(0.0, 0.01, 2.0, 10);
             r.sampler_agreement = Some(&agreement);
             let j = e.judge(&state, &r).unwrap();
             assert_eq!(e.step(&mut state, r, &j, 2), Next::Continue);
+            assert_eq!(state.sampling.mixing_level, level, "exploring {exploring}");
         }
-        assert_eq!(state.sampling.mixing_level, 0);
     }
 }
