@@ -13,7 +13,8 @@
 //!              more_samples = "when-resolving" }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
-//! # a whole-curve model emulated on its leading principal components (absent: a GP per point)
+//! # a whole-curve model emulated on its leading principal components (absent: so from 50 data
+//! # rows on, without a second fidelity; `false`: a GP per point)
 //! reduced_basis = { explained_variance = 0.9999, max_components = 30 }
 //! [sensitivity]
 //! n = 1024        # Saltelli base points on the surrogate
