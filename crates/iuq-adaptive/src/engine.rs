@@ -349,7 +349,10 @@ impl AdaptiveEngine {
             Some("converged".to_string())
         } else if reading.runs >= s.max_runs {
             Some(format!("reached max_runs = {}", s.max_runs))
-        } else if sampler_disagrees && state.sampling.mixing_level >= s.max_mixing_level {
+        } else if sampler_disagrees
+            && state.sampling.mixing_level >= s.max_mixing_level
+            && state.sampling.samples >= s.samples
+        {
             Some(format!(
                 "the surrogate posterior still depends on how it is sampled at the strongest mixing (the replicates that mixed harder differ by {sampler_disagreement:.3} posterior stds): raise `samples` of `[surrogate] adaptive` or of `[sampler]`, or set `[sampler] correlation` lower"
             ))
@@ -398,9 +401,12 @@ impl AdaptiveEngine {
         // same either way, and the check decides once the posterior has settled. Without a
         // smaller exploring population, every round is sampled and checked as before exploring
         // rounds existed (the shipped studies' stores were recorded so).
+        // Nor does a check of a round sampled with the exploring population: a smaller
+        // population's own bias is not the sampler's at the population it is set to.
         let exploring = s.exploring_samples < s.samples;
         let far = exploring && Self::far_from_settled(judgement, tolerance);
-        if judgement.sampler_disagrees && !far {
+        let checked_in_full = state.sampling.samples >= s.samples;
+        if judgement.sampler_disagrees && checked_in_full && !far {
             state.sampling.mixing_level = (state.sampling.mixing_level + 1).min(s.max_mixing_level);
         }
         state.sampling.samples = if far {
@@ -709,5 +715,17 @@ mod tests {
             assert_eq!(e.step(&mut state, r, &j, 2), Next::Continue);
             assert_eq!(state.sampling.mixing_level, level, "exploring {exploring}");
         }
+        // Settled (ε small) but checked on the first round's exploring population: the next
+        // round samples in full and the mixing stays.
+        let e = engine(|s| s.exploring_samples = 125);
+        let mut state = e.start(1, None);
+        let mut r = reading(0.0, 0.01, 0.05, 10);
+        r.sampler_agreement = Some(&agreement);
+        let j = e.judge(&state, &r).unwrap();
+        assert_eq!(e.step(&mut state, r, &j, 2), Next::Continue);
+        assert_eq!(
+            (state.sampling.mixing_level, state.sampling.samples),
+            (0, 500)
+        );
     }
 }
