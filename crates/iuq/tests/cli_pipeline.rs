@@ -865,6 +865,17 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
     summary
 }
 
+/// The `--json` summary's posterior entry of parameter `name` (its mean, std, quantiles).
+fn posterior_parameter(summary: &serde_json::Value, name: &str) -> serde_json::Value {
+    summary["posterior"][0]["parameters"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|p| p["parameter"] == name)
+        .unwrap()
+        .clone()
+}
+
 /// The HemoCell 2.7-only calibration (the reference of the two-fidelity study) replays from its
 /// shipped store, from wherever the checkout lies, without a HemoCell run: 20 points (one failed:
 /// HemoCell lost the softest cell at 9.04 Pa), converged after 7 rounds. As with HemoCell 2.1,
@@ -876,15 +887,7 @@ fn the_hemocell27_reference_calibration_replays_from_its_store() {
     assert_eq!(summary["failed"], 1, "{summary}");
     assert_eq!(summary["rounds"], 7, "{summary}");
     assert_eq!(summary["converged"], true, "{summary}");
-    let parameter = |name: &str| {
-        summary["posterior"][0]["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["parameter"] == name)
-            .unwrap()
-            .clone()
-    };
+    let parameter = |name: &str| posterior_parameter(&summary, name);
     let k_link = parameter("kLink");
     assert_eq!(format!("{:.1}", k_link["mean"].as_f64().unwrap()), "90.7");
     assert_eq!(format!("{:.1}", k_link["std"].as_f64().unwrap()), "13.3");
@@ -902,15 +905,7 @@ fn the_hemocell27_two_fidelity_calibration_replays_from_its_stores() {
     assert_eq!(summary["failed"], 1, "{summary}");
     assert_eq!(summary["rounds"], 10, "{summary}");
     assert_eq!(summary["converged"], true, "{summary}");
-    let parameter = |name: &str| {
-        summary["posterior"][0]["parameters"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .find(|p| p["parameter"] == name)
-            .unwrap()
-            .clone()
-    };
+    let parameter = |name: &str| posterior_parameter(&summary, name);
     let k_link = parameter("kLink");
     assert_eq!(format!("{:.1}", k_link["mean"].as_f64().unwrap()), "90.4");
     assert_eq!(format!("{:.1}", k_link["std"].as_f64().unwrap()), "13.2");
