@@ -20,13 +20,20 @@ fn cooling(suite_name: &str) -> PathBuf {
 }
 
 /// The cooling study per measurement time with the closed-form curve as an expression model, a
-/// 6-run one-shot design and `[model_posterior]` lines `extra`.
+/// 6-run one-shot design and `[model_posterior]` lines `extra`, its members not sized for a
+/// target Monte Carlo error (`target_mcse = 1`: these tests follow the method at the members
+/// they name; the sizing is tested on the curved posterior).
 fn expression_study(dir: &Path, extra: &str) -> PathBuf {
     expression_study_of(dir, "20 + (T0 - 20) * exp(-k * t)", extra)
 }
 
 /// The same study with the output `curve` (an expression of k, T0 and t).
 fn expression_study_of(dir: &Path, curve: &str, extra: &str) -> PathBuf {
+    let fixed_members = if extra.contains("method") || extra.contains("target_mcse") {
+        ""
+    } else {
+        "target_mcse = 1"
+    };
     let text = format!(
         r#"name = "cooling-model-posterior"
 [parameters]
@@ -49,6 +56,7 @@ samples = 4000
 burn = 10
 seed = 1
 [model_posterior]
+{fixed_members}
 {extra}
 "#
     );
@@ -411,7 +419,8 @@ fn a_surrogate_one_stage_cannot_carry_is_bridged_to_the_exact_posterior() {
 /// 1 − a² (the exact posterior's b marginal is skewed, with a long tail below). The exact
 /// moments come from the midpoint rule on a 1,201² grid over the prior's box (the posterior is
 /// the grid's density; its own error is below 1e-4 std). Tolerance: 4 Monte Carlo standard
-/// errors of the model posterior, as it reports them (over 33 seeds of this problem the errors'
+/// errors of the model posterior, as it reports them, which its members are sized to keep below
+/// 0.05 posterior stds (over 33 seeds of this problem the errors'
 /// root-mean-square was 0.93–1.16 MCSE per statistic, the largest 3.2).
 #[test]
 fn a_curved_posterior_from_the_adaptive_engine_is_the_models_within_its_errors() {
@@ -450,10 +459,34 @@ seed = 1
     );
     let m = &v["model_posterior"];
     assert_eq!(m["certified"], true, "{m}");
-    assert_eq!(m["samples"], 300, "{m}");
+    // The members are sized for the default target Monte Carlo error of 0.05 posterior stds:
+    // 300 left up to 0.058, so the estimate is made again from 1.2 · 300 · (0.058/0.05)² = 481,
+    // the first 300 among them (their runs reused: one stage, so the final estimate's runs are
+    // all the store holds for the method).
+    let sizing = m["member_sizing"].as_array().unwrap();
+    assert_eq!(sizing.len(), 2, "{m}");
+    let first = sizing[0]["mcse"].as_f64().unwrap();
+    assert_eq!(sizing[0]["samples"], 300, "{m}");
+    assert!(first > 0.05, "{m}");
+    let grown = (1.2 * 300.0 * (first / 0.05_f64).powi(2)).ceil();
+    assert_eq!(sizing[1]["samples"].as_f64(), Some(grown), "{m}");
+    assert!(sizing[1]["mcse"].as_f64().unwrap() <= 0.05, "{m}");
+    assert_eq!(m["samples"].as_f64(), Some(grown), "{m}");
     // The adaptive engine's surrogate is close enough for one importance stage.
     assert_eq!(m["stages"].as_array().unwrap().len(), 1, "{m}");
-    assert_eq!(m["model_evaluations"], 300, "{m}");
+    assert_eq!(m["model_evaluations"].as_f64(), Some(grown), "{m}");
+    let store =
+        iuq_campaign::CampaignStore::open_existing(&dir.join("banana.campaign/campaign.sqlite"))
+            .unwrap();
+    let stored: i64 = sql(&store)
+        .query_row(
+            "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
+             WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap();
+    assert_eq!(m["model_runs"].as_i64(), Some(stored), "{m}");
 
     let n = 1201;
     let (mut w_sum, mut moments) = (0.0, [[0.0; 2]; 2]);
@@ -815,6 +848,7 @@ seed = 1
 samples = 400
 seed = 3
 replicates = 8
+max_samples = 400
 "#,
         outputs = outputs.join(", ")
     );
@@ -914,7 +948,7 @@ fn kill_and_rerun(
         .replace(
             "[surrogate]",
             &format!(
-                "env = {{ COOLING_SLEEP = \"{sleep}\", COOLING_RUN_LOG = \"{}\"{env} }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\n{model_posterior}\n\n[surrogate]",
+                "env = {{ COOLING_SLEEP = \"{sleep}\", COOLING_RUN_LOG = \"{}\"{env} }}\n\n[executor]\nkind = \"local\"\nmax_parallel = 2\n\n[model_posterior]\ntarget_mcse = 1\n{model_posterior}\n\n[surrogate]",
                 log.display()
             ),
         )
@@ -1206,6 +1240,11 @@ fn bad_model_posterior_keys_exit_2_naming_the_file_and_key() {
         ("subchain = 0", "model_posterior.subchain"),
         ("scale = \"wide\"", "model_posterior.scale"),
         ("seed = -1", "model_posterior.seed"),
+        ("target_mcse = 0", "model_posterior.target_mcse"),
+        (
+            "samples = 100\nmax_samples = 50",
+            "model_posterior.max_samples",
+        ),
         (
             "method = \"basis\"\nsamples = 300",
             "model_posterior.samples",

@@ -573,9 +573,10 @@ fn the_shipped_tbhp_study_completes_from_its_shipped_runs() {
 fn the_cell_models_own_posterior_shows_the_cell_at_its_map() {
     let dir = scratch("pipeline", "portraits");
     let study = small_study(&dir, "");
-    let text = std::fs::read_to_string(&study)
-        .unwrap()
-        .replace("method = \"basis\"", "samples = 25\nseed = 3");
+    let text = std::fs::read_to_string(&study).unwrap().replace(
+        "method = \"basis\"",
+        "samples = 25\nseed = 3\nmax_samples = 25",
+    );
     std::fs::write(&study, text).unwrap();
     let out = dir.join("report");
     let run = || {

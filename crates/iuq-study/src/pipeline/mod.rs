@@ -343,11 +343,6 @@ impl OwnedEvent {
     }
 }
 
-/// The Monte Carlo error of the model posterior's means, in posterior stds, above which the
-/// pipeline says how many members would bring it down: twice it is the engine's default
-/// tolerance.
-pub const MODEL_POSTERIOR_MCSE: f64 = 0.05;
-
 /// The sending end of the events (an observer that has gone away is not an error).
 struct Events {
     sender: mpsc::Sender<OwnedEvent>,

@@ -66,6 +66,60 @@ pub struct ModelPosteriorOptions {
     /// Runs per member at each irregular data point of a noisy likelihood, the member's own
     /// included ([`super::replicated_likelihood`]; 1: none repeated).
     pub replicates: usize,
+    /// The Monte Carlo error of the means, in posterior stds, that the members are sized for
+    /// (`target_mcse`; [`MemberSizing`]).
+    pub target_mcse: f64,
+    /// The most members a certified estimate may grow to for `target_mcse` (`max_samples`;
+    /// `samples`: it does not grow).
+    pub max_samples: usize,
+}
+
+/// The default `[model_posterior] target_mcse`: a Monte Carlo error of the means of 0.05
+/// posterior stds (twice it is the adaptive engine's default tolerance).
+pub const DEFAULT_TARGET_MCSE: f64 = 0.05;
+
+/// The default `[model_posterior] max_samples`, as a multiple of `samples`.
+pub const DEFAULT_MAX_SAMPLES_FACTOR: usize = 4;
+
+/// Margin on the members the 1/√members law asks for: the Monte Carlo error itself is an
+/// estimate from the members (its relative error about 1/√(2·ESS)), and an estimate short of
+/// its target by a few per cent would cost another round of runs.
+const SIZING_MARGIN: f64 = 1.2;
+
+/// One estimate of the model posterior on the way to its target Monte Carlo error.
+///
+/// A certified estimate whose largest MCSE(μ_k)/σ_k (grouped by ancestry) exceeds
+/// `target_mcse` is made again from n' = ⌈1.2·n·(MCSE/target)²⌉ members (the error falls as
+/// 1/√n), at most `max_samples` and the surrogate population: the first n members are among the
+/// n' (same seed), so their stored runs are reused and only the new members and the stages
+/// after the first batch cost runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MemberSizing {
+    /// Members of the surrogate posterior in the first batch.
+    pub samples: usize,
+    /// The estimate's largest Monte Carlo error of a mean, in posterior stds.
+    pub mcse: f64,
+    /// Whether the estimate was certified.
+    pub certified: bool,
+    /// Model runs it asked for (stored runs included).
+    pub model_runs: usize,
+}
+
+impl MemberSizing {
+    /// The members for `target` from an estimate of `self.mcse` at `self.samples`, capped at
+    /// `cap`; `None` where the estimate is not certified, meets the target, or cannot grow.
+    pub fn next_samples(&self, target: f64, cap: usize) -> Option<usize> {
+        if !self.certified || !self.mcse.is_finite() || self.mcse <= target {
+            return None;
+        }
+        let wanted = (SIZING_MARGIN * self.samples as f64 * (self.mcse / target).powi(2)).ceil();
+        let next = if wanted >= cap as f64 {
+            cap
+        } else {
+            wanted as usize
+        };
+        (next > self.samples).then_some(next)
+    }
 }
 
 /// The former name of [`ModelPosteriorOptions`].
@@ -75,7 +129,7 @@ pub type ReweightSettings = ModelPosteriorOptions;
 pub const DEFAULT_PROBE: usize = 4;
 
 /// Read `[model_posterior]` (defaults when absent): `method` ("reweight" or "basis"), and for
-/// "reweight" `samples` (300), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
+/// "reweight" `samples` (300), `target_mcse` (0.05), `max_samples` (4 × `samples`), `seed` (1), `cv_target` (1), `bridge_cv_target` (0.5),
 /// `max_stages` (6), `corrections` (1), `moves` (1), `subchain` (20), `scale` (0.4), `min_step`
 /// (1e-4), `probe` (4, at most `samples`), `noisy` (true/false; absent: the probe decides) and
 /// `replicates` (1, at most 64).
@@ -111,6 +165,10 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
         .unwrap_or(DEFAULT_PROBE.min(settings.samples));
     let noisy = s.boolean("noisy")?;
     let replicates = s.count_in("replicates", 1, MAX_REPLICATES)?.unwrap_or(1);
+    let target_mcse = s.positive("target_mcse")?.unwrap_or(DEFAULT_TARGET_MCSE);
+    let max_samples = s
+        .count("max_samples", settings.samples)?
+        .unwrap_or(DEFAULT_MAX_SAMPLES_FACTOR * settings.samples);
     s.finish()?;
     if let Err(iuq_basis::BasisError::InvalidSettings { setting, reason }) = settings.check() {
         return Err(s.error(setting, reason).into());
@@ -120,6 +178,8 @@ pub fn parse_model_posterior(study: &Study) -> Result<ModelPosteriorMethod> {
         probe,
         noisy,
         replicates,
+        target_mcse,
+        max_samples,
     }))
 }
 
@@ -208,6 +268,9 @@ pub struct ModelPosteriorOutcome {
     pub replicate_failures: usize,
     /// Wall-clock seconds.
     pub seconds: f64,
+    /// The estimates made on the way to `target_mcse`, the last one this outcome
+    /// ([`MemberSizing`]).
+    pub member_sizing: Vec<MemberSizing>,
 }
 
 impl ModelPosteriorOutcome {
@@ -230,6 +293,15 @@ impl ModelPosteriorOutcome {
                 }
             })
             .collect()
+    }
+
+    /// The largest Monte Carlo error of a mean in posterior stds, max_k MCSE(μ_k)/σ_k (0 where
+    /// every σ_k is 0).
+    pub fn largest_mcse(&self) -> f64 {
+        self.shift_from_surrogate()
+            .iter()
+            .map(|s| s.1)
+            .fold(0.0, f64::max)
     }
 
     /// The effective sample size the members' correlation leaves: min over parameters of
@@ -286,6 +358,12 @@ impl ModelPosteriorOutcome {
             "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
             "stages": p.stages.iter().map(stage_json).collect::<Vec<_>>(),
             "seconds": self.seconds,
+            "member_sizing": self.member_sizing.iter().map(|m| json!({
+                "samples": m.samples,
+                "mcse": finite(m.mcse),
+                "certified": m.certified,
+                "model_runs": m.model_runs,
+            })).collect::<Vec<_>>(),
         })
     }
 }
@@ -313,7 +391,8 @@ fn stage_json(s: &ModelPosteriorStage) -> Value {
 pub use self::model_posterior_from_surrogate as reweight_to_model;
 
 /// The model's posterior from the surrogate's `gp_posterior` (`options`), through the campaign
-/// of `model_runs`; writes `out/model-posterior/`; `message` receives a line per stage.
+/// of `model_runs`, its members sized for `options.target_mcse` ([`MemberSizing`]); writes
+/// `out/model-posterior/`; `message` receives a line per stage and per resizing.
 pub fn model_posterior_from_surrogate(
     study: &Study,
     gp_posterior: &SampledPosterior,
@@ -324,13 +403,68 @@ pub fn model_posterior_from_surrogate(
     message: &mut dyn FnMut(String),
 ) -> Result<ModelPosteriorOutcome> {
     let started = std::time::Instant::now();
+    let population = gp_posterior.run.state.samples.len();
+    let cap = options.max_samples.min(population);
+    let first = &options.method;
+    let mut options = options.clone();
+    let mut sizing = Vec::new();
+    let mut outcome = loop {
+        let outcome = estimate(
+            study,
+            gp_posterior,
+            surrogate,
+            model_runs,
+            (&options, first),
+            message,
+        )?;
+        let this = MemberSizing {
+            samples: options.method.samples.min(population),
+            mcse: outcome.largest_mcse(),
+            certified: outcome.posterior.certified(),
+            model_runs: outcome.model_runs,
+        };
+        let next = this.next_samples(options.target_mcse, cap);
+        sizing.push(this);
+        let Some(next) = next else { break outcome };
+        message(format!(
+            "the model's posterior: its means carry a Monte Carlo error of up to {:.3} posterior stds, more than `target_mcse` = {}; again from {next} members (the first {} are reused)",
+            outcome.largest_mcse(),
+            options.target_mcse,
+            options.method.samples.min(population),
+        ));
+        options.method.samples = next;
+    };
+    outcome.member_sizing = sizing;
+    outcome.seconds = started.elapsed().as_secs_f64();
+    write_results(&outcome, &out.join("model-posterior"))?;
+    Ok(outcome)
+}
+
+/// One estimate of the model's posterior from `options.method.samples` members, the probe at
+/// the members of the first estimate (`first`: the same runs for every estimate).
+fn estimate(
+    study: &Study,
+    gp_posterior: &SampledPosterior,
+    surrogate: &Surrogate,
+    model_runs: &ModelRuns,
+    (options, first): (&ModelPosteriorOptions, &ModelPosteriorSettings),
+    message: &mut dyn FnMut(String),
+) -> Result<ModelPosteriorOutcome> {
+    let started = std::time::Instant::now();
     let d = model_runs.parameters().len();
     let state = &gp_posterior.run.state;
     let data = match parse_likelihood(study)? {
         LikelihoodSection::Data(data) => Some(data),
         LikelihoodSection::LogDensity(_) => None,
     };
-    let probe = probe_first_members(study, state, model_runs, options, data.as_ref())?;
+    let probe = probe_first_members(
+        study,
+        state,
+        model_runs,
+        options.probe,
+        first,
+        data.as_ref(),
+    )?;
     let pseudo_marginal = options
         .noisy
         .unwrap_or_else(|| probe.as_ref().is_some_and(ReproducibilityProbe::irregular));
@@ -445,28 +579,29 @@ pub fn model_posterior_from_surrogate(
         probe,
         pseudo_marginal,
         seconds: started.elapsed().as_secs_f64(),
+        member_sizing: Vec::new(),
         posterior,
     };
-    write_results(&outcome, &out.join("model-posterior"))?;
     Ok(outcome)
 }
 
-/// The reproducibility probe at the first `options.probe` members of the method's first batch
+/// The reproducibility probe at the first `probe` members of the first batch of `settings`
 /// (`None` without a probe), judged against the data's error scales.
 fn probe_first_members(
     study: &Study,
     state: &BasisState,
     model_runs: &ModelRuns,
-    options: &ModelPosteriorOptions,
+    probe: usize,
+    settings: &ModelPosteriorSettings,
     data: Option<&DataLikelihood>,
 ) -> Result<Option<ReproducibilityProbe>> {
-    if options.probe == 0 {
+    if probe == 0 {
         return Ok(None);
     }
     let d = model_runs.parameters().len();
-    let members: Vec<Vec<f64>> = selected_members(state.samples.len(), &options.method)
+    let members: Vec<Vec<f64>> = selected_members(state.samples.len(), settings)
         .into_iter()
-        .take(options.probe)
+        .take(probe)
         .map(|i| state.samples[i][..d].to_vec())
         .collect();
     let scales = data.map(error_scales).unwrap_or_default();
@@ -792,4 +927,34 @@ fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
         })
         .collect();
     write_numeric_csv(&dir.join("stages.csv"), &columns, &rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::MemberSizing;
+
+    fn sizing(samples: usize, mcse: f64, certified: bool) -> MemberSizing {
+        MemberSizing {
+            samples,
+            mcse,
+            certified,
+            model_runs: 0,
+        }
+    }
+
+    #[test]
+    fn members_grow_by_the_square_of_the_error_ratio_with_a_margin() {
+        // 1.2 · 300 · (0.058/0.05)² = 484.4.
+        assert_eq!(sizing(300, 0.058, true).next_samples(0.05, 1200), Some(485));
+        // Capped at `max_samples` (or the population).
+        assert_eq!(sizing(300, 0.2, true).next_samples(0.05, 1200), Some(1200));
+    }
+
+    #[test]
+    fn members_do_not_grow_within_the_target_uncertified_or_at_the_cap() {
+        assert_eq!(sizing(300, 0.05, true).next_samples(0.05, 1200), None);
+        assert_eq!(sizing(300, 0.2, false).next_samples(0.05, 1200), None);
+        assert_eq!(sizing(300, 0.2, true).next_samples(0.05, 300), None);
+        assert_eq!(sizing(300, f64::NAN, true).next_samples(0.05, 1200), None);
+    }
 }

@@ -20,10 +20,9 @@ use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::{PipelineSettings, ReducedBasisChoice, parse_pipeline_settings};
 use super::surrogate::{Emulation, Surrogate};
 use super::{
-    Events, MODEL_POSTERIOR_MCSE, PIPELINE_FINAL_SAMPLES, PipelineOptions, PipelineOutcome,
-    add_seconds, cell_portraits, emulator, model_posterior, move_aside, point_description,
-    point_runs, resume_checkpoint, sobol_options, study_data, test_points, training_points,
-    write_runs_csv,
+    Events, PIPELINE_FINAL_SAMPLES, PipelineOptions, PipelineOutcome, add_seconds, cell_portraits,
+    emulator, model_posterior, move_aside, point_description, point_runs, resume_checkpoint,
+    sobol_options, study_data, test_points, training_points, write_runs_csv,
 };
 use crate::error::{BadInput, Context, Result, input_error};
 use crate::likelihood_section::DataLikelihood;
@@ -753,14 +752,15 @@ impl<'a> PipelineRun<'a> {
             outcome.posterior.names.get(k).map_or("-", String::as_str),
             shifts.get(k).map_or(0.0, |s| s.1),
         ));
-        // Members for a Monte Carlo error of the means of MODEL_POSTERIOR_MCSE posterior stds:
-        // the error falls as 1/√members (members grouped by ancestry alike).
-        let worst = shifts.iter().map(|s| s.1).fold(0.0, f64::max);
-        if worst > MODEL_POSTERIOR_MCSE {
-            let members = outcome.posterior.samples.len() as f64;
+        // Members for the target Monte Carlo error where `max_samples` (or the surrogate's
+        // population) stopped them short of it: the error falls as 1/√members.
+        let worst = outcome.largest_mcse();
+        let target = settings.target_mcse;
+        if worst > target && outcome.posterior.certified() {
+            let members = outcome.member_sizing.last().map_or(0, |m| m.samples) as f64;
             events.message(format!(
-                "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than {MODEL_POSTERIOR_MCSE}; about {:.0} members (`[model_posterior] samples`) would bring it there",
-                (members * (worst / MODEL_POSTERIOR_MCSE).powi(2)).ceil()
+                "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}; about {:.0} members would bring it there (`[model_posterior] max_samples`, at most the surrogate posterior's population, `[sampler] samples`)",
+                (members * (worst / target).powi(2)).ceil()
             ));
         }
         times.push((
