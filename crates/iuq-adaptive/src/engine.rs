@@ -406,9 +406,22 @@ impl AdaptiveEngine {
         let exploring = s.exploring_samples < s.samples;
         let far = exploring && Self::far_from_settled(judgement, tolerance);
         let checked_in_full = state.sampling.samples >= s.samples;
-        if judgement.sampler_disagrees && checked_in_full && !far {
+        // With exploring rounds the early checks leave the mixing alone, so a settled round
+        // whose samplers' noise still reaches the tolerance once its population has grown past
+        // `samples` mixes harder as well: more samples from chains that do not decorrelate (a
+        // curved posterior at the weakest mixing) leave that noise where it is.
+        let noisy = judgement.noise().is_some_and(|n| n >= tolerance);
+        let noise_unresolved_by_samples =
+            exploring && noisy && !far && state.sampling.samples > s.samples;
+        if (judgement.sampler_disagrees && checked_in_full && !far) || noise_unresolved_by_samples {
             state.sampling.mixing_level = (state.sampling.mixing_level + 1).min(s.max_mixing_level);
         }
+        // Whether sampling harder can still resolve that noise (a round without a candidate
+        // run then samples again rather than stopping).
+        let can_resolve_noise = exploring
+            && noisy
+            && (state.sampling.samples < s.max_samples
+                || state.sampling.mixing_level < s.max_mixing_level);
         state.sampling.samples = if far {
             s.exploring_samples
         } else {
@@ -416,7 +429,7 @@ impl AdaptiveEngine {
         };
         let no_candidate = new_runs == 0;
         let widest = s.candidates * CANDIDATE_WIDENING * CANDIDATE_WIDENING;
-        if no_candidate && !judgement.sampler_disagrees {
+        if no_candidate && !judgement.sampler_disagrees && !can_resolve_noise {
             if state.sampling.candidates >= widest {
                 state.stop_reason = Some(self.no_candidate_reason(state, u, judgement));
                 record(state);
@@ -727,5 +740,47 @@ mod tests {
             (state.sampling.mixing_level, state.sampling.samples),
             (0, 500)
         );
+    }
+
+    #[test]
+    fn with_exploring_rounds_noise_that_more_samples_leave_mixes_harder_before_the_loop_stops() {
+        // Settled (shift 0, ε 0.05) but every round's noise 2·√2·0.05 = 0.14 reaches the
+        // tolerance 0.1, and no candidate run is worth making: the population doubles to
+        // `max_samples` and, once past `samples`, the chains mix harder each round; only when
+        // neither can grow does the loop stop for want of a candidate.
+        let e = engine(|s| s.exploring_samples = 125);
+        let (max_samples, max_level) = (e.settings.max_samples, e.settings.max_mixing_level);
+        let mut state = e.start(1, None);
+        let mut trace = Vec::new();
+        for _ in 0..30 {
+            let r = reading(0.0, 0.05, 0.05, 10);
+            let j = e.judge(&state, &r).unwrap();
+            trace.push((state.sampling.samples, state.sampling.mixing_level));
+            if e.step(&mut state, r, &j, 0) == Next::Stop {
+                break;
+            }
+        }
+        let reason = state.stop_reason.clone().unwrap_or_default();
+        assert!(
+            reason.starts_with("no candidate run"),
+            "{reason}: {trace:?}"
+        );
+        assert_eq!(state.sampling.samples, max_samples, "{trace:?}");
+        assert_eq!(state.sampling.mixing_level, max_level, "{trace:?}");
+        // The mixing rose only once the population had grown past `samples`.
+        assert!(
+            trace
+                .windows(2)
+                .all(|w| w[1].1 == w[0].1 || w[0].0 > e.settings.samples),
+            "{trace:?}"
+        );
+        // Without exploring rounds the loop behaves as before: no candidate, no noise rule.
+        let e = engine(|_| {});
+        let s = drive(
+            &e,
+            (0..30).map(|_| reading(0.0, 0.05, 0.05, 10)).collect(),
+            0,
+        );
+        assert_eq!(s.sampling.mixing_level, 0);
     }
 }
