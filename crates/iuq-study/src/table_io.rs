@@ -118,7 +118,7 @@ pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
         return Err(input_error(format!("{}: not a file path", path.display())));
     }
     iuq_atomic_file::write_atomically(path, contents, iuq_atomic_file::Durability::Atomic)
-        .map_err(|source| StudyError::Failure(format!("cannot write {}: {source}", path.display())))
+        .map_err(|source| StudyError::failure(format!("cannot write {}: {source}", path.display())))
 }
 
 /// Format a numeric table as CSV text (shortest round-trip representation of each value).

@@ -828,10 +828,10 @@ fn sample_replicates(
             Some(previous) => {
                 let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
                     .map_err(|e| {
-                        StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                        StudyError::failure(format!("adaptive round {}: {e}", ctx.round))
                     })?;
                 match carry(&basis, previous).map_err(|e| {
-                    StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                    StudyError::failure(format!("adaptive round {}: {e}", ctx.round))
                 })? {
                     Carried::Ready(state) => {
                         carried_replicates += 1;
@@ -880,7 +880,7 @@ fn sample_replicates(
         replicate_moments.push((sampled.summary.mean, sampled.summary.std));
     }
     pooled.moments = PosteriorMoments::pooled(&replicate_moments)
-        .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?;
+        .map_err(|e| StudyError::failure(format!("adaptive round {}: {e}", ctx.round)))?;
     let sampler_check = if checked {
         let group = |parity: usize| -> Vec<(Vec<f64>, Vec<f64>)> {
             replicate_moments
@@ -898,7 +898,7 @@ fn sample_replicates(
                 &pooled.moments.std,
                 ctx.settings.tolerance,
             )
-            .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?,
+            .map_err(|e| StudyError::failure(format!("adaptive round {}: {e}", ctx.round)))?,
         )
     } else {
         None
@@ -1003,7 +1003,7 @@ fn surrogate_errors(
             )
         }
     }
-    .map_err(|e| StudyError::Failure(e.to_string()))?;
+    .map_err(|e| StudyError::failure(e.to_string()))?;
     let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
     Ok((surrogate_error, group_surrogate_error))
 }
@@ -1160,7 +1160,7 @@ fn measure_round(
         base_seed.wrapping_add(round as u64),
     )
     .map_err(|e| match e {
-        StudyError::Failure(m) => StudyError::Failure(format!("adaptive round {round}: {m}")),
+        StudyError::Failure(_) => e.context(format_args!("adaptive round {round}")),
         other => other,
     })?;
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
@@ -1315,7 +1315,7 @@ fn measure_or_read_round(
         let populations = recorded_populations.as_deref().and_then(populations_of);
         let stops = engine
             .judge(state, &m.reading(populations, made))
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?
+            .map_err(|e| StudyError::failure(format!("adaptive round {round}: {e}")))?
             .stop
             .is_some();
         if stops || runs_recorded {
@@ -1331,7 +1331,7 @@ fn measure_or_read_round(
     let (m, scoring) = measure_round(inputs, round, &state.sampling, groups, carried)?;
     if inputs.keeps_populations() {
         let text = serde_json::to_string(&carried).map_err(|e| {
-            StudyError::Failure(format!(
+            StudyError::failure(format!(
                 "adaptive round {round}: cannot record the population: {e}"
             ))
         })?;
@@ -1344,7 +1344,7 @@ fn measure_or_read_round(
         ));
     }
     let text = serde_json::to_string(&m)
-        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: cannot record: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("adaptive round {round}: cannot record: {e}")))?;
     runs.record_derived_result(&key, &fingerprint, &text)?;
     Ok(MeasuredRound {
         measurement: m,
@@ -1538,7 +1538,7 @@ fn recorded_allocation(inputs: &RoundInputs<'_>, round: usize) -> Result<Option<
         return Ok(None);
     };
     serde_json::from_str(&text).map(Some).map_err(|e| {
-        StudyError::Failure(format!(
+        StudyError::failure(format!(
             "adaptive round {round}: the allocation recorded in the store cannot be read: {e}"
         ))
     })
@@ -1588,7 +1588,7 @@ fn allocate(
     let variance = |j: usize| total_variance(inputs.data, j, None).max(f64::MIN_POSITIVE);
     let allocation = low.allocate(bank, inputs.runs, &variance, wanted, ratio)?;
     let text = serde_json::to_string(&allocation)
-        .map_err(|e| StudyError::Failure(format!("cannot record the allocation: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("cannot record the allocation: {e}")))?;
     inputs
         .runs
         .record_derived_result(&allocation_key(round), ALLOCATION_FINGERPRINT, &text)?;
@@ -1636,7 +1636,7 @@ pub(super) fn refine(
     let engine = AdaptiveEngine::new(engine_settings(settings))
         .bad_input(|| format!("{}: key `surrogate.adaptive`", study.path.display()))?;
     std::fs::create_dir_all(dir)
-        .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
+        .map_err(|e| StudyError::failure(format!("cannot create {}: {e}", dir.display())))?;
     let choice = RunChoice::new(data, settings, runs, groups.len());
     // Going on after a failed check: from the round after the last, its moments the previous
     // ones (the shift then measures what the check's runs changed).
@@ -1697,7 +1697,7 @@ pub(super) fn refine(
         let reading = measured.reading(populations, made);
         let judgement = engine
             .judge(&state, &reading)
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+            .map_err(|e| StudyError::failure(format!("adaptive round {round}: {e}")))?;
         let mut record = AdaptiveRound::judged(
             round,
             made,
@@ -1715,7 +1715,7 @@ pub(super) fn refine(
             (None, Some(recorded), _) => recorded,
             (None, None, scoring) => {
                 let scoring = scoring.as_ref().ok_or_else(|| {
-                    StudyError::Failure(format!(
+                    StudyError::failure(format!(
                         "adaptive round {round}: no surrogate to choose runs from"
                     ))
                 })?;
@@ -1958,7 +1958,7 @@ fn write_runs_table(study: &Study, dir: &Path, rows: &[Vec<f64>]) -> Result<()> 
 
 fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {
     let text = serde_json::to_string_pretty(rounds)
-        .map_err(|e| StudyError::Failure(format!("cannot write the rounds: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("cannot write the rounds: {e}")))?;
     write_atomically(&dir.join("rounds.json"), text.as_bytes())
 }
 

@@ -580,11 +580,11 @@ fn replicates_line(r: &ReplicatedLikelihood<'_>, model_runs: &ModelRuns, members
 /// evaluate, or another failure.
 fn method_error(e: iuq_basis::BasisError) -> StudyError {
     match e {
-        iuq_basis::BasisError::ModelInput(reason) => StudyError::BadInput(reason),
-        iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
+        iuq_basis::BasisError::ModelInput(reason) => StudyError::bad_input(reason),
+        iuq_basis::BasisError::ModelBatch(reason) => StudyError::failure(format!(
             "the model posterior: the model could not evaluate a batch: {reason}"
         )),
-        e => StudyError::Failure(format!("the model posterior: {e}")),
+        e => StudyError::failure(format!("the model posterior: {e}")),
     }
 }
 
