@@ -53,6 +53,7 @@ pub fn portraits_at(
             StudyError::failure(format!(
                 "the cell portraits recorded in the campaign store do not parse: {e}"
             ))
+            .with_source(e)
         })?;
         return Ok(Some(portraits));
     }
@@ -62,7 +63,7 @@ pub fn portraits_at(
     ));
     let cell = model
         .cell_parameters(map)
-        .map_err(|e| StudyError::failure(format!("the cell at {whose}: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("the cell at {whose}: {e}")).with_source(e))?;
     let portraits = stresses
         .par_iter()
         .map(|&stress| {
@@ -70,6 +71,7 @@ pub fn portraits_at(
             experiment.parallel = false;
             shear_portrait(&experiment, TRACE_POINTS).map_err(|e| {
                 StudyError::failure(format!("the cell at {whose} at {stress} Pa: {e}"))
+                    .with_source(e)
             })
         })
         .collect::<Result<Vec<_>>>()?;

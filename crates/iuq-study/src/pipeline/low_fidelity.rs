@@ -116,10 +116,10 @@ pub fn low_fidelity_study(
         cost_ratio,
     };
     let text = std::fs::read_to_string(&study.path)
-        .map_err(|e| input_error(format!("{file}: cannot read: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: cannot read: {e}")).with_source(e))?;
     let mut root: Table = text
         .parse()
-        .map_err(|e| input_error(format!("{file}: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: {e}")).with_source(e))?;
     root.remove("low_fidelity");
     root.insert("model".into(), Value::Table(model));
     root.insert(
@@ -140,8 +140,9 @@ pub fn low_fidelity_study(
         Value::String(format!("{directory}/low-fidelity")),
     );
     root.insert("executor".into(), Value::Table(executor));
-    let text = toml::to_string(&root)
-        .map_err(|e| StudyError::failure(format!("cannot write the low-fidelity study: {e}")))?;
+    let text = toml::to_string(&root).map_err(|e| {
+        StudyError::failure(format!("cannot write the low-fidelity study: {e}")).with_source(e)
+    })?;
     let low = Study::parse(&text, &study.path).map_err(|e| match e {
         StudyError::BadInput(_) => e.map_message(|m| {
             m.replace("key `model.", "key `low_fidelity.")

@@ -314,7 +314,7 @@ pub fn check_posterior(
         .collect();
     let outcomes = runs.run_with_diagnostics(Some(&label), &requests)?;
     let predictions = surrogate.emulator.predict(&points).map_err(|e| {
-        StudyError::failure(format!("predicting the posterior check's points: {e}"))
+        StudyError::failure(format!("predicting the posterior check's points: {e}")).with_source(e)
     })?;
     let mut checks = Vec::new();
     for g in 0..runs.groups() {
