@@ -227,7 +227,7 @@ impl NativeStudy {
             .allow_threads(|| {
                 let model = study.model()?;
                 let bad = |e: iuq_sensitivity::SensitivityError| {
-                    StudyError::BadInput(format!("{}: {e}", study.path.display()))
+                    StudyError::bad_input(format!("{}: {e}", study.path.display())).with_source(e)
                 };
                 analyse(&model, &study.space, &options.check().map_err(bad)?).map_err(bad)
             })
@@ -269,7 +269,7 @@ impl NativeStudy {
                 };
                 let sampled = sample_posterior(job, &posterior, settings, &mut iuq_basis::Silent)?;
                 let stages = serde_json::to_string(&sampled.run.state.diagnostics)
-                    .map_err(|e| StudyError::Failure(e.to_string()))?;
+                    .map_err(|e| StudyError::failure(e.to_string()).with_source(e))?;
                 Ok::<_, StudyError>((sampled, stages))
             })
             .map_err(study_error)?;
@@ -324,7 +324,7 @@ impl NativeStudy {
                         export_csv(&rows, &parameters, &outputs).map_err(campaign_error)?
                     } else {
                         serde_json::to_vec_pretty(&table)
-                            .map_err(|e| StudyError::Failure(e.to_string()))?
+                            .map_err(|e| StudyError::failure(e.to_string()).with_source(e))?
                     };
                     write_atomically(file, &bytes)?;
                     Ok(json!({"rows": rows.len(), "out": file.display().to_string(), "format": format}).to_string())

@@ -16,9 +16,9 @@ use crate::error::{Result, input_error};
 pub fn read_gp_file(path: &Path, reader: &str) -> Result<GpBank> {
     let file = path.display();
     let text = std::fs::read_to_string(path)
-        .map_err(|e| input_error(format!("{file}: cannot read: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: cannot read: {e}")).with_source(e))?;
     let bank = GpBank::from_json_str(&text)
-        .map_err(|e| input_error(format!("{file}: not a GP file: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: not a GP file: {e}")).with_source(e))?;
     if bank.gps().len() != 1 {
         return Err(input_error(format!(
             "{file}: a GP bank of {} outputs; {reader} takes a GP file of one output",

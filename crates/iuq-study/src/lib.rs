@@ -8,7 +8,7 @@
 //! surrogates, Sobol' indices, BASIS, the report — as [`pipeline::run`].
 //!
 //! Every error is a [`StudyError`]: bad input (a message naming the file, the key and the
-//! reason) or a failure of the work.
+//! reason) or a failure of the work, keeping the typed error it came from as its source.
 //!
 //! | module | what |
 //! |---|---|

@@ -163,12 +163,13 @@ fn parse_data(
     let file = s.file();
     let base = study.path.parent().unwrap_or(Path::new("."));
     let path = base.join(&data_file);
-    let table_data = read_numeric_csv(&path, false)
-        .map_err(|e| input_error(format!("{file}: key `likelihood.data.file`: {e}")))?;
+    let table_data = read_numeric_csv(&path, false).map_err(|e| {
+        input_error(format!("{file}: key `likelihood.data.file`: {e}")).with_source(e)
+    })?;
     let column = |name: &str, key: &str| -> Result<usize> {
-        table_data
-            .column_index(name, &path)
-            .map_err(|e| input_error(format!("{file}: key `likelihood.data.{key}`: {e}")))
+        table_data.column_index(name, &path).map_err(|e| {
+            input_error(format!("{file}: key `likelihood.data.{key}`: {e}")).with_source(e)
+        })
     };
     let ix = column(&x_column, "x")?;
     let iy = column(&y_column, "y")?;

@@ -315,7 +315,7 @@ pub fn sample_posterior(
     } = job;
     let out = out.to_path_buf();
     std::fs::create_dir_all(&out)
-        .map_err(|e| input_error(format!("cannot create {}: {e}", out.display())))?;
+        .map_err(|e| input_error(format!("cannot create {}: {e}", out.display())).with_source(e))?;
     let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), settings)
         .bad_input(|| format!("{}", study_file.display()))?;
     if let Some(state) = &checkpoint {

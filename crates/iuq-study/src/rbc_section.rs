@@ -140,15 +140,16 @@ pub fn rbc_shear_model(
         Some(s) => s,
         None => stresses_from_likelihood(file, study_path, likelihood)?,
     };
-    RbcShearModel::new(inputs, stresses, settings).map_err(|e| match e {
-        RbcError::InvalidParameter {
-            name,
-            value,
-            reason,
-        } => input_error(format!(
-            "{file}: section `[model]`: invalid value {value} for `{name}`: {reason}"
-        )),
-        other => input_error(format!("{file}: section `[model]`: {other}")),
+    RbcShearModel::new(inputs, stresses, settings).map_err(|e| {
+        let message = match &e {
+            RbcError::InvalidParameter {
+                name,
+                value,
+                reason,
+            } => format!("{file}: section `[model]`: invalid value {value} for `{name}`: {reason}"),
+            other => format!("{file}: section `[model]`: {other}"),
+        };
+        input_error(message).with_source(e)
     })
 }
 

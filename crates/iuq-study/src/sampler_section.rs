@@ -169,8 +169,9 @@ fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Resul
             .unwrap_or(d.delayed_acceptance),
     };
     s.finish()?;
-    settings.check().map_err(|e| match e {
+    settings.check().map_err(|e| match &e {
         BasisError::InvalidSettings { setting, reason } => {
+            let setting = *setting;
             let (key, flag) = names_of(setting);
             let from_flag = match setting {
                 "samples" => overrides.samples.is_some(),
@@ -180,8 +181,8 @@ fn parse_section(mut s: StudySection<'_>, overrides: &SamplerOverrides) -> Resul
                 _ => false,
             };
             match (from_flag, flag) {
-                (true, Some(flag)) => input_error(format!("{flag}: {reason}")),
-                _ => s.error(key, reason).into(),
+                (true, Some(flag)) => input_error(format!("{flag}: {reason}")).with_source(e),
+                _ => s.error(key, reason.clone()).into(),
             }
         }
         other => s.section_error(other.to_string()).into(),

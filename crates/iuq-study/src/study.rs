@@ -229,8 +229,9 @@ pub struct Study {
 impl Study {
     /// Read and validate a study file.
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())))?;
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            input_error(format!("{}: cannot read: {e}", path.display())).with_source(e)
+        })?;
         Self::parse(&text, path)
     }
 

@@ -46,14 +46,14 @@ impl NumericTable {
 /// only when `allow_nan` is set.
 pub fn read_numeric_csv(path: &Path, allow_nan: bool) -> Result<NumericTable> {
     let text = std::fs::read_to_string(path)
-        .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())))?;
+        .map_err(|e| input_error(format!("{}: cannot read: {e}", path.display())).with_source(e))?;
     let mut reader = csv::ReaderBuilder::new()
         .comment(Some(b'#'))
         .trim(csv::Trim::All)
         .from_reader(text.as_bytes());
     let columns: Vec<String> = reader
         .headers()
-        .map_err(|e| input_error(format!("{}: bad header: {e}", path.display())))?
+        .map_err(|e| input_error(format!("{}: bad header: {e}", path.display())).with_source(e))?
         .iter()
         .map(str::to_string)
         .collect();
@@ -65,7 +65,8 @@ pub fn read_numeric_csv(path: &Path, allow_nan: bool) -> Result<NumericTable> {
     }
     let mut rows = Vec::new();
     for record in reader.records() {
-        let record = record.map_err(|e| input_error(format!("{}: {e}", path.display())))?;
+        let record =
+            record.map_err(|e| input_error(format!("{}: {e}", path.display())).with_source(e))?;
         let line = record.position().map_or(0, |p| p.line());
         if record.len() != columns.len() {
             return Err(input_error(format!(
@@ -117,8 +118,12 @@ pub fn write_atomically(path: &Path, contents: &[u8]) -> Result<()> {
     if path.file_name().is_none() {
         return Err(input_error(format!("{}: not a file path", path.display())));
     }
-    iuq_atomic_file::write_atomically(path, contents, iuq_atomic_file::Durability::Atomic)
-        .map_err(|source| StudyError::Failure(format!("cannot write {}: {source}", path.display())))
+    iuq_atomic_file::write_atomically(path, contents, iuq_atomic_file::Durability::Atomic).map_err(
+        |source| {
+            StudyError::failure(format!("cannot write {}: {source}", path.display()))
+                .with_source(source)
+        },
+    )
 }
 
 /// Format a numeric table as CSV text (shortest round-trip representation of each value).

@@ -135,6 +135,7 @@ pub fn connect(
             input_error(format!(
                 "{file}: section `[model]` (kind = \"umbridge\"): {e}"
             ))
+            .with_source(e)
         } else {
             StudyError::from(e).context(format!("{file}: section `[model]` (kind = \"umbridge\")"))
         }

@@ -96,7 +96,7 @@ fn main() {
         Ok(()) => EXIT_SUCCESS,
         Err(error) => {
             let bad_input = is_input_error(&error);
-            let message = format!("{error:#}");
+            let message = input_error::message(&error);
             if cli.json {
                 println!(
                     "{}",

@@ -477,6 +477,10 @@ fn bad_study_files_exit_2_naming_file_key_and_reason() {
         assert_eq!(v["error"]["kind"], "bad_input");
         let m = v["error"]["message"].as_str().unwrap();
         assert!(m.contains("study.toml") && m.contains(key), "{m}");
+        // The message is printed once: the error the study layer keeps as its source (the
+        // campaign's) is not repeated after it.
+        assert_eq!(String::from_utf8_lossy(&o.stderr), format!("error: {m}\n"));
+        assert_eq!(m.matches(key).count(), 1, "{m}");
     }
     let o = iuq(&["status", dir.join("missing.toml").to_str().unwrap()]);
     assert_eq!(o.status.code(), Some(2));

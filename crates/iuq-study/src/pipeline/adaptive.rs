@@ -828,10 +828,11 @@ fn sample_replicates(
             Some(previous) => {
                 let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
                     .map_err(|e| {
-                        StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                        StudyError::failure(format!("adaptive round {}: {e}", ctx.round))
+                            .with_source(e)
                     })?;
                 match carry(&basis, previous).map_err(|e| {
-                    StudyError::Failure(format!("adaptive round {}: {e}", ctx.round))
+                    StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
                 })? {
                     Carried::Ready(state) => {
                         carried_replicates += 1;
@@ -879,8 +880,9 @@ fn sample_replicates(
         pooled.log_evidence += state.log_evidence / ctx.settings.replicates as f64;
         replicate_moments.push((sampled.summary.mean, sampled.summary.std));
     }
-    pooled.moments = PosteriorMoments::pooled(&replicate_moments)
-        .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?;
+    pooled.moments = PosteriorMoments::pooled(&replicate_moments).map_err(|e| {
+        StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
+    })?;
     let sampler_check = if checked {
         let group = |parity: usize| -> Vec<(Vec<f64>, Vec<f64>)> {
             replicate_moments
@@ -898,7 +900,9 @@ fn sample_replicates(
                 &pooled.moments.std,
                 ctx.settings.tolerance,
             )
-            .map_err(|e| StudyError::Failure(format!("adaptive round {}: {e}", ctx.round)))?,
+            .map_err(|e| {
+                StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
+            })?,
         )
     } else {
         None
@@ -1003,7 +1007,7 @@ fn surrogate_errors(
             )
         }
     }
-    .map_err(|e| StudyError::Failure(e.to_string()))?;
+    .map_err(|e| StudyError::failure(e.to_string()).with_source(e))?;
     let group_surrogate_error: Vec<f64> = group_errors.iter().map(|e| e.largest()).collect();
     Ok((surrogate_error, group_surrogate_error))
 }
@@ -1160,7 +1164,7 @@ fn measure_round(
         base_seed.wrapping_add(round as u64),
     )
     .map_err(|e| match e {
-        StudyError::Failure(m) => StudyError::Failure(format!("adaptive round {round}: {m}")),
+        StudyError::Failure(_) => e.context(format_args!("adaptive round {round}")),
         other => other,
     })?;
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
@@ -1315,7 +1319,9 @@ fn measure_or_read_round(
         let populations = recorded_populations.as_deref().and_then(populations_of);
         let stops = engine
             .judge(state, &m.reading(populations, made))
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?
+            .map_err(|e| {
+                StudyError::failure(format!("adaptive round {round}: {e}")).with_source(e)
+            })?
             .stop
             .is_some();
         if stops || runs_recorded {
@@ -1331,9 +1337,10 @@ fn measure_or_read_round(
     let (m, scoring) = measure_round(inputs, round, &state.sampling, groups, carried)?;
     if inputs.keeps_populations() {
         let text = serde_json::to_string(&carried).map_err(|e| {
-            StudyError::Failure(format!(
+            StudyError::failure(format!(
                 "adaptive round {round}: cannot record the population: {e}"
             ))
+            .with_source(e)
         })?;
         runs.record_derived_result(&population_key, &fingerprint, &text)?;
     }
@@ -1343,8 +1350,9 @@ fn measure_or_read_round(
             m.surrogate_error, old.surrogate_error, m.log_evidence, old.log_evidence
         ));
     }
-    let text = serde_json::to_string(&m)
-        .map_err(|e| StudyError::Failure(format!("adaptive round {round}: cannot record: {e}")))?;
+    let text = serde_json::to_string(&m).map_err(|e| {
+        StudyError::failure(format!("adaptive round {round}: cannot record: {e}")).with_source(e)
+    })?;
     runs.record_derived_result(&key, &fingerprint, &text)?;
     Ok(MeasuredRound {
         measurement: m,
@@ -1538,9 +1546,10 @@ fn recorded_allocation(inputs: &RoundInputs<'_>, round: usize) -> Result<Option<
         return Ok(None);
     };
     serde_json::from_str(&text).map(Some).map_err(|e| {
-        StudyError::Failure(format!(
+        StudyError::failure(format!(
             "adaptive round {round}: the allocation recorded in the store cannot be read: {e}"
         ))
+        .with_source(e)
     })
 }
 
@@ -1587,8 +1596,9 @@ fn allocate(
     let ratio = low.cost_ratio(inputs.runs)?;
     let variance = |j: usize| total_variance(inputs.data, j, None).max(f64::MIN_POSITIVE);
     let allocation = low.allocate(bank, inputs.runs, &variance, wanted, ratio)?;
-    let text = serde_json::to_string(&allocation)
-        .map_err(|e| StudyError::Failure(format!("cannot record the allocation: {e}")))?;
+    let text = serde_json::to_string(&allocation).map_err(|e| {
+        StudyError::failure(format!("cannot record the allocation: {e}")).with_source(e)
+    })?;
     inputs
         .runs
         .record_derived_result(&allocation_key(round), ALLOCATION_FINGERPRINT, &text)?;
@@ -1635,8 +1645,9 @@ pub(super) fn refine(
     } = *inputs;
     let engine = AdaptiveEngine::new(engine_settings(settings))
         .bad_input(|| format!("{}: key `surrogate.adaptive`", study.path.display()))?;
-    std::fs::create_dir_all(dir)
-        .map_err(|e| StudyError::Failure(format!("cannot create {}: {e}", dir.display())))?;
+    std::fs::create_dir_all(dir).map_err(|e| {
+        StudyError::failure(format!("cannot create {}: {e}", dir.display())).with_source(e)
+    })?;
     let choice = RunChoice::new(data, settings, runs, groups.len());
     // Going on after a failed check: from the round after the last, its moments the previous
     // ones (the shift then measures what the check's runs changed).
@@ -1695,9 +1706,9 @@ pub(super) fn refine(
             None
         };
         let reading = measured.reading(populations, made);
-        let judgement = engine
-            .judge(&state, &reading)
-            .map_err(|e| StudyError::Failure(format!("adaptive round {round}: {e}")))?;
+        let judgement = engine.judge(&state, &reading).map_err(|e| {
+            StudyError::failure(format!("adaptive round {round}: {e}")).with_source(e)
+        })?;
         let mut record = AdaptiveRound::judged(
             round,
             made,
@@ -1715,7 +1726,7 @@ pub(super) fn refine(
             (None, Some(recorded), _) => recorded,
             (None, None, scoring) => {
                 let scoring = scoring.as_ref().ok_or_else(|| {
-                    StudyError::Failure(format!(
+                    StudyError::failure(format!(
                         "adaptive round {round}: no surrogate to choose runs from"
                     ))
                 })?;
@@ -1958,7 +1969,7 @@ fn write_runs_table(study: &Study, dir: &Path, rows: &[Vec<f64>]) -> Result<()> 
 
 fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {
     let text = serde_json::to_string_pretty(rounds)
-        .map_err(|e| StudyError::Failure(format!("cannot write the rounds: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("cannot write the rounds: {e}")).with_source(e))?;
     write_atomically(&dir.join("rounds.json"), text.as_bytes())
 }
 

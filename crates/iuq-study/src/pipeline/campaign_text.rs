@@ -19,7 +19,8 @@ pub(super) fn campaign_text(
     let mut parameters = Table::new();
     for p in study.space.parameters() {
         let prior = Value::try_from(p.prior).map_err(|e| {
-            StudyError::Failure(format!("cannot write the prior of `{}`: {e}", p.name))
+            StudyError::failure(format!("cannot write the prior of `{}`: {e}", p.name))
+                .with_source(e)
         })?;
         parameters.insert(p.name.clone(), prior);
     }
@@ -44,6 +45,7 @@ pub(super) fn campaign_text(
     if let Some(executor) = &study.executor {
         root.insert("executor".into(), Value::Table(executor.clone()));
     }
-    toml::to_string(&root)
-        .map_err(|e| StudyError::Failure(format!("cannot write the campaign study: {e}")))
+    toml::to_string(&root).map_err(|e| {
+        StudyError::failure(format!("cannot write the campaign study: {e}")).with_source(e)
+    })
 }

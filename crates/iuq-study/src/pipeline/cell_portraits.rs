@@ -50,9 +50,10 @@ pub fn portraits_at(
     );
     if let Some(text) = runs.derived_result(PORTRAITS_KEY, &fingerprint)? {
         let portraits: Vec<ShearPortrait> = serde_json::from_str(&text).map_err(|e| {
-            StudyError::Failure(format!(
+            StudyError::failure(format!(
                 "the cell portraits recorded in the campaign store do not parse: {e}"
             ))
+            .with_source(e)
         })?;
         return Ok(Some(portraits));
     }
@@ -62,14 +63,15 @@ pub fn portraits_at(
     ));
     let cell = model
         .cell_parameters(map)
-        .map_err(|e| StudyError::Failure(format!("the cell at {whose}: {e}")))?;
+        .map_err(|e| StudyError::failure(format!("the cell at {whose}: {e}")).with_source(e))?;
     let portraits = stresses
         .par_iter()
         .map(|&stress| {
             let mut experiment = model.experiment(&cell, stress);
             experiment.parallel = false;
             shear_portrait(&experiment, TRACE_POINTS).map_err(|e| {
-                StudyError::Failure(format!("the cell at {whose} at {stress} Pa: {e}"))
+                StudyError::failure(format!("the cell at {whose} at {stress} Pa: {e}"))
+                    .with_source(e)
             })
         })
         .collect::<Result<Vec<_>>>()?;

@@ -116,10 +116,10 @@ pub fn low_fidelity_study(
         cost_ratio,
     };
     let text = std::fs::read_to_string(&study.path)
-        .map_err(|e| input_error(format!("{file}: cannot read: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: cannot read: {e}")).with_source(e))?;
     let mut root: Table = text
         .parse()
-        .map_err(|e| input_error(format!("{file}: {e}")))?;
+        .map_err(|e| input_error(format!("{file}: {e}")).with_source(e))?;
     root.remove("low_fidelity");
     root.insert("model".into(), Value::Table(model));
     root.insert(
@@ -140,14 +140,15 @@ pub fn low_fidelity_study(
         Value::String(format!("{directory}/low-fidelity")),
     );
     root.insert("executor".into(), Value::Table(executor));
-    let text = toml::to_string(&root)
-        .map_err(|e| StudyError::Failure(format!("cannot write the low-fidelity study: {e}")))?;
+    let text = toml::to_string(&root).map_err(|e| {
+        StudyError::failure(format!("cannot write the low-fidelity study: {e}")).with_source(e)
+    })?;
     let low = Study::parse(&text, &study.path).map_err(|e| match e {
-        StudyError::BadInput(m) => StudyError::BadInput(
+        StudyError::BadInput(_) => e.map_message(|m| {
             m.replace("key `model.", "key `low_fidelity.")
                 .replace("key `model`", "key `low_fidelity`")
-                .replace("section `[model]`", "section `[low_fidelity]`"),
-        ),
+                .replace("section `[model]`", "section `[low_fidelity]`")
+        }),
         other => other,
     })?;
     Ok(Some((low, settings)))
@@ -191,10 +192,10 @@ impl LowFidelity {
             events.campaign_progress("low-fidelity runs"),
         )
         .map_err(|e| match e {
-            StudyError::BadInput(m) => StudyError::BadInput(
+            StudyError::BadInput(_) => e.map_message(|m| {
                 m.replace("key `model.", "key `low_fidelity.")
-                    .replace("key `model`", "key `low_fidelity`"),
-            ),
+                    .replace("key `model`", "key `low_fidelity`")
+            }),
             other => other,
         })?;
         let groups = vec![GroupRuns::default(); runs.groups()];
@@ -208,7 +209,7 @@ impl LowFidelity {
     fn groups(&self) -> Result<std::sync::MutexGuard<'_, Vec<GroupRuns>>> {
         self.groups
             .lock()
-            .map_err(|_| StudyError::Failure("the low-fidelity runs' lock is poisoned".into()))
+            .map_err(|_| StudyError::failure("the low-fidelity runs' lock is poisoned"))
     }
 
     /// The cheap model's group and position of data point `j`.

@@ -257,7 +257,9 @@ pub fn run(
                 },
             )
         })
-        .map_err(|e| StudyError::Failure(format!("cannot start the pipeline's thread: {e}")))?;
+        .map_err(|e| {
+            StudyError::failure(format!("cannot start the pipeline's thread: {e}")).with_source(e)
+        })?;
     let mut asked_to_stop: Option<std::time::Instant> = None;
     // Ends when the stages are done and every sender (the campaign's progress observer's too)
     // is dropped.

@@ -714,13 +714,14 @@ fn replicates_line(r: &ReplicatedLikelihood<'_>, model_runs: &ModelRuns, members
 /// The method's error as the study reports it: bad model input, a batch the model could not
 /// evaluate, or another failure.
 fn method_error(e: iuq_basis::BasisError) -> StudyError {
-    match e {
-        iuq_basis::BasisError::ModelInput(reason) => StudyError::BadInput(reason),
-        iuq_basis::BasisError::ModelBatch(reason) => StudyError::Failure(format!(
+    let error = match &e {
+        iuq_basis::BasisError::ModelInput(reason) => StudyError::bad_input(reason.clone()),
+        iuq_basis::BasisError::ModelBatch(reason) => StudyError::failure(format!(
             "the model posterior: the model could not evaluate a batch: {reason}"
         )),
-        e => StudyError::Failure(format!("the model posterior: {e}")),
-    }
+        other => StudyError::failure(format!("the model posterior: {other}")),
+    };
+    error.with_source(e)
 }
 
 /// The model at both MAPs, per data point (`None`: a run failed): the surrogate posterior's

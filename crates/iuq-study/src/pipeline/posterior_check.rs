@@ -298,7 +298,7 @@ pub fn check_posterior(
         ),
         CheckPoints::Recorded { mut points, label } => {
             if points.is_empty() {
-                return Err(StudyError::Failure(format!(
+                return Err(StudyError::failure(format!(
                     "the posterior check `{label}` recorded in the campaign store has no points"
                 )));
             }
@@ -314,7 +314,7 @@ pub fn check_posterior(
         .collect();
     let outcomes = runs.run_with_diagnostics(Some(&label), &requests)?;
     let predictions = surrogate.emulator.predict(&points).map_err(|e| {
-        StudyError::Failure(format!("predicting the posterior check's points: {e}"))
+        StudyError::failure(format!("predicting the posterior check's points: {e}")).with_source(e)
     })?;
     let mut checks = Vec::new();
     for g in 0..runs.groups() {

@@ -200,8 +200,9 @@ impl<'a> PipelineRun<'a> {
                 None
             };
         let out = options.out.clone();
-        std::fs::create_dir_all(&out)
-            .map_err(|e| input_error(format!("--out: cannot create {}: {e}", out.display())))?;
+        std::fs::create_dir_all(&out).map_err(|e| {
+            input_error(format!("--out: cannot create {}: {e}", out.display())).with_source(e)
+        })?;
         if options.max_parallel == Some(0) {
             return Err(input_error("--max-parallel: must be at least 1"));
         }

@@ -116,7 +116,7 @@ impl Surrogate {
             for (k, j) in runs.group_outputs(g).enumerate() {
                 let training = group.training(k);
                 if training.y.len() < 3 {
-                    return Err(StudyError::Failure(format!(
+                    return Err(StudyError::failure(format!(
                         "{}: only {} training runs succeeded; a GP needs at least 3 (failures: {}); a larger initial design (`[surrogate] design.n`, `initial_runs` of iuq.calibrate) or narrower priors give it more",
                         describe(j),
                         training.y.len(),
@@ -191,7 +191,7 @@ impl Surrogate {
         describe: impl Fn(usize) -> String,
     ) -> Result<Self> {
         let [group] = groups else {
-            return Err(StudyError::Failure(format!(
+            return Err(StudyError::failure(format!(
                 "a reduced basis emulates a whole-curve model (one run group), not {} run groups",
                 groups.len()
             )));
@@ -200,7 +200,7 @@ impl Surrogate {
         let inputs = group.training(0).x;
         let columns: Vec<Vec<f64>> = (0..m).map(|k| group.training(k).y).collect();
         if inputs.len() < 3 {
-            return Err(StudyError::Failure(format!(
+            return Err(StudyError::failure(format!(
                 "{}: only {} training runs succeeded; a reduced basis needs at least 3 (failures: {})",
                 describe(0),
                 inputs.len(),
