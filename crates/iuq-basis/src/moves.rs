@@ -23,12 +23,13 @@ use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 use iuq_core::ParameterSpace;
-use iuq_core::random::StreamRng;
+use iuq_core::random::{StreamRng, stages::SAMPLER_BASE, stream};
 
 use crate::error::Result;
 use crate::likelihood::LogLikelihood;
 use crate::proposal::Proposal;
-use crate::sampler::{Basis, start_correlation};
+use crate::resampling::resample;
+use crate::sampler::{Basis, BasisState, RESAMPLING_STREAM};
 use crate::settings::Mixing;
 
 /// One Markov chain of a stage.
@@ -118,43 +119,84 @@ struct Moves<'p> {
     counts: MoveCounts,
 }
 
-/// Move `chains` at `exponent` with `proposal` until every chain has recorded its length.
-pub(crate) fn run_moves<L: LogLikelihood + ?Sized>(
-    basis: &Basis<'_, L>,
-    mut chains: Vec<Chain>,
-    proposal: &Proposal,
-    exponent: f64,
-    stage: usize,
-) -> Result<Moved> {
-    let settings = basis.settings();
-    let mut counts = MoveCounts::default();
-    if settings.delayed_acceptance {
-        screen_starts(basis, &mut chains, stage, &mut counts)?;
+impl<L: LogLikelihood + ?Sized> Basis<'_, L> {
+    /// Steps 5 and 6's seeds: the copy counts, and member i's ⌈n_i/l_max⌉ chains of near-equal
+    /// lengths, chain c drawing from stream (seed, stage, c).
+    pub(crate) fn seed_chains(
+        &self,
+        state: &BasisState,
+        weights: &[f64],
+        stage: usize,
+    ) -> Vec<Chain> {
+        let settings = self.settings();
+        let stage_key = SAMPLER_BASE + stage as u64;
+        let mut resampling_rng = stream(settings.seed, stage_key, RESAMPLING_STREAM);
+        let counts = resample(
+            weights,
+            settings.samples,
+            settings.resampling,
+            &mut resampling_rng,
+        );
+        let mut chains = Vec::new();
+        for (member, &count) in counts.iter().enumerate() {
+            if count == 0 {
+                continue;
+            }
+            let pieces = count.div_ceil(settings.max_chain_length);
+            let (base, extra) = (count / pieces, count % pieces);
+            for piece in 0..pieces {
+                let length = base + usize::from(piece < extra);
+                let index = chains.len() as u64;
+                chains.push(Chain::new(
+                    state.samples[member].clone(),
+                    state.log_likelihood[member],
+                    state.log_prior[member],
+                    length,
+                    stream(settings.seed, stage_key, index),
+                ));
+            }
+        }
+        chains
     }
-    let (burn, decorrelation) = match settings.mixing {
-        Mixing::Fixed => (Some(settings.burn_in), None),
-        Mixing::Adaptive {
-            correlation,
-            max_burn_in,
-        } => (None, Some((correlation, max_burn_in))),
-    };
-    let mut moves = Moves {
-        starts: chains.iter().map(|c| c.theta.clone()).collect(),
-        longest: chains.iter().map(|c| c.length).max().unwrap_or(0),
-        chains,
-        proposal,
-        exponent,
-        stage,
-        burn,
-        decorrelation,
-        least_burn_in: settings.burn_in.max(1),
-        step_index: 0,
-        counts,
-    };
-    while !moves.finished() {
-        moves.step(basis)?;
+
+    /// Move `chains` at `exponent` with `proposal` until every chain has recorded its length.
+    pub(crate) fn run_moves(
+        &self,
+        mut chains: Vec<Chain>,
+        proposal: &Proposal,
+        exponent: f64,
+        stage: usize,
+    ) -> Result<Moved> {
+        let settings = self.settings();
+        let mut counts = MoveCounts::default();
+        if settings.delayed_acceptance {
+            screen_starts(self, &mut chains, stage, &mut counts)?;
+        }
+        let (burn, decorrelation) = match settings.mixing {
+            Mixing::Fixed => (Some(settings.burn_in), None),
+            Mixing::Adaptive {
+                correlation,
+                max_burn_in,
+            } => (None, Some((correlation, max_burn_in))),
+        };
+        let mut moves = Moves {
+            starts: chains.iter().map(|c| c.theta.clone()).collect(),
+            longest: chains.iter().map(|c| c.length).max().unwrap_or(0),
+            chains,
+            proposal,
+            exponent,
+            stage,
+            burn,
+            decorrelation,
+            least_burn_in: settings.burn_in.max(1),
+            step_index: 0,
+            counts,
+        };
+        while !moves.finished() {
+            moves.step(self)?;
+        }
+        Ok(moves.finish())
     }
-    Ok(moves.finish())
 }
 
 /// The screen at every chain's start; a chain whose start has none moves unscreened.
@@ -412,6 +454,43 @@ impl Moves<'_> {
             counts: self.counts,
         }
     }
+}
+
+/// The largest |correlation|, over the parameters, between the chains' starting points and their
+/// current states (each chain counted once). A parameter whose states have not spread (zero
+/// variance) counts as correlation 1; one whose starts were all equal and whose states have
+/// spread, as 0.
+fn start_correlation(starts: &[Vec<f64>], chains: &[Chain]) -> f64 {
+    let m = chains.len();
+    if m < 2 {
+        return 1.0;
+    }
+    let d = starts[0].len();
+    let mut largest: f64 = 0.0;
+    for k in 0..d {
+        let (mut sa, mut sb) = (0.0, 0.0);
+        for (start, chain) in starts.iter().zip(chains) {
+            sa += start[k];
+            sb += chain.theta[k];
+        }
+        let (ma, mb) = (sa / m as f64, sb / m as f64);
+        let (mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0);
+        for (start, chain) in starts.iter().zip(chains) {
+            let (a, b) = (start[k] - ma, chain.theta[k] - mb);
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+        }
+        let rho = if sbb <= 0.0 {
+            1.0
+        } else if saa <= 0.0 {
+            0.0
+        } else {
+            (sab / (saa * sbb).sqrt()).abs()
+        };
+        largest = largest.max(rho);
+    }
+    largest
 }
 
 #[cfg(test)]

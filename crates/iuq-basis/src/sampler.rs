@@ -45,9 +45,7 @@ use crate::annealing::{incremental_weights, log_evidence_increment, max_finite, 
 use crate::diagnostics::{StageDiagnostics, count_failure, merge_failure_reasons};
 use crate::error::{BasisError, Result};
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
-use crate::moves::{Chain, run_moves};
 use crate::proposal::Proposal;
-use crate::resampling::resample;
 use crate::settings::{CheckedSettings, MinStepAction, Mixing};
 
 /// The stream index (within a stage) of the resampling draws; chains use 0, 1, 2, ….
@@ -480,7 +478,7 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         let weighed = self.weigh(&state, &next, max_ll)?;
         let chains = self.seed_chains(&state, &weighed.weights, stage);
         let chain_count = chains.len();
-        let moved = run_moves(self, chains, &weighed.proposal, next.exponent, stage)?;
+        let moved = self.run_moves(chains, &weighed.proposal, next.exponent, stage)?;
         let counts = moved.counts;
         let log_evidence = state.log_evidence + weighed.increment;
         let diagnostics = StageDiagnostics {
@@ -613,40 +611,6 @@ impl<'a, L: LogLikelihood + ?Sized> Basis<'a, L> {
         })
     }
 
-    /// Steps 5 and 6's seeds: the copy counts, and member i's ⌈n_i/l_max⌉ chains of near-equal
-    /// lengths, chain c drawing from stream (seed, stage, c).
-    fn seed_chains(&self, state: &BasisState, weights: &[f64], stage: usize) -> Vec<Chain> {
-        let settings = &self.settings;
-        let stage_key = SAMPLER_BASE + stage as u64;
-        let mut resampling_rng = stream(settings.seed, stage_key, RESAMPLING_STREAM);
-        let counts = resample(
-            weights,
-            settings.samples,
-            settings.resampling,
-            &mut resampling_rng,
-        );
-        let mut chains = Vec::new();
-        for (member, &count) in counts.iter().enumerate() {
-            if count == 0 {
-                continue;
-            }
-            let pieces = count.div_ceil(settings.max_chain_length);
-            let (base, extra) = (count / pieces, count % pieces);
-            for piece in 0..pieces {
-                let length = base + usize::from(piece < extra);
-                let index = chains.len() as u64;
-                chains.push(Chain::new(
-                    state.samples[member].clone(),
-                    state.log_likelihood[member],
-                    state.log_prior[member],
-                    length,
-                    stream(settings.seed, stage_key, index),
-                ));
-            }
-        }
-        chains
-    }
-
     /// The parameter space sampled.
     pub(crate) fn space(&self) -> &ParameterSpace {
         self.space
@@ -713,43 +677,6 @@ fn adapted_scale(diagnostics: &[StageDiagnostics], dimension: usize) -> f64 {
     let a = last.acceptance_rate.clamp(1e-3, 1.0 - 1e-3);
     let ratio = quantile(TARGET_ACCEPTANCE / 2.0) / quantile(a / 2.0);
     (beta * ratio.clamp(0.5, 2.0)).min(2.38)
-}
-
-/// The largest |correlation|, over the parameters, between the chains' starting points and their
-/// current states (each chain counted once). A parameter whose states have not spread (zero
-/// variance) counts as correlation 1; one whose starts were all equal and whose states have
-/// spread, as 0.
-pub(crate) fn start_correlation(starts: &[Vec<f64>], chains: &[Chain]) -> f64 {
-    let m = chains.len();
-    if m < 2 {
-        return 1.0;
-    }
-    let d = starts[0].len();
-    let mut largest: f64 = 0.0;
-    for k in 0..d {
-        let (mut sa, mut sb) = (0.0, 0.0);
-        for (start, chain) in starts.iter().zip(chains) {
-            sa += start[k];
-            sb += chain.theta[k];
-        }
-        let (ma, mb) = (sa / m as f64, sb / m as f64);
-        let (mut saa, mut sbb, mut sab) = (0.0, 0.0, 0.0);
-        for (start, chain) in starts.iter().zip(chains) {
-            let (a, b) = (start[k] - ma, chain.theta[k] - mb);
-            saa += a * a;
-            sbb += b * b;
-            sab += a * b;
-        }
-        let rho = if sbb <= 0.0 {
-            1.0
-        } else if saa <= 0.0 {
-            0.0
-        } else {
-            (sab / (saa * sbb).sqrt()).abs()
-        };
-        largest = largest.max(rho);
-    }
-    largest
 }
 
 /// "name: checkpoint a, this run b" for every setting that differs.

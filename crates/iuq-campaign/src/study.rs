@@ -50,7 +50,6 @@ use crate::decoder::{CsvRow, DecoderFormat, DecoderSpec, OutputDecoder};
 use crate::error::{CampaignError, Result};
 use crate::outcome::OutcomeKind;
 use crate::retry_policy::RetryPolicy;
-use crate::study_design::StudyDesign;
 use crate::template::{Segment, Template};
 
 /// Top-level keys a study file may hold (the sections of other stages are not read here).
@@ -158,6 +157,31 @@ impl CommandSpec {
             .map(|d| OutputDecoder::new(d, self.outputs.clone()))
             .transpose()
     }
+}
+
+/// The study's `[design]`: how the points of `iuq run` are chosen.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StudyDesign {
+    /// A maximin Latin hypercube of `n` points mapped through the priors.
+    Lhs {
+        /// Points.
+        n: usize,
+        /// Seed.
+        seed: u64,
+    },
+    /// `n` scrambled Sobol' points mapped through the priors.
+    Sobol {
+        /// Points.
+        n: usize,
+        /// Seed of the scrambling.
+        seed: u64,
+    },
+    /// Points read from a CSV file whose columns are named as the parameters.
+    File {
+        /// The file (absolute, or relative to the study's folder when written).
+        path: PathBuf,
+    },
 }
 
 /// Which executor runs the tasks.

@@ -1,12 +1,8 @@
-//! The study file's `[design]`: what it asks for ([`StudyDesign`], read with the rest of the
-//! study by [`crate::study`]) and the points it makes for `iuq run` ([`design_points`]): built on
-//! the unit cube and mapped through the priors (so non-uniform priors get designs distributed as
-//! the prior), or read from a file. (The designs a campaign store has recorded, whoever asked for
-//! them, are [`crate::store::recorded_designs`].)
-
-use std::path::PathBuf;
-
-use serde::{Deserialize, Serialize};
+//! The study file's `[design]`: what it asks for ([`StudyDesign`], defined and read with the rest
+//! of the study in [`crate::study`]) and the points it makes for `iuq run` ([`design_points`]):
+//! built on the unit cube and mapped through the priors (so non-uniform priors get designs
+//! distributed as the prior), or read from a file. (The designs a campaign store has recorded,
+//! whoever asked for them, are [`crate::store::recorded_designs`].)
 
 use iuq_doe::{LhsMethod, Scrambling, latin_hypercube, sobol_points};
 
@@ -14,30 +10,7 @@ use crate::decoder::read_csv_text;
 use crate::error::{CampaignError, Result};
 use crate::study::CampaignStudy;
 
-/// The study's `[design]`: how the points of `iuq run` are chosen.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum StudyDesign {
-    /// A maximin Latin hypercube of `n` points mapped through the priors.
-    Lhs {
-        /// Points.
-        n: usize,
-        /// Seed.
-        seed: u64,
-    },
-    /// `n` scrambled Sobol' points mapped through the priors.
-    Sobol {
-        /// Points.
-        n: usize,
-        /// Seed of the scrambling.
-        seed: u64,
-    },
-    /// Points read from a CSV file whose columns are named as the parameters.
-    File {
-        /// The file (absolute, or relative to the study's folder when written).
-        path: PathBuf,
-    },
-}
+pub use crate::study::StudyDesign;
 
 /// The points of the study's design (an input error when the study has none).
 pub fn design_points(study: &CampaignStudy) -> Result<Vec<Vec<f64>>> {

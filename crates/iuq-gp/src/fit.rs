@@ -124,6 +124,37 @@ impl std::ops::Deref for CheckedFitOptions {
     }
 }
 
+impl GaussianProcess {
+    /// Fits a GP to (`x`, `y`) by maximising the log marginal likelihood ([`crate::fit()`]).
+    pub fn fit(x: &[Vec<f64>], y: &[f64], options: &CheckedFitOptions) -> Result<Self> {
+        fit(x, y, options)
+    }
+
+    /// Conditions a GP with the given hyper-parameters (scaled units; no optimisation) on
+    /// (`x`, `y`), using the kernel, scalings, jitter and Q2 threshold of `options`.
+    pub fn with_hyperparameters(
+        x: &[Vec<f64>],
+        y: &[f64],
+        hyperparameters: Hyperparameters,
+        options: &CheckedFitOptions,
+    ) -> Result<Self> {
+        let prepared = prepare(x, y, options.scale_inputs, options.standardize_outputs)?;
+        hyperparameters.validate(&options.kernel, prepared.x.d)?;
+        Self::assemble(
+            x,
+            y,
+            prepared,
+            Covariance {
+                kernel: options.kernel,
+                hyperparameters,
+                jitter: options.jitter,
+            },
+            options.min_leave_one_out_q2,
+            FitDiagnostics::default(),
+        )
+    }
+}
+
 /// Fits a GP to training inputs `x` (one row per point) and outputs `y` by maximising the log
 /// marginal likelihood (see the module documentation).
 ///

@@ -5,7 +5,6 @@ use crate::bounds::Bounds;
 use crate::data::{ColumnMajor, validate_points, validate_values};
 use crate::diagnostics::{FitDiagnostics, FitWarning};
 use crate::error::{GpError, Result};
-use crate::fit::CheckedFitOptions;
 use crate::forward_substitution::PackedFactor;
 use crate::kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 use crate::log_marginal_likelihood::LmlWorkspace;
@@ -157,35 +156,6 @@ pub(crate) fn bound_warnings(
 }
 
 impl GaussianProcess {
-    /// Fits a GP to (`x`, `y`) by maximising the log marginal likelihood ([`crate::fit()`]).
-    pub fn fit(x: &[Vec<f64>], y: &[f64], options: &CheckedFitOptions) -> Result<Self> {
-        crate::fit::fit(x, y, options)
-    }
-
-    /// Conditions a GP with the given hyper-parameters (scaled units; no optimisation) on
-    /// (`x`, `y`), using the kernel, scalings, jitter and Q2 threshold of `options`.
-    pub fn with_hyperparameters(
-        x: &[Vec<f64>],
-        y: &[f64],
-        hyperparameters: Hyperparameters,
-        options: &CheckedFitOptions,
-    ) -> Result<Self> {
-        let prepared = prepare(x, y, options.scale_inputs, options.standardize_outputs)?;
-        hyperparameters.validate(&options.kernel, prepared.x.d)?;
-        Self::assemble(
-            x,
-            y,
-            prepared,
-            Covariance {
-                kernel: options.kernel,
-                hyperparameters,
-                jitter: options.jitter,
-            },
-            options.min_leave_one_out_q2,
-            FitDiagnostics::default(),
-        )
-    }
-
     /// Factorises K for `covariance` and builds the GP with its leave-one-out diagnostics
     /// (a Q² at or below `min_leave_one_out_q2` adds a warning).
     pub(crate) fn assemble(

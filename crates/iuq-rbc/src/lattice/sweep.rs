@@ -1,14 +1,12 @@
-//! The AA-pattern sweep: the node fields a sweep reads, the odd-step links between rows, the
-//! ghost entries that stand for the periodic neighbours in x, and the even- and odd-step row
-//! kernels, generic over the vector type.
+//! The rows of the AA-pattern sweep: the node fields a sweep reads, the odd-step links between
+//! rows, the ghost entries that stand for the periodic neighbours in x, and the even- and
+//! odd-step row kernels, generic over the vector type. (The sweep over every row is
+//! [`super::step`].)
 
-use rayon::prelude::*;
-
-use super::LatticeGeometry;
 use super::collision::{collide, collide_unforced};
 use super::d3q19::{OPPOSITE, Q, SHIFTED_SLOTS, VELOCITIES};
+use super::geometry::LatticeGeometry;
 use super::numbers::{Stored, Vector};
-use super::simd::{Simd, even_row, odd_row};
 
 /// Read-only node fields and boundary data of one sweep.
 pub(super) struct Fields<'a> {
@@ -22,48 +20,6 @@ pub(super) struct Fields<'a> {
     pub(super) geometry: LatticeGeometry,
     pub(super) row_links: &'a [RowLinks],
     pub(super) stride: usize,
-}
-
-/// One even or odd AA step over every row of `f`.
-pub(super) fn sweep<S: Stored>(
-    fields: &Fields,
-    f: &mut [S],
-    odd: bool,
-    parallel: bool,
-    simd: Simd,
-) {
-    let row_len = Q * fields.stride;
-    if !odd {
-        let kernel = |(r, row): (usize, &mut [S])| even_row(fields, r, row, simd);
-        if parallel {
-            f.par_chunks_mut(row_len)
-                .enumerate()
-                .with_min_len(4)
-                .for_each(kernel);
-        } else {
-            f.chunks_mut(row_len).enumerate().for_each(kernel);
-        }
-    } else {
-        let shared = SharedBuffer {
-            ptr: f.as_mut_ptr(),
-            len: f.len(),
-        };
-        let rows = fields.row_links.len();
-        let kernel = |r: usize| odd_row(fields, &shared, r, simd);
-        let g = fields.geometry;
-        let stride = fields.stride;
-        let fold = |(r, row): (usize, &mut [S])| fold_ghosts(row, &g, stride, r);
-        if parallel {
-            (0..rows).into_par_iter().with_min_len(4).for_each(kernel);
-            f.par_chunks_mut(row_len)
-                .enumerate()
-                .with_min_len(16)
-                .for_each(fold);
-        } else {
-            (0..rows).for_each(kernel);
-            f.chunks_mut(row_len).enumerate().for_each(fold);
-        }
-    }
 }
 
 /// After an even step: the ghost an odd-step gather of slot p reads past the run's end (p moves
@@ -80,27 +36,6 @@ pub(super) fn fill_ghosts<S: Stored>(row: &mut [S], nx: usize, stride: usize) {
     }
 }
 
-/// After an odd step: move what the scatter wrote into the ghosts onto the node they stand for.
-/// Runs that a wall feeds (slot p of a row whose upstream row `z − c_z(p)` is beyond a wall)
-/// were written in place by the bounce-back and are left alone.
-#[inline]
-fn fold_ghosts<S: Stored>(row: &mut [S], g: &LatticeGeometry, stride: usize, r: usize) {
-    let nx = g.nx;
-    let z = (r / g.ny) as i64;
-    for (p, cx) in SHIFTED_SLOTS {
-        let upstream = z - VELOCITIES[p][2] as i64;
-        if !g.z_periodic() && !(0..g.nz as i64).contains(&upstream) {
-            continue;
-        }
-        let run = p * stride;
-        if cx > 0 {
-            row[run + 1] = row[run + nx + 1];
-        } else {
-            row[run + nx] = row[run];
-        }
-    }
-}
-
 /// The population buffer shared by the threads of an odd step. Sound because every slot is
 /// read and written by exactly one node (see the `lattice` module docs), and only through raw
 /// pointers.
@@ -112,6 +47,16 @@ pub(super) struct SharedBuffer<S> {
 // SAFETY: the threads of an odd step access disjoint slots (`lattice` module docs), so sharing
 // the pointer is race-free.
 unsafe impl<S: Send> Sync for SharedBuffer<S> {}
+
+impl<S> SharedBuffer<S> {
+    /// The buffer `f`, shared by the threads of one odd step.
+    pub(super) fn new(f: &mut [S]) -> Self {
+        Self {
+            ptr: f.as_mut_ptr(),
+            len: f.len(),
+        }
+    }
+}
 
 /// One link of an odd step: the start of a slot run (its left ghost), the x shift
 /// (`x_source = x − shift`, `x_target = x + shift`) and an additive wall term.
