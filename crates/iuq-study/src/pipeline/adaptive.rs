@@ -61,7 +61,7 @@ use iuq_basis::carried_population::{Carried, carry};
 use iuq_basis::{Basis, BasisState, MAX_MIXING_LEVEL};
 use iuq_core::{Control, Observer};
 
-use super::Events;
+use super::events::Events;
 use super::low_fidelity::{Allocation, LowFidelity, allocation_key};
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
@@ -654,9 +654,7 @@ fn sampler_without_delayed_acceptance(
     (Some(table), delayed)
 }
 
-/// The label of a round's replicates in the pipeline's events (their folders get no
-/// `marginals.json`).
-pub(super) const ROUND_LABEL: &str = "adaptive round";
+pub(super) use super::events::ROUND_LABEL;
 
 /// Version of a round's measurement: raise it whenever the engine computes a measurement
 /// differently, so that measurements recorded by an earlier version are not read back.

@@ -43,7 +43,7 @@ use iuq_doe::{LhsMethod, latin_hypercube};
 use iuq_gp::MultiFidelityBank;
 use iuq_study_file::StudySection;
 
-use super::Events;
+use super::events::Events;
 use super::model_runs::{ModelRuns, RunRequests};
 use super::run_groups::{GroupRuns, OutputRuns, RunOrigin};
 use crate::error::{Result, StudyError, input_error};

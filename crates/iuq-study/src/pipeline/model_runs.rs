@@ -34,9 +34,9 @@ use iuq_campaign::{
 };
 use iuq_core::{Evaluation, EvaluationFailure, Model, Outcome};
 
-use super::Events;
 use super::campaign_text::campaign_text;
 use super::cell_model_campaign::{STRESS, campaign_study_text, cell_model_runs, output_name};
+use super::events::Events;
 use crate::campaign_runs::{campaign_error, open_campaign_with};
 use crate::error::{Result, StudyError, input_error};
 use crate::likelihood_section::DataLikelihood;
@@ -146,7 +146,7 @@ fn in_process_model_table(description: Vec<String>, outputs: &[String]) -> Table
 /// kind `rbc-shear` and `command` (an in-process model's runs are made by the pipeline alone).
 pub fn pipeline_campaign_study(study: &Study) -> Result<CampaignStudy> {
     let file = study.path.display().to_string();
-    let data = super::study_data(study)?;
+    let data = super::designs::study_data(study)?;
     let text = match &study.model {
         ModelSection::RbcShear { .. } => campaign_study_text(study, &data.x)?,
         ModelSection::Command { table, .. } => {

@@ -438,3 +438,7 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         reduced_basis,
     })
 }
+
+/// The final surrogate posterior's population where `[sampler]` gives no `samples` (that of
+/// `iuq.calibrate`'s default).
+pub const PIPELINE_FINAL_SAMPLES: usize = 10_000;

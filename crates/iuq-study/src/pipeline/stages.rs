@@ -12,18 +12,20 @@ use iuq_sensitivity::{SensitivityReport, analyse};
 
 use super::adaptive::{self, AdaptiveOutcome};
 use super::cell_model_campaign::campaign_directory;
+use super::designs::{sobol_options, study_data, test_points, training_points};
+use super::events::Events;
 use super::low_fidelity::{LowFidelity, low_fidelity_study};
 use super::model_runs::{ModelRuns, RunShape};
 use super::posterior_check::{self, PosteriorCheck};
+use super::records::{
+    add_seconds, move_aside, point_description, point_runs, resume_checkpoint, write_runs_csv,
+};
 use super::report_data::{PipelineResults, PointRuns, write_pipeline_report};
 use super::run_groups::{GroupRuns, RunOrigin};
+use super::settings::PIPELINE_FINAL_SAMPLES;
 use super::settings::{PipelineSettings, ReducedBasisChoice, parse_pipeline_settings};
 use super::surrogate::{Emulation, Surrogate};
-use super::{
-    Events, PIPELINE_FINAL_SAMPLES, PipelineOptions, PipelineOutcome, add_seconds, cell_portraits,
-    emulator, model_posterior, move_aside, point_description, point_runs, resume_checkpoint,
-    sobol_options, study_data, test_points, training_points, write_runs_csv,
-};
+use super::{PipelineOptions, PipelineOutcome, cell_portraits, emulator, model_posterior};
 use crate::error::{BadInput, Context, Result, input_error};
 use crate::likelihood_section::DataLikelihood;
 use crate::posterior::{SampledPosterior, build_posterior_with};
