@@ -406,22 +406,22 @@ impl AdaptiveEngine {
         let exploring = s.exploring_samples < s.samples;
         let far = exploring && Self::far_from_settled(judgement, tolerance);
         let checked_in_full = state.sampling.samples >= s.samples;
-        // With exploring rounds the early checks leave the mixing alone, so a settled round
-        // whose samplers' noise still reaches the tolerance once its population has grown past
-        // `samples` mixes harder as well: more samples from chains that do not decorrelate (a
-        // curved posterior at the weakest mixing) leave that noise where it is.
-        let noisy = judgement.noise().is_some_and(|n| n >= tolerance);
-        let noise_unresolved_by_samples =
-            exploring && noisy && !far && state.sampling.samples > s.samples;
-        if (judgement.sampler_disagrees && checked_in_full && !far) || noise_unresolved_by_samples {
+        if judgement.sampler_disagrees && checked_in_full && !far {
             state.sampling.mixing_level = (state.sampling.mixing_level + 1).min(s.max_mixing_level);
         }
-        // Whether sampling harder can still resolve that noise (a round without a candidate
-        // run then samples again rather than stopping).
-        let can_resolve_noise = exploring
-            && noisy
-            && (state.sampling.samples < s.max_samples
-                || state.sampling.mixing_level < s.max_mixing_level);
+        // With exploring rounds, a settled round whose samplers' noise still reaches the
+        // tolerance samples again with twice the population while it can grow, even where no
+        // candidate run is worth making (the noise, not the surrogate, keeps the rule from
+        // holding).
+        // With `WhenResolving`, only once the surrogate's error no longer keeps the round from
+        // converging.
+        let resolving = match s.more_samples {
+            MoreSamples::WhenNoisy => true,
+            MoreSamples::WhenResolving => judgement.assessment.surrogate_error < tolerance,
+        };
+        let noisy = judgement.noise().is_some_and(|n| n >= tolerance);
+        let can_resolve_noise =
+            exploring && noisy && resolving && !far && state.sampling.samples < s.max_samples;
         state.sampling.samples = if far {
             s.exploring_samples
         } else {
@@ -441,14 +441,8 @@ impl AdaptiveEngine {
                 (state.sampling.candidates * CANDIDATE_WIDENING).min(widest);
             state.sampling.samples = (2 * state.sampling.samples).min(s.max_samples);
         } else {
-            // The shift cannot be told from the samplers' noise: sample more next round (with
-            // `WhenResolving`, only once the surrogate's error no longer keeps the round from
-            // converging).
-            let resolving = match s.more_samples {
-                MoreSamples::WhenNoisy => true,
-                MoreSamples::WhenResolving => judgement.assessment.surrogate_error < tolerance,
-            };
-            if resolving && judgement.noise().is_some_and(|n| n >= tolerance) {
+            // The shift cannot be told from the samplers' noise: sample more next round.
+            if resolving && noisy {
                 state.sampling.samples = (2 * state.sampling.samples).min(s.max_samples);
             }
         }
@@ -743,19 +737,19 @@ mod tests {
     }
 
     #[test]
-    fn with_exploring_rounds_noise_that_more_samples_leave_mixes_harder_before_the_loop_stops() {
+    fn with_exploring_rounds_a_noisy_settled_round_samples_more_before_the_loop_stops() {
         // Settled (shift 0, ε 0.05) but every round's noise 2·√2·0.05 = 0.14 reaches the
-        // tolerance 0.1, and no candidate run is worth making: the population doubles to
-        // `max_samples` and, once past `samples`, the chains mix harder each round; only when
-        // neither can grow does the loop stop for want of a candidate.
+        // tolerance 0.1, and no candidate run is worth making: the population doubles round by
+        // round to `max_samples` among as many candidates, the mixing left as it is; only then
+        // does the loop look among more candidates and stop for want of one.
         let e = engine(|s| s.exploring_samples = 125);
-        let (max_samples, max_level) = (e.settings.max_samples, e.settings.max_mixing_level);
+        let max_samples = e.settings.max_samples;
         let mut state = e.start(1, None);
         let mut trace = Vec::new();
         for _ in 0..30 {
             let r = reading(0.0, 0.05, 0.05, 10);
             let j = e.judge(&state, &r).unwrap();
-            trace.push((state.sampling.samples, state.sampling.mixing_level));
+            trace.push((state.sampling.samples, state.sampling.candidates));
             if e.step(&mut state, r, &j, 0) == Next::Stop {
                 break;
             }
@@ -766,21 +760,27 @@ mod tests {
             "{reason}: {trace:?}"
         );
         assert_eq!(state.sampling.samples, max_samples, "{trace:?}");
-        assert_eq!(state.sampling.mixing_level, max_level, "{trace:?}");
-        // The mixing rose only once the population had grown past `samples`.
-        assert!(
-            trace
-                .windows(2)
-                .all(|w| w[1].1 == w[0].1 || w[0].0 > e.settings.samples),
-            "{trace:?}"
+        assert_eq!(state.sampling.mixing_level, 0, "{trace:?}");
+        // (population, candidates) of each round: the first has no shift to be noisy about,
+        // so it widens the candidates as before; then the population doubles among 4000
+        // candidates up to `max_samples` (8000 here), and only then do they widen again.
+        assert_eq!(
+            trace,
+            [
+                (125, 1000),
+                (1000, 4000),
+                (2000, 4000),
+                (4000, 4000),
+                (8000, 4000),
+                (8000, 16000)
+            ],
         );
-        // Without exploring rounds the loop behaves as before: no candidate, no noise rule.
+        // Without exploring rounds the loop widens its candidates at once, as before.
         let e = engine(|_| {});
-        let s = drive(
-            &e,
-            (0..30).map(|_| reading(0.0, 0.05, 0.05, 10)).collect(),
-            0,
-        );
-        assert_eq!(s.sampling.mixing_level, 0);
+        let mut state = e.start(1, None);
+        let r = reading(0.0, 0.05, 0.05, 10);
+        let j = e.judge(&state, &r).unwrap();
+        e.step(&mut state, r, &j, 0);
+        assert_eq!(state.sampling.candidates, 4 * e.settings.candidates);
     }
 }

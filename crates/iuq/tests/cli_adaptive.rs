@@ -969,35 +969,13 @@ fn no_candidate_worth_a_run_is_no_convergence_the_engine_looks_wider_then_says_w
         "{reason}"
     );
     // Each round that found nothing looked among 4 times more candidates, from twice the
-    // samples; except after a round whose samplers' noise (on the shift or the distance) still
-    // reached the tolerance 0.1 with its population grown past `samples`: that round's
-    // sample was redone with the chains mixing harder, among as many candidates. No run was
-    // made after the initial design.
+    // samples. No run was made after the initial design.
     let rounds = v["adaptive"]["rounds"].as_array().unwrap();
     let looked: Vec<u64> = rounds
         .iter()
         .map(|r| r["candidates"].as_u64().unwrap())
         .collect();
-    assert_eq!(looked.first(), Some(&1000), "{v}");
-    assert_eq!(looked.last(), Some(&16000), "{v}");
-    for pair in rounds.windows(2) {
-        let noise = ["shift_noise", "distance_noise"]
-            .iter()
-            .filter_map(|k| pair[0][k].as_f64())
-            .fold(0.0, f64::max);
-        let grown = pair[0]["samples"].as_u64().unwrap() > 2000;
-        let (before, after) = (
-            pair[0]["candidates"].as_u64(),
-            pair[1]["candidates"].as_u64(),
-        );
-        let mixing = |r: &serde_json::Value| r["mixing_level"].as_u64().unwrap();
-        if noise >= 0.1 && grown {
-            assert_eq!(after, before, "{v}");
-            assert_eq!(mixing(&pair[1]), mixing(&pair[0]) + 1, "{v}");
-        } else {
-            assert_eq!(after, before.map(|c| 4 * c), "{v}");
-        }
-    }
+    assert_eq!(looked, [1000, 4000, 16000], "{v}");
     assert!(rounds.iter().all(|r| r["new_runs"] == 0));
     assert_eq!(v["runs"], 8);
 }
