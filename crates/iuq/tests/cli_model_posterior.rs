@@ -122,6 +122,19 @@ fn assert_exact_within_errors(
     (em, es)
 }
 
+/// The store's distinct runs of the model posterior's batches, bridges, probe and replicates
+/// (not the two MAP runs).
+fn model_posterior_runs_stored(store: &iuq_campaign::CampaignStore) -> i64 {
+    sql(store)
+        .query_row(
+            "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
+             WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",
+            [],
+            |r| r.get(0),
+        )
+        .unwrap()
+}
+
 /// A connection of the test's own to the campaign store `store` (the store keeps its own
 /// private), to look at its tables.
 fn sql(store: &iuq_campaign::CampaignStore) -> rusqlite::Connection {
@@ -478,14 +491,7 @@ seed = 1
     let store =
         iuq_campaign::CampaignStore::open_existing(&dir.join("banana.campaign/campaign.sqlite"))
             .unwrap();
-    let stored: i64 = sql(&store)
-        .query_row(
-            "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
-             WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",
-            [],
-            |r| r.get(0),
-        )
-        .unwrap();
+    let stored = model_posterior_runs_stored(&store);
     assert_eq!(m["model_runs"].as_i64(), Some(stored), "{m}");
 
     let n = 1201;
@@ -1041,14 +1047,7 @@ fn kill_and_rerun(
     // The runs the model posterior reports are the store's distinct runs of its batches,
     // bridges, probe (whose members are the first batch's runs) and replicates, not the two MAP
     // runs.
-    let stored: i64 = sql(&store)
-        .query_row(
-            "SELECT COUNT(DISTINCT p.run_id) FROM design_points p JOIN designs d ON d.id = p.design_id \
-             WHERE d.label LIKE 'model-posterior-%' AND d.label != 'model-posterior-maps'",
-            [],
-            |r| r.get(0),
-        )
-        .unwrap();
+    let stored = model_posterior_runs_stored(&store);
     assert_eq!(
         v["model_posterior"]["model_runs"].as_i64(),
         Some(stored),
