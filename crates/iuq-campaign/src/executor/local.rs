@@ -19,6 +19,12 @@ pub const STARTED_DELAY: Duration = Duration::from_millis(50);
 /// coordinator's commit before it starts its next task.
 const QUEUE_DEPTH: usize = 3;
 
+/// The same for a model evaluated in this process, whose runs may take microseconds: the
+/// coordinator commits the results it has at each wake-up, so a deep queue lets one commit (one
+/// flush to disk) ingest hundreds of runs instead of a handful. A queued task is started only
+/// while the executor starts tasks, so an interrupt still stops after the running ones.
+const IN_PROCESS_QUEUE_DEPTH: usize = 63;
+
 use crate::error::Result;
 use crate::executor::{
     Executor, ExecutorEvent, OpenTask, SubmittedTask, failure_events, report_events,
@@ -32,6 +38,8 @@ use crate::worker::{CompiledSpec, execute_task, process_start_ticks, read_status
 /// Runs tasks as processes on this machine.
 pub struct LocalExecutor {
     capacity: usize,
+    /// Tasks queued per worker thread beyond the running one.
+    queue_depth: usize,
     in_flight: usize,
     /// `Started` events held back for [`STARTED_DELAY`]: runs that finish sooner are never
     /// reported as running, which saves one store commit per short run.
@@ -107,6 +115,11 @@ impl LocalExecutor {
             .collect();
         Self {
             capacity,
+            queue_depth: if in_process.is_some() {
+                IN_PROCESS_QUEUE_DEPTH
+            } else {
+                QUEUE_DEPTH
+            },
             in_flight: 0,
             held_started: Vec::new(),
             tasks: Some(task_tx),
@@ -201,7 +214,7 @@ impl Executor for LocalExecutor {
     }
 
     fn capacity(&self) -> usize {
-        self.capacity * (1 + QUEUE_DEPTH)
+        self.capacity * (1 + self.queue_depth)
     }
 
     fn in_flight(&self) -> usize {
