@@ -8,6 +8,11 @@
 //! log-likelihood) is called with the GIL held, one 2-D array per batch (see the module `callable`).
 
 #![warn(missing_docs)]
+// No panic reachable from Python: every failure becomes a Python exception.
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
 
 use pyo3::prelude::*;
 

@@ -41,6 +41,11 @@
 //! This crate does no file I/O: checkpoints are strings, and the binary writes them.
 
 #![warn(missing_docs)]
+// No panic reachable from user input: a library reports every failure in its error type.
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
 
 pub mod ancestral_variance;
 pub mod annealing;

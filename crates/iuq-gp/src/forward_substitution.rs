@@ -249,6 +249,10 @@ macro_rules! for_each_row {
 /// and the rows of `v` (LANES values per row), in order. The SUB × LANES values are held in
 /// registers (one vector per row with AVX-512, two with AVX2).
 #[inline(always)]
+#[expect(
+    clippy::expect_used,
+    reason = "the slices' lengths are fixed by chunks_exact and the tile's layout: no input reaches the panics"
+)]
 fn update<const SUB: usize>(a: &[f64], v: &[f64], tile: &mut [f64], first: usize) {
     let tile = &mut tile[first * LANES..(first + SUB) * LANES];
     let mut acc = [[0.0f64; LANES]; SUB];
@@ -289,6 +293,10 @@ fn solve_row<const I: usize>(
 /// The in-tile substitution of one tile (after its off-diagonal update): writes v back and
 /// returns Σ_i v_i² over its rows (fused multiply-adds in increasing i).
 #[inline(always)]
+#[expect(
+    clippy::expect_used,
+    reason = "the diagonal block and reciprocals are ROWS² and ROWS values by the tile's layout: no input reaches the panics"
+)]
 fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES] {
     let diagonal: &[f64; ROWS * ROWS] = diagonal.try_into().expect("ROWS² values");
     let reciprocal: &[f64; ROWS] = reciprocal.try_into().expect("ROWS values");

@@ -39,6 +39,11 @@
 //! ```
 
 #![warn(missing_docs)]
+// No panic reachable from user input: a library reports every failure in its error type.
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
 
 pub mod benchmark;
 pub mod cell_in_flow;

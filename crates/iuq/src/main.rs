@@ -4,6 +4,12 @@
 //! and reason). With `--json` every verb prints exactly one JSON object on stdout; on an error
 //! that object is `{"error": {"kind": "bad_input" | "failure", "message": ...}}`.
 
+// No panic reachable from user input: every failure exits 1 or 2 with its message.
+#![cfg_attr(
+    not(test),
+    deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
+)]
+
 mod commands;
 mod input_error;
 mod markdown_help;
