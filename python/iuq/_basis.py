@@ -263,14 +263,16 @@ def basis(
         data_args,
         names,
         priors,
-        count("samples", samples, 2),
-        None if burn is None else count("burn", burn, 0, 2**20),
-        count("max_chain", max_chain, 1, 2**20),
-        seed_of(seed),
-        real("cv_target", cv_target),
-        None if proposal_scale is None else real("proposal_scale", proposal_scale),
-        count("max_stages", max_stages, 1, 2**20),
-        on_error,
+        dict(
+            samples=count("samples", samples, 2),
+            burn=None if burn is None else count("burn", burn, 0, 2**20),
+            max_chain=count("max_chain", max_chain, 1, 2**20),
+            seed=seed_of(seed),
+            cv_target=real("cv_target", cv_target),
+            proposal_scale=None if proposal_scale is None else real("proposal_scale", proposal_scale),
+            max_stages=count("max_stages", max_stages, 1, 2**20),
+            on_error=on_error,
+        ),
     )
     return result_from_raw(raw)
 

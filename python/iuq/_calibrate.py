@@ -638,10 +638,12 @@ def calibrate(
             text = native.calibrate(
                 os.fspath(out),
                 function,
-                1 if per_point else m,
-                on_error,
-                batch_size,
-                bool(model_posterior) or isinstance(model_posterior, dict),
+                dict(
+                    outputs=1 if per_point else m,
+                    on_error=on_error,
+                    max_parallel=batch_size,
+                    model_posterior=bool(model_posterior) or isinstance(model_posterior, dict),
+                ),
                 printer,
                 cheap,
             )

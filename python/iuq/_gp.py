@@ -124,11 +124,13 @@ class GaussianProcess:
         native = _native.GaussianProcess.fit(
             X,
             y,
-            count("restarts", restarts, 0, 10_000),
-            seed_of(seed),
-            str(kernel),
-            bool(scale_inputs),
-            bool(standardize_outputs),
+            dict(
+                restarts=count("restarts", restarts, 0, 10_000),
+                seed=seed_of(seed),
+                kernel=str(kernel),
+                scale_inputs=bool(scale_inputs),
+                standardize_outputs=bool(standardize_outputs),
+            ),
             names,
             str(output_name),
         )

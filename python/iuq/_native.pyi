@@ -29,12 +29,7 @@ def sobol_indices(
     names: Sequence[str],
     priors: Sequence[Tuple[str, Sequence[float]]],
     outputs: Sequence[str],
-    n: int,
-    seed: int,
-    resamples: int,
-    replicates: Optional[int],
-    confidence: float,
-    on_error: str,
+    settings: Dict[str, Any],  # n, seed, resamples, replicates, confidence, on_error
 ) -> Dict[str, Any]: ...
 def basis(
     log_likelihood: Optional[Callable[[npt.NDArray[np.float64]], Any]],
@@ -42,14 +37,7 @@ def basis(
     data: Optional[Dict[str, Any]],
     names: Sequence[str],
     priors: Sequence[Tuple[str, Sequence[float]]],
-    samples: int,
-    burn: Optional[int],
-    max_chain: int,
-    seed: int,
-    cv_target: float,
-    proposal_scale: Optional[float],
-    max_stages: int,
-    on_error: str,
+    settings: Dict[str, Any],  # samples, burn, max_chain, seed, cv_target, proposal_scale, max_stages, on_error
 ) -> Dict[str, Any]: ...
 
 class GaussianProcess:
@@ -57,11 +45,7 @@ class GaussianProcess:
     def fit(
         x: npt.NDArray[np.float64],
         y: npt.NDArray[np.float64],
-        restarts: int,
-        seed: int,
-        kernel: str,
-        scale_inputs: bool,
-        standardize_outputs: bool,
+        settings: Dict[str, Any],  # restarts, seed, kernel, scale_inputs, standardize_outputs
         inputs: List[str],
         output: str,
     ) -> GaussianProcess: ...
@@ -109,21 +93,14 @@ class Study:
     def run(
         self,
         out: str,
-        max_parallel: Optional[int],
-        model_posterior: bool,
-        fresh: bool,
-        runs_only: bool,
-        recompute_rounds: bool,
+        settings: Dict[str, Any],  # max_parallel, model_posterior, fresh, runs_only, recompute_rounds
         progress: Optional[Callable[[str], Any]],
     ) -> str: ...
     def calibrate(
         self,
         out: str,
         model: Callable[[Any], Any],
-        outputs: int,
-        on_error: str,
-        max_parallel: int,
-        model_posterior: bool,
+        settings: Dict[str, Any],  # outputs, on_error, max_parallel, model_posterior
         progress: Optional[Callable[[str], Any]],
         low_fidelity: Optional[Callable[[Any], Any]] = None,
     ) -> str: ...

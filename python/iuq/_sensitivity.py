@@ -211,12 +211,14 @@ def sobol(
         names,
         priors,
         output_names,
-        n,
-        seed_of(seed),
-        resamples,
-        replicates,
-        confidence,
-        on_error,
+        dict(
+            n=n,
+            seed=seed_of(seed),
+            resamples=resamples,
+            replicates=replicates,
+            confidence=confidence,
+            on_error=on_error,
+        ),
     )
     return result_from_raw(raw)
 

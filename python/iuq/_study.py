@@ -326,11 +326,13 @@ class Study:
         raw = json.loads(
             self._native.run(
                 os.fspath(out),
-                max_parallel,
-                bool(model_posterior),
-                bool(fresh),
-                bool(runs_only),
-                bool(recompute_rounds),
+                dict(
+                    max_parallel=max_parallel,
+                    model_posterior=bool(model_posterior),
+                    fresh=bool(fresh),
+                    runs_only=bool(runs_only),
+                    recompute_rounds=bool(recompute_rounds),
+                ),
                 callback,
             )
         )

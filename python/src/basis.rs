@@ -52,18 +52,10 @@ pub struct DataArgs {
     measurement_error: bool,
 }
 
-/// Sample the posterior with BASIS; the result (samples, evidence, summaries, stage
-/// diagnostics as JSON) as a dict.
-#[pyfunction]
-#[pyo3(signature = (log_likelihood, formula, data, names, priors, samples, burn, max_chain, seed, cv_target, proposal_scale, max_stages, on_error))]
-#[allow(clippy::too_many_arguments)]
-pub fn basis<'py>(
-    py: Python<'py>,
-    log_likelihood: Option<Py<PyAny>>,
-    formula: Option<String>,
-    data: Option<DataArgs>,
-    names: Vec<String>,
-    priors: Vec<PriorArgs>,
+/// The sampler's settings (a dict from `iuq.basis`, checked there).
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct BasisArgs {
     samples: usize,
     burn: Option<usize>,
     max_chain: usize,
@@ -71,9 +63,33 @@ pub fn basis<'py>(
     cv_target: f64,
     proposal_scale: Option<f64>,
     max_stages: usize,
-    on_error: &str,
+    on_error: String,
+}
+
+/// Sample the posterior with BASIS; the result (samples, evidence, summaries, stage
+/// diagnostics as JSON) as a dict.
+#[pyfunction]
+#[pyo3(signature = (log_likelihood, formula, data, names, priors, settings))]
+pub fn basis<'py>(
+    py: Python<'py>,
+    log_likelihood: Option<Py<PyAny>>,
+    formula: Option<String>,
+    data: Option<DataArgs>,
+    names: Vec<String>,
+    priors: Vec<PriorArgs>,
+    settings: BasisArgs,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let on_error = OnError::parse(on_error)?;
+    let BasisArgs {
+        samples,
+        burn,
+        max_chain,
+        seed,
+        cv_target,
+        proposal_scale,
+        max_stages,
+        on_error,
+    } = settings;
+    let on_error = OnError::parse(&on_error)?;
     let model_space = prior_space(&names, &priors)?;
     let (likelihood, space): (AnyLikelihood, ParameterSpace) = match (log_likelihood, formula, data)
     {

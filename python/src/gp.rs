@@ -50,24 +50,37 @@ fn kernel_of(name: &str) -> PyResult<Kernel> {
     }
 }
 
+/// The fit's settings (a dict from `iuq.GaussianProcess.fit`).
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct FitArgs {
+    restarts: usize,
+    seed: u64,
+    kernel: String,
+    scale_inputs: bool,
+    standardize_outputs: bool,
+}
+
 #[pymethods]
 impl NativeGaussianProcess {
     /// Fit by maximising the log marginal likelihood (as `iuq gp fit`).
     #[staticmethod]
-    #[pyo3(signature = (x, y, restarts, seed, kernel, scale_inputs, standardize_outputs, inputs, output))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (x, y, settings, inputs, output))]
     fn fit(
         py: Python<'_>,
         x: PyReadonlyArray2<'_, f64>,
         y: PyReadonlyArray1<'_, f64>,
-        restarts: usize,
-        seed: u64,
-        kernel: &str,
-        scale_inputs: bool,
-        standardize_outputs: bool,
+        settings: FitArgs,
         inputs: Vec<String>,
         output: String,
     ) -> PyResult<Self> {
+        let FitArgs {
+            restarts,
+            seed,
+            kernel,
+            scale_inputs,
+            standardize_outputs,
+        } = settings;
         let x = array_rows(&x);
         let y = array_values(&y);
         if x.len() != y.len() {
@@ -87,7 +100,7 @@ impl NativeGaussianProcess {
             ));
         }
         let options = FitOptions {
-            kernel: kernel_of(kernel)?,
+            kernel: kernel_of(&kernel)?,
             n_restarts: restarts,
             seed,
             scale_inputs,

@@ -105,10 +105,23 @@ impl AnyModel {
     }
 }
 
+/// The estimator's settings (a dict from `iuq.sobol_indices`): `n` base points, `seed`, the
+/// confidence intervals' `resamples` (bootstrap) or `replicates`, their `confidence`, and
+/// `on_error`.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct SobolArgs {
+    n: usize,
+    seed: u64,
+    resamples: usize,
+    replicates: Option<usize>,
+    confidence: f64,
+    on_error: String,
+}
+
 /// Sobol' indices: the options and result of `iuq sobol`, as a dict of lists.
 #[pyfunction]
-#[pyo3(signature = (function, expressions, names, priors, outputs, n, seed, resamples, replicates, confidence, on_error))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (function, expressions, names, priors, outputs, settings))]
 pub fn sobol_indices<'py>(
     py: Python<'py>,
     function: Option<Py<PyAny>>,
@@ -116,20 +129,23 @@ pub fn sobol_indices<'py>(
     names: Vec<String>,
     priors: Vec<PriorArgs>,
     outputs: Vec<String>,
-    n: usize,
-    seed: u64,
-    resamples: usize,
-    replicates: Option<usize>,
-    confidence: f64,
-    on_error: &str,
+    settings: SobolArgs,
 ) -> PyResult<Bound<'py, PyDict>> {
+    let SobolArgs {
+        n,
+        seed,
+        resamples,
+        replicates,
+        confidence,
+        on_error,
+    } = settings;
     let space = prior_space(&names, &priors)?;
     let model = AnyModel::new(
         function,
         expressions,
         &names,
         outputs,
-        OnError::parse(on_error)?,
+        OnError::parse(&on_error)?,
     )?;
     if n < 2 {
         return Err(bad_input(

@@ -42,6 +42,29 @@ fn to_json_text(value: &Value) -> PyResult<String> {
     serde_json::to_string(value).map_err(|e| failure("serialising the result", e))
 }
 
+/// How `Study.run` runs the pipeline (a dict from `iuq.Study.run`; the flags of `iuq pipeline`).
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct RunArgs {
+    max_parallel: Option<usize>,
+    model_posterior: bool,
+    fresh: bool,
+    runs_only: bool,
+    recompute_rounds: bool,
+}
+
+/// How `Study.calibrate` calls the Python model (a dict from `iuq.calibrate`): its `outputs`
+/// per call, `on_error`, up to `max_parallel` runs per call, and whether to certify the model
+/// posterior.
+#[derive(FromPyObject)]
+#[pyo3(from_item_all)]
+pub struct CalibrateArgs {
+    outputs: usize,
+    on_error: String,
+    max_parallel: usize,
+    model_posterior: bool,
+}
+
 #[pymethods]
 impl NativeStudy {
     /// Read and check a study file (as every CLI verb does).
@@ -77,19 +100,21 @@ impl NativeStudy {
     }
 
     /// Run the pipeline (`iuq pipeline`); the outcome as the JSON text of `iuq pipeline --json`.
-    #[pyo3(signature = (out, max_parallel, model_posterior, fresh, runs_only, recompute_rounds, progress))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (out, settings, progress))]
     fn run(
         &self,
         py: Python<'_>,
         out: PathBuf,
-        max_parallel: Option<usize>,
-        model_posterior: bool,
-        fresh: bool,
-        runs_only: bool,
-        recompute_rounds: bool,
+        settings: RunArgs,
         progress: Option<Py<PyAny>>,
     ) -> PyResult<String> {
+        let RunArgs {
+            max_parallel,
+            model_posterior,
+            fresh,
+            runs_only,
+            recompute_rounds,
+        } = settings;
         let options = PipelineOptions {
             out,
             max_parallel,
@@ -117,21 +142,23 @@ impl NativeStudy {
     /// evaluated on this thread in batches of up to `max_parallel` runs (see
     /// [`crate::calibrate`]); the outcome as `run` gives it. `low_fidelity`, a callable of the
     /// same signature, is the cheap model of a `[low_fidelity] kind = "callable"`.
-    #[pyo3(signature = (out, model, outputs, on_error, max_parallel, model_posterior, progress, low_fidelity=None))]
-    #[allow(clippy::too_many_arguments)]
+    #[pyo3(signature = (out, model, settings, progress, low_fidelity=None))]
     fn calibrate(
         &self,
         py: Python<'_>,
         out: PathBuf,
         model: Py<PyAny>,
-        outputs: usize,
-        on_error: &str,
-        max_parallel: usize,
-        model_posterior: bool,
+        settings: CalibrateArgs,
         progress: Option<Py<PyAny>>,
         low_fidelity: Option<Py<PyAny>>,
     ) -> PyResult<String> {
-        let on_error = OnError::parse(on_error)?;
+        let CalibrateArgs {
+            outputs,
+            on_error,
+            max_parallel,
+            model_posterior,
+        } = settings;
+        let on_error = OnError::parse(&on_error)?;
         let output_names: Vec<String> = (0..outputs).map(|j| format!("y[{j}]")).collect();
         let inputs = self.study.model_inputs();
         let mut models = vec![PyModel::new(
