@@ -131,8 +131,10 @@ fn assert_model_posterior_is_exact(
     out: &Path,
     exact: &[(String, f64, f64)],
 ) -> serde_json::Value {
-    let text =
-        std::fs::read_to_string(study).unwrap() + "\n[model_posterior]\nsamples = 200\nseed = 1\n";
+    // 200 members, not sized for a target Monte Carlo error (which makes them 490 here): these
+    // tests are about a model kind's runs reaching the method.
+    let text = std::fs::read_to_string(study).unwrap()
+        + "\n[model_posterior]\nsamples = 200\ntarget_mcse = 1\nseed = 1\n";
     std::fs::write(study, text).unwrap();
     let v = common::pipeline(study, out, &["--model-posterior"]).0;
     let m = &v["model_posterior"];
@@ -230,8 +232,12 @@ fn a_model_failing_over_part_of_the_posterior_gets_no_mass_and_few_runs_there() 
         .replace(
             "design = { kind = \"lhs\", n = 8, seed = 1 }",
             "design = { kind = \"lhs\", n = 12, seed = 1 }",
-        );
-    assert!(study.contains("n = 12"));
+        )
+        // The classifier's boundary still moves the truncated posterior by 0.2–0.4 stds a round
+        // at 45 runs, so the loop would spend the example's 60 without converging (this test
+        // asserts where the mass lies and where the runs went, not convergence).
+        .replace("max_runs = 60", "max_runs = 45");
+    assert!(study.contains("n = 12") && study.contains("max_runs = 45"));
     let path = dir.join("failing.toml");
     std::fs::write(&path, study).unwrap();
     let out = dir.join("failing-report");
