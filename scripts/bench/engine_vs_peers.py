@@ -5,6 +5,7 @@ long-run reference posteriors (a benchmark, not a test: it prints our figures be
     pip install ./python -r scripts/bench/requirements-engine.txt
     python3 scripts/bench/engine_vs_peers.py [--problems twoexp,banana,...] [--methods iuq,cli,pyvbmc,gpry]
     python3 scripts/bench/engine_vs_peers.py --iuq-bin target/release/iuq --out bench-out
+    python3 scripts/bench/engine_vs_peers.py --methods cli --model-posterior --seed 2
 
 Problems (synthetic data from known parameters, Gaussian noise, fixed seeds; the likelihood is
 exactly N(y | f(θ), y_std²), which every method is given):
@@ -30,6 +31,13 @@ pipeline` on the same study with `[model] kind = "expression"` where the model i
 PyVBMC and GPry on the same log-likelihood with their defaults, PyVBMC with the problem's box as
 hard bounds and its central half as plausible bounds, GPry on the box (±4 prior stds for a
 normal or log-normal prior).
+
+With `--model-posterior` the CLI also runs `iuq pipeline --model-posterior` and adds a row
+`cli+model`: the model's own posterior certified from the surrogate's, its weighted members'
+largest mean error and std ratios against the reference (beside the surrogate's on the `cli`
+row), its model calls counted on top of the surrogate's, and C2ST on a resample of its members by
+weight (as many as there are members, so its noise is larger: about ±0.02 at 400 members).
+`--seed` seeds every method (default 1).
 """
 
 import argparse
@@ -306,25 +314,55 @@ def write_study(problem, workdir, name, surrogate, sampler):
     return study
 
 
-def run_cli(problem, binary, workdir, seed=1):
+def run_cli(problem, binary, workdir, seed=1, model_posterior=False):
     if problem["formula"] is None:
         return None
     # The CLI's adaptive defaults are iuq.calibrate's (max(6, d + 2) initial runs, batch 2,
     # max_runs 300).
     study = write_study(problem, workdir, "bench", ["adaptive = {}"], [f"seed = {seed}"])
+    if model_posterior:
+        with open(study, "a") as f:
+            f.write(f"[model_posterior]\nseed = {seed}\n")
     started = time.time()
-    done = subprocess.run([binary, "pipeline", study, "--out", os.path.join(workdir, "out"), "--json"],
-                          capture_output=True, text=True, timeout=900)
+    command = [binary, "pipeline", study, "--out", os.path.join(workdir, "out"), "--json"]
+    done = subprocess.run(command + (["--model-posterior"] if model_posterior else []),
+                          capture_output=True, text=True, timeout=1800)
     wall = time.time() - started
     if done.returncode != 0:
         return dict(error=done.stderr.strip().splitlines()[-1:])
     summary = json.loads(done.stdout)
+    d = len(problem["names"])
     samples = np.loadtxt(os.path.join(workdir, "out", "basis-gp", "samples.csv"), delimiter=",", skiprows=1)
     with open(os.path.join(workdir, "out", "adaptive", "rounds.json")) as f:
         rounds = json.load(f)
     rounds = rounds if isinstance(rounds, list) else rounds["rounds"]
-    return dict(calls=summary.get("runs"), wall=wall, rounds=[r["seconds"] for r in rounds],
-                converged=summary.get("converged"), samples=samples[:, :len(problem["names"])])
+    m = summary.get("model_posterior")
+    # `runs` counts the surrogate's runs; the model posterior's are in its own `model_runs`.
+    row = dict(calls=summary.get("runs"), wall=wall,
+               rounds=[r["seconds"] for r in rounds], converged=summary.get("converged"), samples=samples[:, :d])
+    if m:
+        members = np.loadtxt(os.path.join(workdir, "out", "model-posterior", "samples.csv"), delimiter=",",
+                             skiprows=1)
+        theta, w = members[:, :d], members[:, d]
+        w = w / w.sum()
+        # Systematic resampling by weight: as many equally weighted samples as members.
+        u = (np.random.default_rng(seed).random() + np.arange(len(w))) / len(w)
+        resampled = theta[np.minimum(np.searchsorted(np.cumsum(w), u), len(w) - 1)]
+        row["model_posterior"] = dict(calls=m.get("model_runs"), certified=m.get("certified"), theta=theta, weights=w,
+                                      resampled=resampled, max_mcse=max(m["mcse_mean"][n] / m["std"][n]
+                                                                        for n in problem["names"]))
+    return row
+
+
+def weighted_score(theta, w, resampled, ref):
+    """The weighted members' largest mean error (reference stds) and std ratios, and C2ST on
+    their resample."""
+    mean, std = ref.mean(axis=0), ref.std(axis=0)
+    m = w @ theta
+    s = np.sqrt(w @ (theta - m) ** 2)
+    ratio = s / std
+    return dict(c2st=c2st(resampled, ref), mean_error=float((np.abs(m - mean) / std).max()),
+                std_ratio=(float(ratio.min()), float(ratio.max())))
 
 
 def run_pyvbmc(problem, seed=1):
@@ -395,6 +433,9 @@ def main():
     parser.add_argument("--out", default=None, help="work directory of the CLI runs (default: a temporary one)")
     parser.add_argument("--json", default=None, help="also write the table as JSON here (after every row)")
     parser.add_argument("--max-seconds", type=int, default=900, help="a method's time limit per problem")
+    parser.add_argument("--seed", type=int, default=1, help="the seed of every method (default 1)")
+    parser.add_argument("--model-posterior", action="store_true",
+                        help="the CLI also certifies the model's own posterior (a `cli+model` row)")
     args = parser.parse_args()
 
     def too_long(*_):
@@ -410,33 +451,47 @@ def main():
             signal.alarm(args.max_seconds)
             try:
                 if method == "iuq":
-                    r = run_iuq(problem)
+                    r = run_iuq(problem, args.seed)
                 elif method == "cli":
-                    r = run_cli(problem, args.iuq_bin, os.path.join(work, name))
+                    r = run_cli(problem, args.iuq_bin, os.path.join(work, name), args.seed, args.model_posterior)
                 elif method == "pyvbmc":
-                    r = run_pyvbmc(problem)
+                    r = run_pyvbmc(problem, args.seed)
                 else:
-                    r = run_gpry(problem)
+                    r = run_gpry(problem, args.seed)
             except Exception as e:  # noqa: BLE001
                 r = dict(error=f"{type(e).__name__}: {str(e)[:80]}")
             finally:
                 signal.alarm(0)
             if r is None:
                 continue
+            model = r.pop("model_posterior", None)
             row = dict(problem=name, method=method, **{k: v for k, v in r.items() if k != "samples"})
             if "samples" in r:
                 row.update(score(r["samples"], ref))
             rows.append(row)
-            if args.json:
-                with open(args.json, "w") as f:
-                    json.dump(rows, f, indent=1, default=float)
-            rounds = row.get("rounds") or []
-            print(f"{name:14s} {method:7s} calls {row.get('calls', '-')!s:>5}  wall {row.get('wall', float('nan')):7.1f} s  "
-                  f"rounds {len(rounds):2d} (median {np.median(rounds) if rounds else float('nan'):5.2f} s, max "
-                  f"{max(rounds) if rounds else float('nan'):5.2f} s)  c2st {row.get('c2st', float('nan')):.3f}  "
-                  f"mean err {row.get('mean_error', float('nan')):.3f} sd  std ratio "
-                  f"{row.get('std_ratio', (float('nan'),) * 2)[0]:.3f}–{row.get('std_ratio', (float('nan'),) * 2)[1]:.3f}"
-                  + (f"  ERROR {row['error']}" if "error" in row else ""), flush=True)
+            report(row, args.json, rows)
+            if model is not None:
+                row = dict(problem=name, method="cli+model", calls=model["calls"], certified=model["certified"],
+                           max_mcse=model["max_mcse"],
+                           **weighted_score(model["theta"], model["weights"], model["resampled"], ref))
+                rows.append(row)
+                report(row, args.json, rows)
+
+
+def report(row, json_path, rows):
+    """Print one row of the table (and write the table so far as JSON)."""
+    if json_path:
+        with open(json_path, "w") as f:
+            json.dump(rows, f, indent=1, default=float)
+    rounds = row.get("rounds") or []
+    name, method = row["problem"], row["method"]
+    extra = f"  certified {row['certified']}, max MCSE {row['max_mcse']:.3f} sd" if "certified" in row else ""
+    print(f"{name:14s} {method:9s} calls {row.get('calls', '-')!s:>5}  wall {row.get('wall', float('nan')):7.1f} s  "
+          f"rounds {len(rounds):2d} (median {np.median(rounds) if rounds else float('nan'):5.2f} s, max "
+          f"{max(rounds) if rounds else float('nan'):5.2f} s)  c2st {row.get('c2st', float('nan')):.3f}  "
+          f"mean err {row.get('mean_error', float('nan')):.3f} sd  std ratio "
+          f"{row.get('std_ratio', (float('nan'),) * 2)[0]:.3f}–{row.get('std_ratio', (float('nan'),) * 2)[1]:.3f}"
+          + extra + (f"  ERROR {row['error']}" if "error" in row else ""), flush=True)
 
 
 if __name__ == "__main__":
