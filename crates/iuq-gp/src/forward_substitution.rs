@@ -16,18 +16,17 @@
 //!
 //! and ‖v‖² = Σ over panels (in order) of the panel's Σ_i v_i² (fused multiply-adds in
 //! increasing i). The result for a point does not depend on the other points of its group,
-//! on the batch or on the number of threads. The kernel is plain Rust on arrays of [`LANES`]
-//! lanes, compiled for AVX-512, for AVX2+FMA and for the baseline and chosen at run time; the
-//! variants hold as many rows of a tile in registers as the CPU's register file takes (24, 6
-//! and 3 rows: a 24-row tile on AVX2's 16 registers spilled and ran 3× slower, 0.90 s instead of
-//! 0.34 s for 100,000 points at n = 500). Every variant performs the same operations in the
-//! same order, so all agree bit for bit with an unvectorised reference (tested). With AVX-512 the
-//! tile is 24 vector registers and the update's inner loop is 24 fused multiply-adds with
-//! broadcast operands per row of v. On the 2-core development machine (quiet) it ran at
-//! 24.8 GFMA/s per core at n = 500, 74 % of the core's measured peak of 33.6, where faer's
-//! general triangular solve on blocks of 128–1024 points reached 14–15.5 (≈ 45 %)
-//! (`cargo test --release -p iuq-gp -- --ignored --nocapture --test-threads=1
-//! kernel_throughput profile_prediction`).
+//! on the batch or on the number of threads. The kernel is chosen at run time: plain Rust on
+//! arrays of [`LANES`] lanes compiled for AVX-512 (a tile of 24 rows, one register per row) and
+//! for the baseline (3 rows), and AVX2+FMA intrinsics (6 rows, two registers per row), for
+//! which the compiler had left the plain Rust in scalar code with spills (1.2 GFMA/s per core
+//! at n = 500 on an AMD EPYC core without AVX-512; 11.3 with the intrinsics). A 24-row tile on
+//! AVX2's 16 registers would spill. Every variant performs the same operations in the same
+//! order, so all agree bit for bit with an unvectorised reference (tested). On an AVX-512
+//! development machine (quiet) the 24-row tile ran at 24.8 GFMA/s per core at n = 500, 74 % of
+//! the core's measured peak of 33.6, where faer's general triangular solve on blocks of
+//! 128–1024 points reached 14–15.5 (≈ 45 %) (`cargo test --release -p iuq-gp -- --ignored
+//! --nocapture --test-threads=1 kernel_throughput profile_prediction`).
 //!
 //! Accuracy: forward substitution is backward stable, like faer's blocked triangular solve it
 //! replaces (tested to agree to round-off). An explicit inverse L⁻¹ would allow a plain matrix
@@ -102,7 +101,7 @@ impl PackedFactor {
     /// columns (so that the chunk of the factor stays in the L1 cache while the groups pass
     /// through it; a tile's partial sums wait in `v` between chunks, stored exactly), then
     /// the in-tile substitution of every group. Compiled for AVX-512, AVX2+FMA and the
-    /// baseline, chosen at run time; per value, the operations of
+    /// baseline (see [`blocked_squared_norms`]), chosen at run time; per value, the operations of
     /// [`Self::squared_norms_reference`] in the same order.
     pub(crate) fn squared_norms(&self, v: &mut [f64], norms: &mut [[f64; LANES]]) {
         let size = self.padded_rows() * LANES;
@@ -150,22 +149,22 @@ const K_CHUNK: usize = 128;
 
 /// [`PackedFactor::squared_norms`] (sizes checked by the caller), dispatched at run time to
 /// the variant compiled for the CPU. The variants differ only in how many rows of a tile
-/// the off-diagonal update holds in registers at once ([`blocked_squared_norms_with`]'s `SUB`):
-/// the whole tile (24 rows of 8 lanes: 24 of AVX-512's 32 vector registers), 6 rows with
-/// AVX2+FMA (12 of its 16 registers of 4 doubles; the whole tile would be 48 registers and
-/// spill to memory, which made AVX2 machines 3× slower), and 3 rows on the x86-64 baseline
-/// (SSE2, 16 registers of 2 doubles; 6 on other architectures, e.g. NEON's 32). Every variant
-/// performs the same operations on every value in the same order, so all agree bit for bit.
+/// the off-diagonal update holds in registers at once ([`TileKernel::SUB`]): the whole tile
+/// (24 rows of 8 lanes: 24 of AVX-512's 32 vector registers), 6 rows with AVX2+FMA (12 of its
+/// 16 registers of 4 doubles, written with intrinsics: [`avx2`]), and 3 rows on the x86-64
+/// baseline (SSE2, 16 registers of 2 doubles; 6 on other architectures, e.g. NEON's 32). Every
+/// variant performs the same operations on every value in the same order, so all agree bit for
+/// bit.
 fn blocked_squared_norms(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
     #[cfg(target_arch = "x86_64")]
     {
         #[target_feature(enable = "avx512f,avx2,fma")]
         unsafe fn v4(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
-            blocked_squared_norms_with::<24>(packed, v, norms)
+            blocked_squared_norms_with::<Portable<24>>(packed, v, norms)
         }
         #[target_feature(enable = "avx2,fma")]
         unsafe fn v3(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64; LANES]]) {
-            blocked_squared_norms_with::<6>(packed, v, norms)
+            blocked_squared_norms_with::<avx2::Avx2>(packed, v, norms)
         }
         if std::arch::is_x86_feature_detected!("avx512f")
             && std::arch::is_x86_feature_detected!("avx2")
@@ -179,21 +178,50 @@ fn blocked_squared_norms(packed: &PackedFactor, v: &mut [f64], norms: &mut [[f64
             // SAFETY: the CPU supports every feature `v3` is compiled for.
             return unsafe { v3(packed, v, norms) };
         }
-        blocked_squared_norms_with::<3>(packed, v, norms)
+        blocked_squared_norms_with::<Portable<3>>(packed, v, norms)
     }
     #[cfg(not(target_arch = "x86_64"))]
-    blocked_squared_norms_with::<6>(packed, v, norms)
+    blocked_squared_norms_with::<Portable<6>>(packed, v, norms)
 }
 
-/// The packed substitution with the off-diagonal update done `SUB` rows of a tile at a time
-/// (`SUB` divides [`ROWS`]; see [`blocked_squared_norms`]).
+/// The two register-tile operations of the substitution, per instruction set: the off-diagonal
+/// update of [`Self::SUB`] rows of a tile ([`update`]'s contract) and the in-tile substitution
+/// ([`solve`]'s). Every implementation performs the same operations on every value in the same
+/// order.
+trait TileKernel {
+    /// Rows of a tile the update holds in registers at once (divides [`ROWS`]).
+    const SUB: usize;
+    /// The update of rows `first..first + SUB` of `tile` by the columns of `a` and rows of `v`.
+    fn update(a: &[f64], v: &[f64], tile: &mut [f64], first: usize);
+    /// The substitution of one tile; returns Σ_i v_i² over its rows.
+    fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES];
+}
+
+/// Plain Rust on arrays of [`LANES`] lanes, vectorised by the compiler where the instruction
+/// set of the calling function allows it (AVX-512: one register per row of a tile).
+struct Portable<const SUB: usize>;
+
+impl<const SUB: usize> TileKernel for Portable<SUB> {
+    const SUB: usize = SUB;
+    #[inline(always)]
+    fn update(a: &[f64], v: &[f64], tile: &mut [f64], first: usize) {
+        update::<SUB>(a, v, tile, first)
+    }
+    #[inline(always)]
+    fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES] {
+        solve(diagonal, reciprocal, tile)
+    }
+}
+
+/// The packed substitution with the tile operations of `K`, the off-diagonal update done
+/// `K::SUB` rows of a tile at a time (see [`blocked_squared_norms`]).
 #[inline(always)]
-fn blocked_squared_norms_with<const SUB: usize>(
+fn blocked_squared_norms_with<K: TileKernel>(
     packed: &PackedFactor,
     v: &mut [f64],
     norms: &mut [[f64; LANES]],
 ) {
-    const { assert!(SUB > 0 && ROWS % SUB == 0) };
+    const { assert!(K::SUB > 0 && ROWS % K::SUB == 0) };
     let size = packed.padded_rows() * LANES;
     for total in norms.iter_mut() {
         *total = [0.0; LANES];
@@ -208,15 +236,15 @@ fn blocked_squared_norms_with<const SUB: usize>(
             for group in v.chunks_exact_mut(size) {
                 let (done, rest) = group.split_at_mut(r0 * LANES);
                 let done = &done[k0 * LANES..k1 * LANES];
-                for first in (0..ROWS).step_by(SUB) {
-                    update::<SUB>(chunk, done, &mut rest[..ROWS * LANES], first);
+                for first in (0..ROWS).step_by(K::SUB) {
+                    K::update(chunk, done, &mut rest[..ROWS * LANES], first);
                 }
             }
             k0 = k1;
         }
         for (group, total) in v.chunks_exact_mut(size).zip(norms.iter_mut()) {
             let tile = &mut group[r0 * LANES..(r0 + ROWS) * LANES];
-            let s = solve(diagonal, reciprocal, tile);
+            let s = K::solve(diagonal, reciprocal, tile);
             for (t, s) in total.iter_mut().zip(s) {
                 *t += s;
             }
@@ -318,6 +346,113 @@ fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES]
     s
 }
 
+/// The tile operations with AVX2 and FMA intrinsics: a row of a tile is two registers of four
+/// lanes. Written out because the compiler's vectoriser left [`Portable`]'s arrays in scalar
+/// code with spills for this instruction set (1.2 GFMA/s at n = 500 on an AMD EPYC core).
+#[cfg(target_arch = "x86_64")]
+mod avx2 {
+    use super::{LANES, ROWS, TileKernel};
+    use std::arch::x86_64::{
+        __m256d, _mm256_fmadd_pd, _mm256_loadu_pd, _mm256_mul_pd, _mm256_set1_pd,
+        _mm256_setzero_pd, _mm256_storeu_pd,
+    };
+
+    /// Rows of a tile the update holds in registers: 12 of AVX2's 16 vector registers.
+    const SUB: usize = 6;
+
+    /// [`TileKernel`] for AVX2 + FMA; only called from functions compiled for both (the
+    /// dispatch's `v3`), into which it is inlined.
+    pub(super) struct Avx2;
+
+    /// Lanes `4h..4h + 4` of row `i` of a row-major tile of [`LANES`] lanes.
+    ///
+    /// # Safety
+    /// `(i + 1)·LANES ≤ tile.len()`, `h < 2`, and the CPU supports AVX.
+    #[inline(always)]
+    unsafe fn load(tile: &[f64], i: usize, h: usize) -> __m256d {
+        // SAFETY: in bounds by the caller's contract.
+        unsafe { _mm256_loadu_pd(tile.as_ptr().add(i * LANES + 4 * h)) }
+    }
+
+    /// Stores `x` as lanes `4h..4h + 4` of row `i` (the contract of [`load`]).
+    #[inline(always)]
+    unsafe fn store(tile: &mut [f64], i: usize, h: usize, x: __m256d) {
+        // SAFETY: in bounds by the caller's contract.
+        unsafe { _mm256_storeu_pd(tile.as_mut_ptr().add(i * LANES + 4 * h), x) }
+    }
+
+    impl TileKernel for Avx2 {
+        const SUB: usize = SUB;
+
+        #[inline(always)]
+        fn update(a: &[f64], v: &[f64], tile: &mut [f64], first: usize) {
+            let columns = (v.len() / LANES).min(a.len() / ROWS);
+            let tile = &mut tile[first * LANES..(first + SUB) * LANES];
+            // SAFETY: `tile` holds SUB rows (sliced above), `v` and `a` at least `columns` rows
+            // of LANES and ROWS values, and first + SUB ≤ ROWS (the callers step `first` by SUB
+            // through 0..ROWS); AVX2 and FMA by the caller's compilation (type docs).
+            unsafe {
+                let mut lo = [_mm256_setzero_pd(); SUB];
+                let mut hi = [_mm256_setzero_pd(); SUB];
+                for i in 0..SUB {
+                    lo[i] = load(tile, i, 0);
+                    hi[i] = load(tile, i, 1);
+                }
+                for k in 0..columns {
+                    let vk = &v[k * LANES..];
+                    let (v_lo, v_hi) = (load(vk, 0, 0), load(vk, 0, 1));
+                    let ak = a.as_ptr().add(k * ROWS + first);
+                    for i in 0..SUB {
+                        let aik = _mm256_set1_pd(*ak.add(i));
+                        lo[i] = _mm256_fmadd_pd(aik, v_lo, lo[i]);
+                        hi[i] = _mm256_fmadd_pd(aik, v_hi, hi[i]);
+                    }
+                }
+                for i in 0..SUB {
+                    store(tile, i, 0, lo[i]);
+                    store(tile, i, 1, hi[i]);
+                }
+            }
+        }
+
+        #[inline(always)]
+        fn solve(diagonal: &[f64], reciprocal: &[f64], tile: &mut [f64]) -> [f64; LANES] {
+            let diagonal = &diagonal[..ROWS * ROWS];
+            let reciprocal = &reciprocal[..ROWS];
+            let tile = &mut tile[..ROWS * LANES];
+            let mut total = [0.0; LANES];
+            // SAFETY: the slices above hold ROWS² values, ROWS values and ROWS rows; AVX2 and
+            // FMA by the caller's compilation (type docs).
+            unsafe {
+                let mut acc = [[_mm256_setzero_pd(); 2]; ROWS];
+                for (i, row) in acc.iter_mut().enumerate() {
+                    *row = [load(tile, i, 0), load(tile, i, 1)];
+                }
+                for i in 0..ROWS {
+                    let mut x = acc[i];
+                    for m in 0..i {
+                        let l = _mm256_set1_pd(diagonal[i * ROWS + m]);
+                        x[0] = _mm256_fmadd_pd(l, acc[m][0], x[0]);
+                        x[1] = _mm256_fmadd_pd(l, acc[m][1], x[1]);
+                    }
+                    let r = _mm256_set1_pd(reciprocal[i]);
+                    acc[i] = [_mm256_mul_pd(x[0], r), _mm256_mul_pd(x[1], r)];
+                }
+                let mut s = [_mm256_setzero_pd(); 2];
+                for (i, row) in acc.iter().enumerate() {
+                    for h in 0..2 {
+                        s[h] = _mm256_fmadd_pd(row[h], row[h], s[h]);
+                        store(tile, i, h, row[h]);
+                    }
+                }
+                store(&mut total[..], 0, 0, s[0]);
+                store(&mut total[..], 0, 1, s[1]);
+            }
+            total
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -403,26 +538,27 @@ mod tests {
                     }
                 }
             }
-            // Every sub-tile height (AVX-512's 24 rows, AVX2's 6, the baseline's 3, and 1)
-            // gives the reference's results bit for bit, whichever variant this CPU runs.
-            for (sub, run) in [
-                (
-                    24,
-                    blocked_squared_norms_with::<24>
-                        as fn(&PackedFactor, &mut [f64], &mut [[f64; LANES]]),
-                ),
-                (6, blocked_squared_norms_with::<6>),
-                (3, blocked_squared_norms_with::<3>),
-                (1, blocked_squared_norms_with::<1>),
-            ] {
+            // Every tile kernel (AVX-512's 24 rows, the baseline's 3, 1, and the AVX2
+            // intrinsics where this CPU has them) gives the reference's results bit for bit.
+            type Run = fn(&PackedFactor, &mut [f64], &mut [[f64; LANES]]);
+            let mut runs: Vec<(&str, Run)> = vec![
+                ("portable 24", blocked_squared_norms_with::<Portable<24>>),
+                ("portable 6", blocked_squared_norms_with::<Portable<6>>),
+                ("portable 3", blocked_squared_norms_with::<Portable<3>>),
+                ("portable 1", blocked_squared_norms_with::<Portable<1>>),
+            ];
+            #[cfg(target_arch = "x86_64")]
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                runs.push(("avx2", blocked_squared_norms_with::<avx2::Avx2>));
+            }
+            for (kernel, run) in runs {
                 let mut c = rhs.clone();
                 let mut norms_sub = [[0.0; LANES]; GROUPS];
                 run(&packed, &mut c, &mut norms_sub);
-                assert_eq!(c, b, "n = {n}: sub-tiles of {sub} rows differ");
-                assert_eq!(
-                    norms_sub, norms_portable,
-                    "n = {n}: sub-tiles of {sub} rows"
-                );
+                assert_eq!(c, b, "n = {n}: the {kernel} kernel differs");
+                assert_eq!(norms_sub, norms_portable, "n = {n}: the {kernel} kernel");
             }
             // A column's result does not depend on its neighbours or on the other groups.
             let mut single = vec![0.0; size];
