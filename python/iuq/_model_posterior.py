@@ -72,7 +72,14 @@ class ModelPosteriorSamples:
 
     @property
     def mean(self) -> np.ndarray:
-        """The weighted mean of each column of :attr:`samples`, shape (p,)."""
+        """The weighted mean of each column of :attr:`samples`, shape (p,).
+
+        The summary's ``mean`` and ``std`` are these, except where ``summary["paired"]`` is
+        true: one certified step from a uniform subset of the surrogate's posterior samples,
+        whose moments the summary then pairs with the members' (the surrogate samples' moments
+        plus the shift the weights give the members', a control variate with a smaller Monte
+        Carlo error; ``docs/methods/model-posterior.md``).
+        """
         return self.weights @ self.samples
 
     @property

@@ -348,18 +348,20 @@ def run_cli(problem, binary, workdir, seed=1, model_posterior=False):
         # Systematic resampling by weight: as many equally weighted samples as members.
         u = (np.random.default_rng(seed).random() + np.arange(len(w))) / len(w)
         resampled = theta[np.minimum(np.searchsorted(np.cumsum(w), u), len(w) - 1)]
+        # The estimate's moments as the summary reports them (a paired estimate's where `paired`).
+        names = problem["names"]
         row["model_posterior"] = dict(calls=m.get("model_runs"), certified=m.get("certified"), theta=theta, weights=w,
-                                      resampled=resampled, max_mcse=max(m["mcse_mean"][n] / m["std"][n]
-                                                                        for n in problem["names"]))
+                                      resampled=resampled, paired=m.get("paired", False),
+                                      mean=np.array([m["mean"][n] for n in names]),
+                                      std=np.array([m["std"][n] for n in names]),
+                                      max_mcse=max(m["mcse_mean"][n] / m["std"][n] for n in names))
     return row
 
 
-def weighted_score(theta, w, resampled, ref):
-    """The weighted members' largest mean error (reference stds) and std ratios, and C2ST on
-    their resample."""
+def weighted_score(resampled, ref, m, s):
+    """The estimate's largest mean error (reference stds) and std ratios from its reported
+    moments `m`, `s`, and C2ST on the resample of its weighted members."""
     mean, std = ref.mean(axis=0), ref.std(axis=0)
-    m = w @ theta
-    s = np.sqrt(w @ (theta - m) ** 2)
     ratio = s / std
     return dict(c2st=c2st(resampled, ref), mean_error=float((np.abs(m - mean) / std).max()),
                 std_ratio=(float(ratio.min()), float(ratio.max())))
@@ -472,8 +474,8 @@ def main():
             report(row, args.json, rows)
             if model is not None:
                 row = dict(problem=name, method="cli+model", calls=model["calls"], certified=model["certified"],
-                           max_mcse=model["max_mcse"],
-                           **weighted_score(model["theta"], model["weights"], model["resampled"], ref))
+                           max_mcse=model["max_mcse"], paired=model["paired"],
+                           **weighted_score(model["resampled"], ref, model["mean"], model["std"]))
                 rows.append(row)
                 report(row, args.json, rows)
 
@@ -485,7 +487,8 @@ def report(row, json_path, rows):
             json.dump(rows, f, indent=1, default=float)
     rounds = row.get("rounds") or []
     name, method = row["problem"], row["method"]
-    extra = f"  certified {row['certified']}, max MCSE {row['max_mcse']:.3f} sd" if "certified" in row else ""
+    extra = (f"  certified {row['certified']}, paired {row['paired']}, max MCSE {row['max_mcse']:.3f} sd"
+             if "certified" in row else "")
     print(f"{name:14s} {method:9s} calls {row.get('calls', '-')!s:>5}  wall {row.get('wall', float('nan')):7.1f} s  "
           f"rounds {len(rounds):2d} (median {np.median(rounds) if rounds else float('nan'):5.2f} s, max "
           f"{max(rounds) if rounds else float('nan'):5.2f} s)  c2st {row.get('c2st', float('nan')):.3f}  "

@@ -18,7 +18,8 @@
 //!   and delayed-acceptance moves, certified by k̂ and [`spread_ratio`]; [`pseudo_marginal`] for a noisy model, with
 //!   [`moment_matching`]'s correction and its test, and [`defensive_normal`]'s (or [`defensive_tempering`]'s) batch where
 //!   that correction cannot be made; [`member_selection`]: the members a batch
-//!   runs, nested in the batch's size.
+//!   runs, nested in the batch's size; [`paired_estimate`]: its moments paired with the
+//!   surrogate population's, where it is one step from a uniform subset of it.
 //!
 //! ```
 //! use iuq_basis::{Basis, BasisSettings, FnLikelihood, Silent};
@@ -63,6 +64,7 @@ pub mod member_selection;
 pub mod model_posterior;
 pub mod moment_matching;
 mod moves;
+pub mod paired_estimate;
 pub mod pareto_smoothing;
 pub mod prediction_error;
 pub mod proposal;

@@ -196,6 +196,11 @@ pub struct ModelPosteriorReport {
     /// mixture of the two posteriors (else, after a correction, the corrected batch's stages).
     #[serde(default)]
     pub both_batches: bool,
+    /// Whether the moments are paired with the surrogate's posterior (its population's mean
+    /// plus the weights' shift of the members' mean, a control variate), so that their MCSE
+    /// counts the surrogate posterior's own sampling error and the shift's.
+    #[serde(default)]
+    pub paired: bool,
     /// Corrections tried and refused before the one made, each with its reason.
     #[serde(default)]
     pub corrections_refused: Vec<String>,

@@ -473,7 +473,15 @@ fn model_posterior_section(
         "model-posterior",
         "The model's own posterior",
         format!(
-            "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.{noisy}",
+            "The {model}'s posterior obtained from the {surrogate}'s: {samples} members of the {surrogate} posterior run through the {model} ({runs} model runs in all), weighted by the ratio of the {model}'s likelihood to the {surrogate}'s in importance stages, each certified when the Pareto-smoothed k̂ of its weights (Vehtari et al. 2024) is below min(1 − 1/log₁₀ S, 0.7) (and, for a reproducible {model}'s step to the {model}'s posterior, when no parameter's weighted std exceeds the members' own by more than 1.2: the std ratio, since k̂ underestimates the tail of a proposal narrower than the target); where one stage does not hold, delayed-acceptance moves screened by the {surrogate} and confirmed by the {model} bridge to the next.{probe}{corrected} {stop}. Relative differences are (model − surrogate)/|surrogate|; MCSE is the Monte Carlo standard error of the model posterior's mean and std.{paired}{noisy}",
+            paired = if m.paired {
+                format!(
+                    " The means and stds are paired with the {surrogate} posterior: its samples' moments plus the shift the weights give the members' (a control variate whose error vanishes as the weights become equal), so their MCSE counts the {surrogate} posterior's own sampling error and the shift's.",
+                    surrogate = m.surrogate_source
+                )
+            } else {
+                String::new()
+            },
             noisy = if m.pseudo_marginal {
                 noisy_caveat(m)
             } else {

@@ -107,6 +107,7 @@ use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
 use crate::likelihood::LogLikelihood;
 use crate::moment_matching::ProposalMismatch;
+use crate::paired_estimate::paired_moments;
 use crate::pareto_smoothing::{
     ParetoSmoothing, normalised_weights, pareto_k_threshold, pareto_smooth,
 };
@@ -169,7 +170,7 @@ pub fn model_posterior(
     } else {
         state.temper(&inputs, observer)?
     };
-    state.into_posterior(space, settings, weights)
+    state.into_posterior(space, settings, weights, population.samples)
 }
 
 /// Both batches as one sample of their even mixture, with their raw log-weights.
@@ -400,16 +401,43 @@ impl MethodState {
         space: &ParameterSpace,
         settings: &ModelPosteriorSettings,
         (raw, smoothed, pareto_k, stop): TemperedWeights,
+        population: &[Vec<f64>],
     ) -> Result<ModelPosterior> {
+        // One certified step from the first batch: its members are the uniform subset
+        // `selected_members` of the population, which the paired estimate needs.
+        let first_batch_step = stop == ModelPosteriorStop::Certified
+            && !settings.pseudo_marginal
+            && self.corrections.is_empty()
+            && !self.both_batches
+            && self.stages.len() == 1;
         let Members {
             theta,
             surrogate: ls,
             model: lm,
             prior: lp,
         } = self.members;
-        let (weights, mean, std, quantiles) =
+        let (weights, mut mean, mut std, quantiles) =
             weighted_moments(&theta, &smoothed, &settings.probabilities)?;
-        let errors = ancestral_errors(&theta, &weights, &self.ancestor, &mean, &std);
+        let mut errors = ancestral_errors(&theta, &weights, &self.ancestor, &mean, &std);
+        let paired = first_batch_step
+            .then(|| {
+                paired_moments(
+                    population,
+                    &selected_members(population.len(), settings),
+                    &weights,
+                )
+            })
+            .flatten()
+            .filter(|p| {
+                largest_relative(&p.mcse_mean, &p.std) < largest_relative(&errors.mean, &std)
+            });
+        let paired = paired.map(|p| {
+            mean = p.mean;
+            std = p.std;
+            errors.mean = p.mcse_mean;
+            errors.std = p.mcse_std;
+            p.errors
+        });
         let Some((map, map_log_likelihood, map_log_prior)) = self.best.point else {
             return Err(BasisError::NoFiniteLikelihood {
                 stage: self.stages.len(),
@@ -444,6 +472,7 @@ impl MethodState {
             proposal_mismatch: self.mismatch,
             correction_not_made: self.correction_not_made,
             both_batches: self.both_batches,
+            paired,
             model_evaluations: self.evaluations,
             failures: self.failures,
         })
@@ -492,6 +521,15 @@ fn check_inputs(
         )));
     }
     Ok(())
+}
+
+/// max_k error_k/std_k (infinite where a std is 0).
+fn largest_relative(error: &[f64], std: &[f64]) -> f64 {
+    error
+        .iter()
+        .zip(std)
+        .map(|(e, s)| if *s > 0.0 { e / s } else { f64::INFINITY })
+        .fold(0.0, f64::max)
 }
 
 /// The normalised weights of `log_weights`, and the weighted mean, std and quantiles at

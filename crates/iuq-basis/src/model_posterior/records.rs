@@ -8,6 +8,7 @@ use iuq_core::weighted_statistics::effective_sample_size;
 use super::members::recorded_spread_ratio;
 use crate::error::{BasisError, Result};
 use crate::moment_matching::ProposalMismatch;
+use crate::paired_estimate::PairedErrors;
 use crate::pareto_smoothing::{ParetoSmoothing, normalised_weights};
 use crate::sampler::{Control, Observer};
 
@@ -256,6 +257,13 @@ pub struct ModelPosterior {
     /// model's when their k̂ holds), rather than the corrected batch's stages alone.
     #[serde(default)]
     pub both_batches: bool,
+    /// Where the estimate is one certified step from the first batch (a uniform subset of the
+    /// surrogate population) and pairing it with the population is the more precise estimate:
+    /// the two parts of each mean's error ([`crate::paired_estimate`]; `mean`, `std` and their
+    /// MCSEs are then the paired estimate's, the quantiles the members' weighted ones). `None`:
+    /// the members' weighted moments.
+    #[serde(default)]
+    pub paired: Option<PairedErrors>,
     /// Model evaluations requested in all (points already stored in a campaign count too).
     pub model_evaluations: usize,
     /// Of those, failed runs.

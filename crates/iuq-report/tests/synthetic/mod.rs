@@ -351,6 +351,7 @@ pub fn synthetic_report(
             correction_tempering: None,
             correction_defensive_normal: false,
             both_batches: true,
+            paired: false,
             corrections_refused: Vec::new(),
             replicates: 4,
             parameters: ["kLink", "kBend", "sigma_m"]

@@ -92,13 +92,18 @@ const SIZING_MARGIN: f64 = 1.2;
 /// `target_mcse` is made again from n' = ⌈1.2·n·(MCSE/target)²⌉ members (the error falls as
 /// 1/√n), at most `max_samples` and the surrogate population: the first n members are among the
 /// n' (same seed), so their stored runs are reused and only the new members and the stages
-/// after the first batch cost runs.
+/// after the first batch cost runs. A paired estimate's error has a part more members do not
+/// reduce, the surrogate population's own (P): only the rest falls as 1/√n, so
+/// n' = ⌈1.2·n·(MCSE² − P²)/(target² − P²)⌉, and none where P alone reaches the target.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MemberSizing {
     /// Members of the surrogate posterior in the first batch.
     pub samples: usize,
     /// The estimate's largest Monte Carlo error of a mean, in posterior stds.
     pub mcse: f64,
+    /// Of that error, the part of the surrogate population's own error (a paired estimate,
+    /// [`iuq_basis::paired_estimate`]; 0 otherwise), in posterior stds.
+    pub population_mcse: f64,
     /// Whether the estimate was certified.
     pub certified: bool,
     /// Model runs it asked for (stored runs included).
@@ -112,7 +117,13 @@ impl MemberSizing {
         if !self.certified || !self.mcse.is_finite() || self.mcse <= target {
             return None;
         }
-        let wanted = (SIZING_MARGIN * self.samples as f64 * (self.mcse / target).powi(2)).ceil();
+        let floor = self.population_mcse.powi(2);
+        if target * target <= floor {
+            return None;
+        }
+        let wanted = (SIZING_MARGIN * self.samples as f64 * (self.mcse.powi(2) - floor)
+            / (target * target - floor))
+            .ceil();
         let next = if wanted >= cap as f64 {
             cap
         } else {
@@ -277,17 +288,23 @@ impl ModelPosteriorOutcome {
     /// How far the model's posterior moved from the surrogate's, per parameter, in the model
     /// posterior's stds: (μ_model − μ_surrogate)/σ_model, with its Monte Carlo error
     /// MCSE(μ_model)/σ_model (grouped by ancestry: [`iuq_basis::ancestral_variance`]; the
-    /// surrogate's 10,000-sample mean adds little). A shift beyond 2 MCSEs is the surrogate's
-    /// own error that the model's runs corrected; within them, the model posterior confirms the
-    /// surrogate's.
+    /// surrogate's 10,000-sample mean adds little), or for a paired estimate the error of the
+    /// members' difference alone (the population's own error is common to both means). A shift
+    /// beyond 2 MCSEs is the surrogate's own error that the model's runs corrected; within
+    /// them, the model posterior confirms the surrogate's.
     pub fn shift_from_surrogate(&self) -> Vec<(f64, f64)> {
         let p = &self.posterior;
         let (mean, _) = &self.surrogate_moments;
         (0..p.mean.len().min(mean.len()))
             .map(|k| {
                 let sd = p.std[k];
+                let error = p
+                    .paired
+                    .as_ref()
+                    .and_then(|e| e.difference.get(k).copied())
+                    .unwrap_or(p.mcse_mean[k]);
                 if sd > 0.0 {
-                    ((p.mean[k] - mean[k]) / sd, p.mcse_mean[k] / sd)
+                    ((p.mean[k] - mean[k]) / sd, error / sd)
                 } else {
                     (0.0, 0.0)
                 }
@@ -298,10 +315,24 @@ impl ModelPosteriorOutcome {
     /// The largest Monte Carlo error of a mean in posterior stds, max_k MCSE(μ_k)/σ_k (0 where
     /// every σ_k is 0).
     pub fn largest_mcse(&self) -> f64 {
-        self.shift_from_surrogate()
-            .iter()
-            .map(|s| s.1)
-            .fold(0.0, f64::max)
+        self.largest_mcse_split().0
+    }
+
+    /// [`Self::largest_mcse`] with the part of it that is the surrogate population's own error
+    /// (a paired estimate's; 0 otherwise), both in posterior stds.
+    pub fn largest_mcse_split(&self) -> (f64, f64) {
+        let p = &self.posterior;
+        (0..p.mean.len())
+            .filter(|&k| p.std[k] > 0.0)
+            .map(|k| {
+                let population = p
+                    .paired
+                    .as_ref()
+                    .and_then(|e| e.population.get(k).copied())
+                    .unwrap_or(0.0);
+                (p.mcse_mean[k] / p.std[k], population / p.std[k])
+            })
+            .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a })
     }
 
     /// The effective sample size the members' correlation leaves: min over parameters of
@@ -324,6 +355,19 @@ impl ModelPosteriorOutcome {
         let p = &self.posterior;
         let by_name = |v: &[f64]| crate::posterior::by_name(&p.names, v);
         let finite = |v: f64| if v.is_finite() { json!(v) } else { Value::Null };
+        let sizing: Vec<Value> = self
+            .member_sizing
+            .iter()
+            .map(|m| {
+                json!({
+                    "samples": m.samples,
+                    "mcse": finite(m.mcse),
+                    "population_mcse": m.population_mcse,
+                    "certified": m.certified,
+                    "model_runs": m.model_runs,
+                })
+            })
+            .collect();
         json!({
             "method": "reweight",
             "certified": p.certified(),
@@ -341,6 +385,8 @@ impl ModelPosteriorOutcome {
             "mcse_mean": by_name(&p.mcse_mean),
             "mcse_std": by_name(&p.mcse_std),
             "ancestors": p.ancestors,
+            "paired": p.paired.is_some(),
+            "mcse_mean_population": p.paired.as_ref().map(|e| by_name(&e.population)),
             "log_evidence": finite(self.log_evidence),
             "log_evidence_ratio": finite(p.log_evidence_ratio),
             "model_evaluations": p.model_evaluations,
@@ -358,12 +404,7 @@ impl ModelPosteriorOutcome {
             "probe": self.probe.as_ref().map(ReproducibilityProbe::to_json),
             "stages": p.stages.iter().map(stage_json).collect::<Vec<_>>(),
             "seconds": self.seconds,
-            "member_sizing": self.member_sizing.iter().map(|m| json!({
-                "samples": m.samples,
-                "mcse": finite(m.mcse),
-                "certified": m.certified,
-                "model_runs": m.model_runs,
-            })).collect::<Vec<_>>(),
+            "member_sizing": sizing,
         })
     }
 }
@@ -417,9 +458,11 @@ pub fn model_posterior_from_surrogate(
             (&options, first),
             message,
         )?;
+        let (mcse, population_mcse) = outcome.largest_mcse_split();
         let this = MemberSizing {
             samples: options.method.samples.min(population),
-            mcse: outcome.largest_mcse(),
+            mcse,
+            population_mcse,
             certified: outcome.posterior.certified(),
             model_runs: outcome.model_runs,
         };
@@ -938,6 +981,7 @@ mod tests {
         MemberSizing {
             samples,
             mcse,
+            population_mcse: 0.0,
             certified,
             model_runs: 0,
         }
@@ -957,5 +1001,22 @@ mod tests {
         assert_eq!(sizing(300, 0.2, false).next_samples(0.05, 1200), None);
         assert_eq!(sizing(300, 0.2, true).next_samples(0.05, 300), None);
         assert_eq!(sizing(300, f64::NAN, true).next_samples(0.05, 1200), None);
+    }
+
+    #[test]
+    fn a_paired_estimates_population_error_is_a_floor_more_members_do_not_lower() {
+        // MCSE 0.06 of which 0.03 the population's: the members' part 0.052 must fall to
+        // √(0.05² − 0.03²) = 0.04: 1.2 · 300 · (0.0036 − 0.0009)/(0.0025 − 0.0009) = 607.5.
+        let paired = MemberSizing {
+            population_mcse: 0.03,
+            ..sizing(300, 0.06, true)
+        };
+        assert_eq!(paired.next_samples(0.05, 1200), Some(608));
+        // The population alone at the target: no number of members reaches it.
+        let floor = MemberSizing {
+            population_mcse: 0.05,
+            ..sizing(300, 0.06, true)
+        };
+        assert_eq!(floor.next_samples(0.05, 1200), None);
     }
 }

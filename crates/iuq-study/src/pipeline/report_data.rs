@@ -316,6 +316,7 @@ fn model_posterior_report(
         correction_tempering: p.corrections.iter().find_map(|c| c.tempering),
         correction_defensive_normal: p.corrections.iter().any(|c| c.defensive_normal),
         both_batches: p.both_batches,
+        paired: p.paired.is_some(),
         corrections_refused: p
             .corrections
             .iter()
