@@ -33,9 +33,9 @@ hard bounds and its central half as plausible bounds, GPry on the box (±4 prior
 normal or log-normal prior).
 
 With `--model-posterior` the CLI also runs `iuq pipeline --model-posterior` and adds a row
-`cli+model`: the model's own posterior certified from the surrogate's, its weighted members'
-largest mean error and std ratios against the reference (beside the surrogate's on the `cli`
-row), its model calls counted on top of the surrogate's, and C2ST on a resample of its members by
+`cli+model`: the model's own posterior certified from the surrogate's, the largest mean error
+and std ratios of its reported moments against the reference (beside the surrogate's on the
+`cli` row; `paired` where they are paired with the surrogate's samples), its model calls counted on top of the surrogate's, and C2ST on a resample of its members by
 weight (as many as there are members, so its noise is larger: about ±0.02 at 400 members).
 `--seed` seeds every method (default 1).
 """
