@@ -309,11 +309,15 @@ fn bad_pipeline_settings_are_input_errors() {
 /// directory (the report in `report/`).
 /// The replay leaves the store byte for byte as shipped (the README's main command leaves the
 /// checkout clean: a store whose every needed record is there is only read).
-fn replay_shipped_study(name: &str) -> (serde_json::Value, std::path::PathBuf) {
+fn replay_shipped_study(name: &str, extra: &[&str]) -> (serde_json::Value, std::path::PathBuf) {
     let store = format!("examples/{name}.campaign/campaign.sqlite");
-    let (summary, dir) = replay_study(&format!("shipped-{name}"), name, &store, &|text| {
-        text.to_string()
-    });
+    let (summary, dir) = replay_study_with(
+        &format!("shipped-{name}"),
+        name,
+        &store,
+        &|text| text.to_string(),
+        extra,
+    );
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let low_fidelity = format!("examples/{name}.campaign/low-fidelity/campaign.sqlite");
     let stores =
@@ -442,9 +446,8 @@ fn replay_study_with(
     (json_of(&output), dir)
 }
 
-#[test]
-fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
-    let (summary, dir) = replay_shipped_study("rbc-healthy-hemocell");
+/// The shipped healthy study's surrogate calibration as replayed (`summary`, in `dir`).
+fn assert_healthy_study_completes(summary: &serde_json::Value, dir: &Path) {
     let out = dir.join("report");
     // The shipped rounds replayed from the store: converged at round 25 with 669 runs.
     assert_eq!(summary["runs"], 669, "{}", summary["adaptive"]);
@@ -531,9 +534,8 @@ fn the_shipped_healthy_study_completes_from_its_shipped_runs() {
     );
 }
 
-#[test]
-fn the_shipped_tbhp_study_completes_from_its_shipped_runs() {
-    let (summary, _) = replay_shipped_study("rbc-tbhp-hemocell");
+/// The shipped TBHP study's surrogate calibration as replayed (`summary`).
+fn assert_tbhp_study_completes(summary: &serde_json::Value) {
     // The engine's rule held at round 8 with 140 runs; the cell model at that posterior failed
     // the check's test at 6.19 Pa (4 samples in the posterior's high-Λ part, where the GP had no
     // runs, 0.03-0.05 below a surrogate sure to 0.002-0.014: |z| 4.81 against a bound of 4.11);
@@ -798,15 +800,11 @@ fn as_printed(value: f64, printed: &str) -> String {
 
 /// The cell model's own posterior of the shipped study `name` replays from its store: certified,
 /// no model run, and the numbers of the README's Table 2 (both columns) are this replay's.
-fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value {
-    let store = format!("examples/{name}.campaign/campaign.sqlite");
-    let (summary, dir) = replay_study_with(
-        &format!("shipped-model-posterior-{name}"),
-        name,
-        &store,
-        &|text| text.to_string(),
-        &["--model-posterior"],
-    );
+fn assert_shipped_model_posterior(
+    name: &str,
+    table: &str,
+) -> (serde_json::Value, std::path::PathBuf) {
+    let (summary, dir) = replay_shipped_study(name, &["--model-posterior"]);
     let m = &summary["model_posterior"];
     assert_eq!(m["certified"], true, "{m}");
     assert!(m["samples"].as_u64().unwrap() >= 200, "{m}");
@@ -863,7 +861,7 @@ fn assert_shipped_model_posterior(name: &str, table: &str) -> serde_json::Value 
             "{figure}"
         );
     }
-    summary
+    (summary, dir)
 }
 
 /// The `--json` summary's posterior entry of parameter `name` (its mean, std, quantiles).
@@ -883,7 +881,7 @@ fn posterior_parameter(summary: &serde_json::Value, name: &str) -> serde_json::V
 /// kLink is identified and kBend is not (its posterior std near the prior's, 350/√12 = 101).
 #[test]
 fn the_hemocell27_reference_calibration_replays_from_its_store() {
-    let (summary, _) = replay_shipped_study("hemocell/hemocell27-healthy");
+    let (summary, _) = replay_shipped_study("hemocell/hemocell27-healthy", &[]);
     assert_eq!(summary["runs"], 20, "{summary}");
     assert_eq!(summary["failed"], 1, "{summary}");
     assert_eq!(summary["rounds"], 7, "{summary}");
@@ -901,7 +899,7 @@ fn the_hemocell27_reference_calibration_replays_from_its_store() {
 /// posterior within a tenth of a std of HemoCell alone's (90.7 ± 13.3).
 #[test]
 fn the_hemocell27_two_fidelity_calibration_replays_from_its_stores() {
-    let (summary, _) = replay_shipped_study("hemocell/hemocell27-healthy-two-fidelity");
+    let (summary, _) = replay_shipped_study("hemocell/hemocell27-healthy-two-fidelity", &[]);
     assert_eq!(summary["runs"], 15, "{summary}");
     assert_eq!(summary["failed"], 1, "{summary}");
     assert_eq!(summary["rounds"], 10, "{summary}");
@@ -913,9 +911,14 @@ fn the_hemocell27_two_fidelity_calibration_replays_from_its_stores() {
     assert!((k_link["mean"].as_f64().unwrap() - 90.7).abs() < 0.1 * 13.3);
 }
 
+/// The shipped healthy study replayed from its store with `--model-posterior` (one replay
+/// covers both: the surrogate's calibration is the model posterior's first stage): no run
+/// made, the store unchanged, the surrogate's calibration as published and the cell model's
+/// own posterior certified as published.
 #[test]
-fn the_shipped_healthy_study_replays_the_cell_models_certified_posterior() {
-    let summary = assert_shipped_model_posterior("rbc-healthy-hemocell", "healthy cells");
+fn the_shipped_healthy_study_replays_its_calibration_and_the_cell_models_certified_posterior() {
+    let (summary, dir) = assert_shipped_model_posterior("rbc-healthy-hemocell", "healthy cells");
+    assert_healthy_study_completes(&summary, &dir);
     let m = &summary["model_posterior"];
     // The figures of docs/case-study.md and PROVENANCE.md: a noisy likelihood at 9.04 Pa weighed in one
     // pseudo-marginal step over both batches (400 members: the surrogate posterior's and the
@@ -936,9 +939,11 @@ fn the_shipped_healthy_study_replays_the_cell_models_certified_posterior() {
     );
 }
 
+/// The shipped TBHP study replayed from its store with `--model-posterior`, as the healthy one.
 #[test]
-fn the_shipped_tbhp_study_replays_the_cell_models_certified_posterior() {
-    let summary = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
+fn the_shipped_tbhp_study_replays_its_calibration_and_the_cell_models_certified_posterior() {
+    let (summary, _) = assert_shipped_model_posterior("rbc-tbhp-hemocell", "TBHP cells");
+    assert_tbhp_study_completes(&summary);
     let m = &summary["model_posterior"];
     // The figures of docs/case-study.md and PROVENANCE.md: 1,198 model evaluations and the probe's 4, at
     // 6 stresses; 5 stages; k̂ 0.556, ESS 186 and 66 ancestors.
