@@ -80,7 +80,9 @@ rm -rf "$scratch"/repo/examples/cooling/*.campaign
 (cd "$scratch/repo" && "$py" -m pytest --doctest-modules "$scratch/python/iuq" -q -p no:cacheprovider)
 
 step "the README's and the book's commands and code samples"
-"$py" scripts/docs/check_blocks.py
+# Two pages at a time (each in its own scratch copy): a page's commands leave a core idle while
+# they start processes and write files (116 s one at a time, 83 s two at a time on 2 cores).
+"$py" scripts/docs/check_blocks.py --jobs=2
 
 step "links and anchors"
 "$py" scripts/docs/check_links.py --site book
