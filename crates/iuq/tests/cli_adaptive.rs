@@ -11,13 +11,13 @@
 //! 0.18 posterior stds for a mean (three times that spread) and 10 % for a std (over five
 //! times), leave room for it and catch a surrogate that misplaces the posterior.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{cooling_example, iuq, json_of, stderr_of};
+use crate::common::{cooling_example, iuq, json_of, stderr_of};
 
 fn cooling(suite_name: &str) -> PathBuf {
     cooling_example("adaptive", suite_name)

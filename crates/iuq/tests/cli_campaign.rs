@@ -4,9 +4,7 @@
 //! in the middle of a campaign, and fake `sbatch`/`squeue`/`scontrol` and `hq` programs on PATH
 //! (the HyperQueue one prints the JSON shapes of `tests/fixtures/hq` in iuq-campaign).
 
-mod common;
-
-use common::{json_of, scratch};
+use crate::common::{json_of, scratch};
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -883,7 +881,7 @@ fn hyperqueue_executor_with_a_fake_hq_printing_recorded_json() {
 /// ```text
 /// git clone https://github.com/It4innovations/hyperqueue && cd hyperqueue && git checkout v0.26.2
 /// cargo build --release -p hyperqueue --no-default-features --features microlp
-/// HQ_BIN=$PWD/target/release/hq cargo test --release -p iuq --test cli_campaign hyperqueue -- --nocapture
+/// HQ_BIN=$PWD/target/release/hq cargo test --release -p iuq --test cli cli_campaign::hyperqueue -- --nocapture
 /// ```
 ///
 /// (the default features build the HiGHS solver and jemalloc from C/C++ sources, which needs

@@ -1,8 +1,6 @@
 //! End-to-end tests of `iuq gp fit|predict|validate`.
 
-mod common;
-
-use common::{iuq, json_of, scratch};
+use crate::common::{iuq, json_of, scratch};
 
 use std::path::Path;
 

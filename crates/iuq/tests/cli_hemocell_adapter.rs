@@ -4,9 +4,7 @@
 //! end with a fake `oneCellShear` built the same way; and `iuq rbc elongation` names bad input.
 //! The parts that need h5py are skipped, with the reason printed, when `import h5py` fails.
 
-mod common;
-
-use common::{
+use crate::common::{
     hemocell_campaign_in, hemocell_example_dir, iuq, json_of, native_frames, scratch, stderr_of,
 };
 

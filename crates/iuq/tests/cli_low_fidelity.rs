@@ -9,11 +9,11 @@
 //! (a cheap model that does not correlate, taken at its word) misses them by far: before the
 //! guard on the explained share, the uncorrelated case below ended 3–4.5 stds off.
 
-mod common;
+use crate::common;
 
 use std::path::Path;
 
-use common::{iuq, pipeline, scratch, stderr_of};
+use crate::common::{iuq, pipeline, scratch, stderr_of};
 
 const TIMES: usize = 10;
 

@@ -7,13 +7,13 @@
 //! is off and the model posterior has to correct it. Tolerances: 4 Monte Carlo standard errors of
 //! the model posterior (as it reports them) plus 4 of the reference's.
 
-mod common;
+use crate::common;
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use common::{cooling_example, iuq, json_of, stderr_of};
+use crate::common::{cooling_example, iuq, json_of, stderr_of};
 
 fn cooling(suite_name: &str) -> PathBuf {
     cooling_example("model-posterior", suite_name)

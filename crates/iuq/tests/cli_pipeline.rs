@@ -6,12 +6,10 @@
 //! `start_strain = 0.05` ends each run after about 170 lattice steps instead of the study's 7.5
 //! strain units, so the numbers are not the study's, only the machinery is.
 
-mod common;
-
 use std::collections::HashSet;
 use std::path::Path;
 
-use common::{iuq, json_of, scratch};
+use crate::common::{iuq, json_of, scratch};
 
 const DATA: &str =
     "stress_pa,el_healthy,el_healthy_err\n0.64,0.151,0.005\n1.36,0.268,0.004\n2.91,0.389,0.004\n";

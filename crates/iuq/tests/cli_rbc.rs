@@ -1,11 +1,11 @@
 //! End-to-end tests of `iuq rbc`: real processes. The shear runs use a short measuring window
 //! (`--start-strain`) so that they take a second or two.
 
-mod common;
+use crate::common;
 
 use std::path::PathBuf;
 
-use common::{iuq, json_of};
+use crate::common::{iuq, json_of};
 
 /// A fresh, empty directory for one test.
 fn scratch(name: &str) -> PathBuf {

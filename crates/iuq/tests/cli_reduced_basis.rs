@@ -9,11 +9,9 @@
 //! of the likelihood) would miss them by far: the curve's 120 points each carry 0.8 °C noise, so a
 //! systematic error of a tenth of that moves the posterior by more than a posterior std.
 
-mod common;
-
 use std::path::Path;
 
-use common::{cooling_example, iuq, json_of};
+use crate::common::{cooling_example, iuq, json_of};
 
 /// Standard normal deviates from a fixed linear congruential generator (Box–Muller), so that the
 /// test's data need no file.

@@ -4,11 +4,9 @@
 //! posterior std, `crates/iuq-basis/examples/mixing_accuracy.rs`) must be caught and never called
 //! converged, and the engine, sampling harder from then on, must end at the exact posterior.
 
-mod common;
-
 use std::path::Path;
 
-use common::{iuq, json_of, scratch};
+use crate::common::{iuq, json_of, scratch};
 
 /// The design matrix of y(t) = a + b t + c t² + d sin t + e cos t + f exp(−t).
 fn basis(t: f64) -> [f64; 6] {

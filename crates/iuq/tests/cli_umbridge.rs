@@ -3,7 +3,7 @@
 //! `iuq basis` against it, the reference Python client against it (skipped with a message when
 //! the Python package `umbridge` is missing), and the errors a user can make.
 
-mod common;
+use crate::common;
 
 use std::io::{Read, Write};
 use std::net::TcpStream;
@@ -11,7 +11,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::Duration;
 
-use common::{Served, iuq, json_of};
+use crate::common::{Served, iuq, json_of};
 
 use iuq_core::Model;
 use iuq_umbridge::{ClientOptions, UmBridgeModel};

@@ -11,7 +11,7 @@
 //!   runs of about 40 s on one core) and compares it with HemoCell's columns:
 //!
 //!   ```sh
-//!   flock /tmp/iuq-cargo.lock cargo test --release -p iuq --test hemocell_comparison -- --ignored
+//!   flock /tmp/iuq-cargo.lock cargo test --release -p iuq --test cli hemocell_comparison:: -- --ignored
 //!   ```
 //!
 //! * The adapter (`run-hemocell.sh`, `decode-el.py`): HemoCell's own reason when it exits
@@ -25,9 +25,7 @@
 //!   the 2.1 table, and what its provenance says of it. The HDF5 parts need h5py and are
 //!   skipped, with the reason printed, without it.
 
-mod common;
-
-use common::{
+use crate::common::{
     hemocell_campaign_in, hemocell_example_dir, iuq, json_of, native_frames, scratch, stderr_of,
 };
 
@@ -733,7 +731,7 @@ fn the_comparison_table_is_complete_and_consistent() {
 /// [`check_agreement`]. About 15–40 s per point on one core:
 ///
 /// ```sh
-/// flock /tmp/iuq-cargo.lock cargo test --release -p iuq --test hemocell_comparison -- --ignored --nocapture
+/// flock /tmp/iuq-cargo.lock cargo test --release -p iuq --test cli hemocell_comparison:: -- --ignored --nocapture
 /// ```
 #[test]
 #[ignore = "runs the native model 24 times (several minutes)"]

@@ -1,6 +1,6 @@
 //! What every end-to-end test of the `iuq` binary needs: run it, read its one JSON object, and a
 //! scratch directory of its own.
-#![allow(dead_code)] // each test binary uses its own subset
+#![allow(dead_code)] // not every helper is used in every configuration
 
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
