@@ -3,11 +3,11 @@
 //! posterior.
 //!
 //! When the model's posterior p is one importance step from m members M drawn uniformly from
-//! the surrogate's population P (N members of q), the plain estimate of E_p[f] is the weighted
+//! the surrogate's population P (N members of q), the plain estimate of E_p\[f\] is the weighted
 //! mean Σ_{i∈M} w̄_i f_i: the error of m weighted members, even where p = q and the population
-//! knows E_q[f] to the error of N. The paired estimate
+//! knows E_q\[f\] to the error of N. The paired estimate
 //!
-//! E*[f] = mean_P f + (Σ_{i∈M} w̄_i f_i − mean_M f)
+//! E\*\[f\] = mean_P f + (Σ_{i∈M} w̄_i f_i − mean_M f)
 //!
 //! adds to the population's mean the members' weighted-minus-unweighted difference, which
 //! estimates E_p f − E_q f (the unweighted members' mean is a control variate of known mean,
@@ -15,7 +15,7 @@
 //! examples", §8.9 and §9.10; Hesterberg 1995, "Weighted average importance sampling and
 //! defensive mixture distributions", Technometrics 37(2)). Both terms of the difference are
 //! sums over the same members, so their errors cancel as the weights become equal: at equal
-//! weights E*[f] is the population's mean.
+//! weights E\*\[f\] is the population's mean.
 //!
 //! Its variance is the population's plus the difference's:
 //! - Var(mean_P f) by batch means over the population in its stored order, ⌊√N⌋ batches:
@@ -26,16 +26,16 @@
 //! - Var(Σ w̄_i f_i − mean_M f) by the delta method over the members (as for self-normalised
 //!   importance sampling, Vehtari et al. 2024, eq. 6): Σ_i (w̄_i (f_i − E_w f) − (f_i − mean_M f)/m)².
 //!
-//! Moments: μ̂ = E*[θ], σ̂² = E*[(θ − μ̂)²] (E* is linear with E*[1] = 1), MCSE(σ̂) =
-//! MCSE(σ̂²)/(2σ̂). E* is not a positive functional: where a σ̂² comes out non-positive (weights
+//! Moments: μ̂ = E\*\[θ\], σ̂² = E\*\[(θ − μ̂)²\] (E\* is linear with E\*\[1\] = 1), MCSE(σ̂) =
+//! MCSE(σ̂²)/(2σ̂). E\* is not a positive functional: where a σ̂² comes out non-positive (weights
 //! far from equal on a small batch) there is no paired estimate.
 
 /// The paired estimate's moments and their Monte Carlo errors.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairedMoments {
-    /// μ̂_k = E*[θ_k].
+    /// μ̂_k = E\*\[θ_k\].
     pub mean: Vec<f64>,
-    /// σ̂_k = √E*[(θ_k − μ̂_k)²].
+    /// σ̂_k = √E\*\[(θ_k − μ̂_k)²\].
     pub std: Vec<f64>,
     /// MCSE(μ̂_k) = √(population² + difference²).
     pub mcse_mean: Vec<f64>,
@@ -124,7 +124,7 @@ struct Pairing<'a> {
     weights: &'a [f64],
 }
 
-/// One paired expectation E*[f] with the variances of its two terms.
+/// One paired expectation E\*\[f\] with the variances of its two terms.
 struct PairedExpectation {
     value: f64,
     population_variance: f64,
