@@ -117,13 +117,12 @@ impl MemberSizing {
         if !self.certified || !self.mcse.is_finite() || self.mcse <= target {
             return None;
         }
-        let floor = self.population_mcse.powi(2);
-        if target * target <= floor {
-            return None;
-        }
-        let wanted = (SIZING_MARGIN * self.samples as f64 * (self.mcse.powi(2) - floor)
-            / (target * target - floor))
-            .ceil();
+        let wanted = members_for_target(
+            SIZING_MARGIN * self.samples as f64,
+            (self.mcse, self.population_mcse),
+            target,
+        )?
+        .ceil();
         let next = if wanted >= cap as f64 {
             cap
         } else {
@@ -131,6 +130,19 @@ impl MemberSizing {
         };
         (next > self.samples).then_some(next)
     }
+}
+
+/// The members that bring a Monte Carlo error `mcse` at `members` down to `target`, all in
+/// posterior stds, where `population_mcse` of it is the surrogate population's own (a paired
+/// estimate's; 0 otherwise), which more members do not reduce:
+/// members·(MCSE² − P²)/(target² − P²). `None` where P alone reaches the target.
+pub fn members_for_target(
+    members: f64,
+    (mcse, population_mcse): (f64, f64),
+    target: f64,
+) -> Option<f64> {
+    let floor = population_mcse.powi(2);
+    (target * target > floor).then(|| members * (mcse.powi(2) - floor) / (target * target - floor))
 }
 
 /// The former name of [`ModelPosteriorOptions`].

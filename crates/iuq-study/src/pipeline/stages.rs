@@ -761,17 +761,17 @@ impl<'a> PipelineRun<'a> {
         let target = settings.target_mcse;
         if worst > target && outcome.posterior.certified() {
             let members = outcome.member_sizing.last().map_or(0, |m| m.samples) as f64;
-            events.message(if floor >= target {
-                format!(
-                    "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}, of which {floor:.3} is the surrogate posterior's own: more samples of it bring it there (`[sampler] samples`)"
-                )
-            } else {
-                format!(
-                    "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}; about {:.0} members would bring it there (`[model_posterior] max_samples`, at most the surrogate posterior's population, `[sampler] samples`)",
-                    (members * (worst * worst - floor * floor) / (target * target - floor * floor))
-                        .ceil()
-                )
-            });
+            events.message(
+                match model_posterior::members_for_target(members, (worst, floor), target) {
+                    None => format!(
+                        "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}, of which {floor:.3} is the surrogate posterior's own: more samples of it bring it there (`[sampler] samples`)"
+                    ),
+                    Some(needed) => format!(
+                        "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}; about {:.0} members would bring it there (`[model_posterior] max_samples`, at most the surrogate posterior's population, `[sampler] samples`)",
+                        needed.ceil()
+                    ),
+                },
+            );
         }
         times.push((
             "the model's posterior".into(),
