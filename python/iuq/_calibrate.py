@@ -390,8 +390,8 @@ def calibrate(
     The engine (the book's adaptive-engine chapter): an initial maximin Latin hypercube of
     ``initial_runs`` runs, then rounds of up to ``batch`` runs placed where they most reduce
     the surrogate's error on the posterior, until every posterior mean and std is stable to
-    ``tolerance`` posterior stds and the surrogate's error could move none of them by more, or
-    ``max_runs``. One GP per data point stands in for the model; BASIS samples the posterior.
+    ``tolerance`` posterior stds and twice the surrogate's typical error is below it too (a
+    mean or std within ``tolerance`` of the model's posterior at about 95 %), or ``max_runs``. One GP per data point stands in for the model; BASIS samples the posterior.
 
     The likelihood is the prediction-error likelihood (the methods' chapter on it). By default
     it is exactly the Gaussian N(y | model(θ), diag(y_std²)), the surrogate adding its own

@@ -11,10 +11,13 @@
 //! from independent replicate samplers ([`PosteriorMoments::pooled`]): a sequential Monte Carlo
 //! population descends from few lineages, so its moments scatter far more than N independent
 //! samples would (on the red-cell study, two BASIS runs of N = 2000 on the same surrogate differ
-//! by 0.2–0.3 posterior stds). The round's surrogate error ε = max_k of the first-order std of
-//! the posterior mean and std of parameter k under the GPs' error, in posterior stds
-//! ([`crate::moment_error`]). The loop has converged when max_k δ_k, max_k ν_k and ε are all
-//! below `tolerance`: the shift guards the summaries a user reads, ε that they are not the same
+//! by 0.2–0.3 posterior stds). The round's surrogate error ε is the largest typical change
+//! (68.3 % quantile of its absolute value) of a posterior mean or std under draws of the GPs'
+//! error, in posterior stds ([`crate::moment_error`]). The loop has converged when max_k δ_k and
+//! max_k ν_k are below `tolerance` and m·ε is too, m = `surrogate_error_multiple` (default
+//! [`SURROGATE_ERROR_MULTIPLE`] = 2: a moment stands within `tolerance` of the model's posterior
+//! at about 95 %, where m = 1 leaves about one in three further): the shift guards the
+//! summaries a user reads, ε that they are not the same
 //! wrong answer twice (a surrogate that has not yet seen the posterior region can be stable and
 //! wrong). u = E_posterior[√(Σ_t Var[ℓ_t(θ)])], the posterior mean of the surrogate's std of
 //! the log-likelihood ([`crate::acquisition`]), is reported beside it and compared with
@@ -33,6 +36,17 @@ use crate::error::{AdaptiveError, Result};
 /// How many Monte Carlo standard errors of a difference of moments a shift must exceed to
 /// count (about a 95 % two-sided band for a normal error).
 pub const NOISE_MULTIPLE: f64 = 2.0;
+
+/// The default of [`ConvergenceCriterion::surrogate_error_multiple`]: ε, a typical (one-σ)
+/// change, counts twice, so that at the stop every posterior mean and std stands within
+/// `tolerance` of the model's at about 95 % for a normal error (as [`NOISE_MULTIPLE`] for the
+/// sampler's noise).
+pub const SURROGATE_ERROR_MULTIPLE: f64 = 2.0;
+
+/// The multiple of the stores recorded before it existed, which held ε itself to `tolerance`.
+fn recorded_surrogate_error_multiple() -> f64 {
+    1.0
+}
 
 /// The posterior mean and standard deviation of each parameter after one round, with their
 /// Monte Carlo standard errors.
@@ -140,6 +154,12 @@ pub struct ConvergenceCriterion {
     /// surrogate counts as sure where the posterior lies (for the caller's boundary runs and
     /// minimum score; not part of [`ConvergenceCriterion::assess`]).
     pub log_likelihood_tolerance: f64,
+    /// How many times the surrogate's error ε counts against `tolerance`: ε is a typical
+    /// (68.3 % quantile) change of a moment, so at 1 about one moment in three may still stand
+    /// further than `tolerance` from the model's posterior; at [`SURROGATE_ERROR_MULTIPLE`]
+    /// (the default) about one in twenty.
+    #[serde(default = "recorded_surrogate_error_multiple")]
+    pub surrogate_error_multiple: f64,
 }
 
 impl Default for ConvergenceCriterion {
@@ -147,6 +167,7 @@ impl Default for ConvergenceCriterion {
         Self {
             tolerance: 0.1,
             log_likelihood_tolerance: 0.05,
+            surrogate_error_multiple: SURROGATE_ERROR_MULTIPLE,
         }
     }
 }
@@ -167,16 +188,17 @@ pub struct RoundAssessment {
     /// ε, the surrogate's largest first-order error of a posterior mean or std, in posterior
     /// stds.
     pub surrogate_error: f64,
-    /// The shift, the noise and ε are below the tolerance.
+    /// The shift and the noise are below the tolerance, and ε times its multiple.
     pub converged: bool,
 }
 
 impl ConvergenceCriterion {
-    /// Checks that both tolerances are positive and finite.
+    /// Checks that both tolerances and the surrogate error's multiple are positive and finite.
     pub fn check(self) -> Result<Self> {
         for (what, v) in [
             ("convergence tolerance", self.tolerance),
             ("log-likelihood tolerance", self.log_likelihood_tolerance),
+            ("surrogate error multiple", self.surrogate_error_multiple),
         ] {
             if !(v.is_finite() && v > 0.0) {
                 return Err(AdaptiveError::InvalidParameter {
@@ -186,6 +208,12 @@ impl ConvergenceCriterion {
             }
         }
         Ok(self)
+    }
+
+    /// Whether ε no longer keeps a round from converging: `surrogate_error_multiple`·ε below
+    /// `tolerance`.
+    pub fn surrogate_error_holds(&self, surrogate_error: f64) -> bool {
+        self.surrogate_error_multiple * surrogate_error < self.tolerance
     }
 
     /// Judge a round from its moments, the previous round's, u and ε.
@@ -243,7 +271,7 @@ impl ConvergenceCriterion {
         };
         let converged = shift.is_some_and(|s| s < self.tolerance)
             && noise.is_some_and(|n| n < self.tolerance)
-            && surrogate_error < self.tolerance;
+            && self.surrogate_error_holds(surrogate_error);
         Ok(RoundAssessment {
             shift,
             shifts,
@@ -295,6 +323,14 @@ mod tests {
         assert!(!c.assess(Some(&a), &nan, 0.01, 0.01).unwrap().converged);
         // The same moments with a surrogate whose error could move them are not converged.
         assert!(!c.assess(Some(&a), &b, 0.5, 0.5).unwrap().converged);
+        // ε counts `surrogate_error_multiple` times: a typical change of 0.06 posterior stds
+        // leaves about one moment in three further than 0.1 from the model's at multiple 1.
+        assert!(!c.assess(Some(&a), &b, 0.01, 0.06).unwrap().converged);
+        let once = ConvergenceCriterion {
+            surrogate_error_multiple: 1.0,
+            ..c
+        };
+        assert!(once.assess(Some(&a), &b, 0.01, 0.06).unwrap().converged);
         // A std that moved by 20 % is not converged.
         let d = moments([1.0, 10.0], [0.6, 2.0]);
         assert!(!c.assess(Some(&a), &d, 0.01, 0.01).unwrap().converged);

@@ -417,7 +417,9 @@ impl AdaptiveEngine {
         // converging.
         let resolving = match s.more_samples {
             MoreSamples::WhenNoisy => true,
-            MoreSamples::WhenResolving => judgement.assessment.surrogate_error < tolerance,
+            MoreSamples::WhenResolving => s
+                .criterion
+                .surrogate_error_holds(judgement.assessment.surrogate_error),
         };
         let noisy = judgement.noise().is_some_and(|n| n >= tolerance);
         let can_resolve_noise =
@@ -470,12 +472,13 @@ impl AdaptiveEngine {
     fn no_candidate_reason(&self, state: &EngineState, u: f64, judgement: &Judgement) -> String {
         let shown = |v: Option<f64>| v.map_or("-".to_string(), |s| format!("{s:.3}"));
         format!(
-            "no candidate run is worth making among {} candidates, although the rule does not hold (shift {}, distance {}, sampler noise {}, surrogate error {:.3} posterior stds against the tolerance {}; the surrogate's log-likelihood std over the posterior is {u:.3} nats): the surrogate's remaining error lies where no run can reduce it by the minimum worth a run; lower `log_likelihood_tolerance` to let smaller gains count, or raise `tolerance` if this error is acceptable",
+            "no candidate run is worth making among {} candidates, although the rule does not hold (shift {}, distance {}, sampler noise {}, surrogate error {:.3} posterior stds, counted {} times, against the tolerance {}; the surrogate's log-likelihood std over the posterior is {u:.3} nats): the surrogate's remaining error lies where no run can reduce it by the minimum worth a run; lower `log_likelihood_tolerance` to let smaller gains count, or raise `tolerance` if this error is acceptable",
             state.sampling.candidates,
             shown(judgement.assessment.shift),
             shown(judgement.distance.as_ref().map(|d| d.distance)),
             shown(judgement.noise()),
             judgement.assessment.surrogate_error,
+            self.settings.criterion.surrogate_error_multiple,
             self.settings.criterion.tolerance,
         )
     }
@@ -534,7 +537,7 @@ mod tests {
         let e = engine(|_| {});
         let s = drive(
             &e,
-            vec![reading(0.0, 0.01, 0.05, 10), reading(0.02, 0.01, 0.05, 12)],
+            vec![reading(0.0, 0.01, 0.04, 10), reading(0.02, 0.01, 0.04, 12)],
             2,
         );
         assert!(s.converged);
@@ -548,7 +551,7 @@ mod tests {
         // Noise 2·√2·0.05 = 0.14 > 0.1: unresolved, the population doubles.
         let s = drive(
             &e,
-            vec![reading(0.0, 0.05, 0.05, 10), reading(0.0, 0.05, 0.05, 12)],
+            vec![reading(0.0, 0.05, 0.04, 10), reading(0.0, 0.05, 0.04, 12)],
             2,
         );
         assert!(!s.converged);
@@ -559,7 +562,7 @@ mod tests {
         );
         let s = drive(
             &e,
-            vec![reading(0.0, 0.01, 0.05, 10), reading(0.5, 0.01, 0.05, 12)],
+            vec![reading(0.0, 0.01, 0.04, 10), reading(0.5, 0.01, 0.04, 12)],
             2,
         );
         assert!(!s.converged && s.stop_reason.is_none());
@@ -574,6 +577,20 @@ mod tests {
             2,
         );
         assert_eq!(s.sampling.samples, 500);
+        // ε = 0.07 is under the tolerance but counts twice: it still keeps the round from
+        // converging, so the population still waits.
+        let s = drive(
+            &e,
+            vec![reading(0.0, 0.05, 0.07, 10), reading(0.0, 0.05, 0.07, 12)],
+            2,
+        );
+        assert_eq!(s.sampling.samples, 500);
+        let s = drive(
+            &e,
+            vec![reading(0.0, 0.05, 0.04, 10), reading(0.0, 0.05, 0.04, 12)],
+            2,
+        );
+        assert_eq!(s.sampling.samples, 1000);
     }
 
     #[test]
@@ -590,14 +607,14 @@ mod tests {
         // A shift of 3 stds with ε small: still exploring.
         let s = drive(
             &e,
-            vec![reading(0.0, 0.01, 0.05, 10), reading(3.0, 0.01, 0.05, 12)],
+            vec![reading(0.0, 0.01, 0.04, 10), reading(3.0, 0.01, 0.04, 12)],
             2,
         );
         assert_eq!(s.sampling.samples, 125);
         // A shift of 0.5 std (5 tolerances), ε small: the full population.
         let s = drive(
             &e,
-            vec![reading(0.0, 0.01, 2.0, 10), reading(0.5, 0.01, 0.05, 12)],
+            vec![reading(0.0, 0.01, 2.0, 10), reading(0.5, 0.01, 0.04, 12)],
             2,
         );
         assert_eq!(s.sampling.samples, 500);
@@ -605,9 +622,9 @@ mod tests {
         let s = drive(
             &e,
             vec![
-                reading(0.0, 0.01, 0.05, 10),
-                reading(0.3, 0.01, 0.05, 12),
-                reading(5.0, 0.01, 0.05, 14),
+                reading(0.0, 0.01, 0.04, 10),
+                reading(0.3, 0.01, 0.04, 12),
+                reading(5.0, 0.01, 0.04, 14),
             ],
             2,
         );
@@ -670,7 +687,7 @@ mod tests {
                 .collect()
         };
         let with = |sign: f64, seed: u64| {
-            let mut r = reading(0.0, 0.01, 0.05, 10);
+            let mut r = reading(0.0, 0.01, 0.04, 10);
             r.populations = Some(population(sign, seed));
             r
         };
@@ -726,7 +743,7 @@ mod tests {
         // round samples in full and the mixing stays.
         let e = engine(|s| s.exploring_samples = 125);
         let mut state = e.start(1, None);
-        let mut r = reading(0.0, 0.01, 0.05, 10);
+        let mut r = reading(0.0, 0.01, 0.04, 10);
         r.sampler_agreement = Some(&agreement);
         let j = e.judge(&state, &r).unwrap();
         assert_eq!(e.step(&mut state, r, &j, 2), Next::Continue);
@@ -747,7 +764,7 @@ mod tests {
         let mut state = e.start(1, None);
         let mut trace = Vec::new();
         for _ in 0..30 {
-            let r = reading(0.0, 0.05, 0.05, 10);
+            let r = reading(0.0, 0.05, 0.04, 10);
             let j = e.judge(&state, &r).unwrap();
             trace.push((state.sampling.samples, state.sampling.candidates));
             if e.step(&mut state, r, &j, 0) == Next::Stop {
@@ -778,7 +795,7 @@ mod tests {
         // Without exploring rounds the loop widens its candidates at once, as before.
         let e = engine(|_| {});
         let mut state = e.start(1, None);
-        let r = reading(0.0, 0.05, 0.05, 10);
+        let r = reading(0.0, 0.05, 0.04, 10);
         let j = e.judge(&state, &r).unwrap();
         e.step(&mut state, r, &j, 0);
         assert_eq!(state.sampling.candidates, 4 * e.settings.candidates);

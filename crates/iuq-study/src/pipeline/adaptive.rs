@@ -1609,6 +1609,7 @@ fn engine_settings(settings: &AdaptiveSettings) -> EngineSettings {
         criterion: ConvergenceCriterion {
             tolerance: settings.tolerance,
             log_likelihood_tolerance: settings.log_likelihood_tolerance,
+            surrogate_error_multiple: settings.surrogate_error_multiple,
         },
         stopping_rule: settings.stopping_rule,
         max_runs: settings.max_runs,

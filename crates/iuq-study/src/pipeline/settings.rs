@@ -227,6 +227,12 @@ pub struct AdaptiveSettings {
     /// The largest posterior-mean std of the log-likelihood due to the surrogate, in nats, that
     /// counts as converged (`log_likelihood_tolerance`, default 0.05).
     pub log_likelihood_tolerance: f64,
+    /// How many times the surrogate's error ε counts against `tolerance`
+    /// (`surrogate_error_multiple`, default
+    /// [`iuq_adaptive::convergence::SURROGATE_ERROR_MULTIPLE`] = 2: every posterior mean and std
+    /// within `tolerance` of the model's at about 95 %; the shipped red-cell studies name 1, the
+    /// rule they were recorded under).
+    pub surrogate_error_multiple: f64,
     /// BASIS population of each replicate of a round's posterior at first (`samples`,
     /// default 2000).
     pub samples: usize,
@@ -310,6 +316,9 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         max_runs: s.count("max_runs", 1)?.unwrap_or(DEFAULT_MAX_RUNS),
         tolerance: s.positive("tolerance")?.unwrap_or(0.1),
         log_likelihood_tolerance: s.positive("log_likelihood_tolerance")?.unwrap_or(0.05),
+        surrogate_error_multiple: s
+            .positive("surrogate_error_multiple")?
+            .unwrap_or(iuq_adaptive::convergence::SURROGATE_ERROR_MULTIPLE),
         samples,
         exploring_samples: s
             .count_in("exploring_samples", 10, samples)?
