@@ -80,6 +80,7 @@ impl ComputationalError {
 
     /// The variance term c_j for model output `q`, its std `s` and datum `y`: (s·y/q)² for
     /// [`Relative`](Self::Relative), (s·y)², s² or 0 for the others.
+    #[inline]
     pub fn variance(self, q: f64, s: f64, y: f64) -> std::result::Result<f64, EvaluationFailure> {
         Ok(match self {
             ComputationalError::Relative => {
@@ -181,6 +182,22 @@ impl ErrorModel {
         s: f64,
         sigma_m: f64,
     ) -> std::result::Result<f64, EvaluationFailure> {
+        let variance = self.datum_variance(j, y, measurement_std, q, s, sigma_m)?;
+        Ok(deviance(y - q, variance, variance.ln()))
+    }
+
+    /// Σ_jj of one datum (see [`ErrorModel::datum_log_likelihood`]); a non-positive or
+    /// non-finite Σ is a failure naming datum `j`.
+    #[inline]
+    fn datum_variance(
+        &self,
+        j: usize,
+        y: f64,
+        measurement_std: Option<f64>,
+        q: f64,
+        s: f64,
+        sigma_m: f64,
+    ) -> std::result::Result<f64, EvaluationFailure> {
         let sd = if self.measurement_error {
             measurement_std.unwrap_or(0.0)
         } else {
@@ -193,8 +210,35 @@ impl ErrorModel {
                 "variance of observation {j} is {variance} (no positive error term)"
             )));
         }
-        let r = y - q;
-        Ok(r * r / variance + LN_2PI + variance.ln())
+        Ok(variance)
+    }
+}
+
+/// −2 ln f of one datum from its residual r, its variance Σ and ln Σ: r²/Σ + ln 2π + ln Σ.
+#[inline]
+fn deviance(r: f64, variance: f64, log_variance: f64) -> f64 {
+    r * r / variance + LN_2PI + log_variance
+}
+
+/// ln Σ_jj of one point of a batch, reused for every other point whose Σ_jj is the same number:
+/// a screen's surrogate (the GPs' means, a variance that does not depend on θ) or a model without
+/// computational stds gives every point the same variances, and their logarithm was most of a
+/// likelihood evaluation on a 200-point curve. The same input gives the same `ln`, so the
+/// likelihood does not change in the last bit.
+#[derive(Debug, Default)]
+struct VarianceLogs {
+    variance: Vec<f64>,
+    log: Vec<f64>,
+}
+
+impl VarianceLogs {
+    /// ln `variance`, from the memo where datum `j`'s variance there is bitwise the same.
+    #[inline]
+    fn log(&self, j: usize, variance: f64) -> f64 {
+        match self.variance.get(j) {
+            Some(v) if v.to_bits() == variance.to_bits() => self.log[j],
+            _ => variance.ln(),
+        }
     }
 }
 
@@ -310,6 +354,46 @@ impl<M: Model> PredictionErrorLikelihood<M> {
 
     /// ln f(D | θ) from one model outcome and σ_m (0 when not estimated).
     pub fn log_likelihood_of(&self, outcome: &Outcome, sigma_m: f64) -> PointLogLikelihood {
+        self.log_likelihood_with(outcome, sigma_m, &VarianceLogs::default())
+    }
+
+    /// The variances of the data under one outcome and σ_m, with their logarithms (empty where
+    /// the outcome gives no likelihood).
+    fn variance_logs(&self, outcome: &Outcome, sigma_m: f64) -> VarianceLogs {
+        let Ok(evaluation) = outcome else {
+            return VarianceLogs::default();
+        };
+        let y = &self.observations.values;
+        if evaluation.outputs.len() != y.len() || !evaluation.is_finite() {
+            return VarianceLogs::default();
+        }
+        let measurement = self.observations.measurement_std.as_deref();
+        let stds = evaluation.computational_std.as_deref();
+        let variance: Option<Vec<f64>> = y
+            .iter()
+            .zip(&evaluation.outputs)
+            .enumerate()
+            .map(|(j, (&yj, &qj))| {
+                let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
+                self.errors
+                    .datum_variance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)
+                    .ok()
+            })
+            .collect();
+        let Some(variance) = variance else {
+            return VarianceLogs::default();
+        };
+        let log = variance.iter().map(|v| v.ln()).collect();
+        VarianceLogs { variance, log }
+    }
+
+    /// [`PredictionErrorLikelihood::log_likelihood_of`] with the logarithms of `memo`'s variances.
+    fn log_likelihood_with(
+        &self,
+        outcome: &Outcome,
+        sigma_m: f64,
+        memo: &VarianceLogs,
+    ) -> PointLogLikelihood {
         let evaluation = outcome.as_ref().map_err(Clone::clone)?;
         let y = &self.observations.values;
         if evaluation.outputs.len() != y.len() {
@@ -327,9 +411,10 @@ impl<M: Model> PredictionErrorLikelihood<M> {
         let mut sum = 0.0;
         for (j, (&yj, &qj)) in y.iter().zip(&evaluation.outputs).enumerate() {
             let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
-            sum += self
-                .errors
-                .datum_deviance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)?;
+            let variance =
+                self.errors
+                    .datum_variance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)?;
+            sum += deviance(yj - qj, variance, memo.log(j, variance));
         }
         Ok(-0.5 * sum)
     }
@@ -394,14 +479,17 @@ impl<M: Model> PredictionErrorLikelihood<M> {
             )));
         }
         let estimated = self.errors.modelling_error.is_some();
+        let sigma_m = |p: &[f64]| if estimated { p[n_model] } else { 0.0 };
+        let memo = points
+            .first()
+            .zip(outcomes.first())
+            .map(|(p, outcome)| self.variance_logs(outcome, sigma_m(p)))
+            .unwrap_or_default();
         Ok(points
             .par_iter()
             .zip(outcomes.par_iter())
             .with_min_len(64)
-            .map(|(p, outcome)| {
-                let sigma_m = if estimated { p[n_model] } else { 0.0 };
-                self.log_likelihood_of(outcome, sigma_m)
-            })
+            .map(|(p, outcome)| self.log_likelihood_with(outcome, sigma_m(p), &memo))
             .collect())
     }
 }
@@ -436,6 +524,75 @@ mod tests {
             None => Evaluation::new(q),
         };
         Fixed(names(&["k"]), outputs, Ok(e))
+    }
+
+    /// Outputs (k, 2k) with computational stds that depend on k only above 0.5: below, every
+    /// point of a batch has the same variances, above each its own.
+    struct Varying(Vec<String>, Vec<String>);
+    impl Model for Varying {
+        fn input_names(&self) -> &[String] {
+            &self.0
+        }
+        fn output_names(&self) -> &[String] {
+            &self.1
+        }
+        fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+            Ok(points
+                .iter()
+                .map(|p| {
+                    let k = p[0];
+                    let s = if k > 0.5 { 0.1 * k } else { 0.05 };
+                    if k > 0.9 {
+                        Err(EvaluationFailure::new("fails above 0.9"))
+                    } else {
+                        Ok(Evaluation::with_std(vec![k, 2.0 * k], vec![s, s]))
+                    }
+                })
+                .collect())
+        }
+    }
+
+    #[test]
+    fn a_batch_reuses_equal_variances_logarithms_without_changing_a_bit() {
+        let observations = Observations {
+            values: vec![0.3, 0.5],
+            measurement_std: Some(vec![0.01, 0.02]),
+        };
+        for modelling_error in [None, Some(DEFAULT_MODELLING_ERROR_PRIOR)] {
+            let errors = ErrorModel {
+                measurement_error: true,
+                computational_error: ComputationalError::Absolute,
+                modelling_error,
+            };
+            let model = Varying(names(&["k"]), names(&["a", "b"]));
+            let likelihood =
+                PredictionErrorLikelihood::new(model, observations.clone(), errors).unwrap();
+            let points: Vec<Vec<f64>> = (0..200)
+                .map(|i| {
+                    let k = i as f64 / 199.0;
+                    if modelling_error.is_some() {
+                        vec![k, 0.01 + 0.001 * (i % 7) as f64]
+                    } else {
+                        vec![k]
+                    }
+                })
+                .collect();
+            let batch = likelihood.log_likelihood_batch(&points).unwrap();
+            for (p, got) in points.iter().zip(&batch) {
+                let outcome = &likelihood
+                    .model()
+                    .evaluate_batch(&[p[..1].to_vec()])
+                    .unwrap()[0];
+                let sigma_m = p.get(1).copied().unwrap_or(0.0);
+                let alone = likelihood.log_likelihood_of(outcome, sigma_m);
+                match (got, alone) {
+                    (Ok(a), Ok(b)) => assert_eq!(a.to_bits(), b.to_bits(), "at {p:?}"),
+                    (Err(_), Err(_)) => {}
+                    (a, b) => panic!("at {p:?}: {a:?} vs {b:?}"),
+                }
+            }
+            assert!(batch.iter().filter(|v| v.is_err()).count() > 0);
+        }
     }
 
     #[test]
