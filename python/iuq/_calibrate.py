@@ -369,6 +369,7 @@ def calibrate(
     batch: int = 2,
     max_runs: int = 300,
     tolerance: float = 0.1,
+    surrogate_error_multiple: float = 2.0,
     modelling_error: Optional[Tuple[float, float]] = None,
     computational_error: str = "absolute",
     posterior_check: int = 0,
@@ -431,6 +432,10 @@ def calibrate(
         Runs at most.
     tolerance : float, default 0.1
         The stopping rule's tolerance, in posterior stds.
+    surrogate_error_multiple : float, default 2.0
+        How many times the surrogate's typical error on a posterior mean or std counts against
+        ``tolerance``: at 2 every mean and std stands within ``tolerance`` of the model's
+        posterior at about 95 %, at 1 about one in three may stand further (fewer runs).
     modelling_error : (float, float), optional
         ``(lo, hi)``: a modelling error relative to the data, Σ_jj += σ_m²·y_j², σ_m ~ U(lo, hi)
         sampled with θ (the red-cell study's (0.001, 0.1): 0.1 % to 10 % of each datum).
@@ -545,6 +550,9 @@ def calibrate(
     tolerance = real("tolerance", tolerance)
     if not tolerance > 0:
         raise ValueError(f"tolerance: must be > 0, got {tolerance}")
+    surrogate_error_multiple = real("surrogate_error_multiple", surrogate_error_multiple)
+    if not surrogate_error_multiple > 0:
+        raise ValueError(f"surrogate_error_multiple: must be > 0, got {surrogate_error_multiple}")
     samples = count("samples", samples, 2)
     sensitivity = count("sensitivity", sensitivity, 0)
     posterior_check = count("posterior_check", posterior_check, 0, 100_000)
@@ -599,6 +607,7 @@ def calibrate(
         # rounds keep their cost (docs/study-file: `more_samples`).
         adaptive = (
             f"batch = {batch}, max_runs = {max_runs}, tolerance = {_toml_number(tolerance)}, "
+            f"surrogate_error_multiple = {_toml_number(surrogate_error_multiple)}, "
             'more_samples = "when-resolving"'
         )
         study += ["[surrogate]", f'design = {{ kind = "lhs", n = {initial}, seed = {seed} }}', f"adaptive = {{ {adaptive} }}"]

@@ -2,7 +2,8 @@
 
 Exact posteriors come from a fine grid (two parameters, flat priors, no modelling error). The
 accuracy asked of the calibrated posterior — every mean within 0.1 exact std, every std within
-10 % — is the engine's own stopping rule (tolerance 0.1 posterior std on the surrogate's error),
+10 % — is the engine's own stopping rule (tolerance 0.1 posterior std on twice the surrogate's
+typical error),
 plus BASIS's Monte Carlo error at N = 8000 (about 0.02 std for a mean, 1.5 % for a std, from
 ESS ≥ N/2); the fixed seeds make each check deterministic.
 """
@@ -86,11 +87,11 @@ def test_a_python_model_is_calibrated_to_its_exact_posterior(calibrated):
     assert result.store.is_file() and (result.out / "report.html").is_file()
     # Rounds far from settled sample the exploring population (4 replicates of 2000 / 4), the
     # others the full one (4 × 2000), and a round samples more than that only once the
-    # surrogate's error is below the tolerance.
+    # surrogate's error, counted twice (`surrogate_error_multiple`), is below the tolerance.
     full = 4 * 2000
     assert result.rounds[0]["samples"] == full // 4, result.rounds
     for before, after in zip(result.rounds, result.rounds[1:]):
-        if before["surrogate_error"] >= 0.1:
+        if 2 * before["surrogate_error"] >= 0.1:
             assert after["samples"] in (full // 4, full), result.rounds
 
 
@@ -496,6 +497,7 @@ def test_to_arviz_round_trips_through_arviz_summary(calibrated):
         ({"parameters": {"x": (0, 1)}}, "parameters"),
         ({"on_error": "ignore"}, "on_error"),
         ({"tolerance": 0.0}, "tolerance"),
+        ({"surrogate_error_multiple": -1.0}, "surrogate_error_multiple"),
         ({"modelling_error": (0.1, 0.01)}, "modelling_error"),
         ({"y_std": [0.1] * 3}, "y_std"),
     ],
