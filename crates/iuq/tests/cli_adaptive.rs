@@ -378,6 +378,10 @@ fn bad_adaptive_keys_exit_2_naming_the_file_and_key() {
             "adaptive = { log_likelihood_tolerance = \"small\" }",
             "surrogate.adaptive.log_likelihood_tolerance",
         ),
+        (
+            "adaptive = { surrogate_error_multiple = 0 }",
+            "surrogate.adaptive.surrogate_error_multiple",
+        ),
         ("adaptive = 3", "surrogate.adaptive"),
         (
             "adaptive = { replicates = 1000000 }",
@@ -431,6 +435,14 @@ fn an_expression_model_with_an_abscissa_runs_in_process_and_converges() {
     // log-likelihood term moves by 0.05 nats (|Δ|·|residual|/σ² ≈ 0.05 with residuals ~ σ).
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    // The report states the rule, the surrogate's error counted twice by default.
+    let criterion = report["report"]["convergence"]["criterion"]
+        .as_str()
+        .unwrap();
+    assert!(
+        criterion.contains("2 times the surrogate's typical error"),
+        "{criterion}"
+    );
     let check = &report["report"]["posterior_check"];
     assert_eq!(check["samples"], 20);
     let points = check["points"].as_array().unwrap();

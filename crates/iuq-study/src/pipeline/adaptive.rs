@@ -267,6 +267,8 @@ pub struct AdaptiveOutcome {
     pub tolerance: f64,
     /// The criterion's log-likelihood part (nats).
     pub log_likelihood_tolerance: f64,
+    /// How many times the surrogate's error counts against `tolerance`.
+    pub surrogate_error_multiple: f64,
     /// The posterior checks that failed their test and were trained on, in order.
     pub retrained_checks: Vec<RetrainedCheck>,
     /// The mixing level of the last round, at which the final posterior is sampled too.
@@ -1772,6 +1774,7 @@ pub(super) fn refine(
         parameters,
         tolerance: settings.tolerance,
         log_likelihood_tolerance: settings.log_likelihood_tolerance,
+        surrogate_error_multiple: settings.surrogate_error_multiple,
         retrained_checks,
         mixing_level: state.sampling.mixing_level,
         run_rows: new_rows,

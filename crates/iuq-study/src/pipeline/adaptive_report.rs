@@ -19,9 +19,17 @@ const MAX_PANELS: usize = 8;
 
 /// The convergence section's data.
 pub(super) fn convergence(outcome: &AdaptiveOutcome) -> Convergence {
+    let surrogate_error = if outcome.surrogate_error_multiple == 1.0 {
+        "the surrogate's typical error on a posterior mean or std".to_string()
+    } else {
+        format!(
+            "{} times the surrogate's typical error on a posterior mean or std",
+            outcome.surrogate_error_multiple
+        )
+    };
     Convergence {
         criterion: format!(
-            "every posterior mean and std moves by less than {0} posterior stds between rounds beyond twice the sampler's Monte Carlo error, that noise is itself below {0} posterior stds, the surrogate's error could move no posterior mean or std by more than {0} posterior stds, and the replicates that mix harder agree with the others within {0} posterior stds beyond their noise",
+            "every posterior mean and std moves by less than {0} posterior stds between rounds beyond twice the sampler's Monte Carlo error, that noise is itself below {0} posterior stds, {surrogate_error} is below {0} posterior stds, and the replicates that mix harder agree with the others within {0} posterior stds beyond their noise",
             outcome.tolerance
         ),
         converged: outcome.converged,
