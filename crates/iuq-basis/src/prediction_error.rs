@@ -357,43 +357,16 @@ impl<M: Model> PredictionErrorLikelihood<M> {
         self.log_likelihood_with(outcome, sigma_m, &VarianceLogs::default())
     }
 
-    /// The variances of the data under one outcome and σ_m, with their logarithms (empty where
-    /// the outcome gives no likelihood).
-    fn variance_logs(&self, outcome: &Outcome, sigma_m: f64) -> VarianceLogs {
-        let Ok(evaluation) = outcome else {
-            return VarianceLogs::default();
-        };
-        let y = &self.observations.values;
-        if evaluation.outputs.len() != y.len() || !evaluation.is_finite() {
-            return VarianceLogs::default();
-        }
-        let measurement = self.observations.measurement_std.as_deref();
-        let stds = evaluation.computational_std.as_deref();
-        let variance: Option<Vec<f64>> = y
-            .iter()
-            .zip(&evaluation.outputs)
-            .enumerate()
-            .map(|(j, (&yj, &qj))| {
-                let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
-                self.errors
-                    .datum_variance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)
-                    .ok()
-            })
-            .collect();
-        let Some(variance) = variance else {
-            return VarianceLogs::default();
-        };
-        let log = variance.iter().map(|v| v.ln()).collect();
-        VarianceLogs { variance, log }
-    }
-
-    /// [`PredictionErrorLikelihood::log_likelihood_of`] with the logarithms of `memo`'s variances.
-    fn log_likelihood_with(
-        &self,
-        outcome: &Outcome,
+    /// Each datum's residual ŷ_j − q_j and Σ_jj under one outcome and σ_m, after checking that
+    /// the outcome is a finite evaluation with one output per datum.
+    fn data_terms<'a>(
+        &'a self,
+        outcome: &'a Outcome,
         sigma_m: f64,
-        memo: &VarianceLogs,
-    ) -> PointLogLikelihood {
+    ) -> std::result::Result<
+        impl Iterator<Item = std::result::Result<(f64, f64), EvaluationFailure>> + 'a,
+        EvaluationFailure,
+    > {
         let evaluation = outcome.as_ref().map_err(Clone::clone)?;
         let y = &self.observations.values;
         if evaluation.outputs.len() != y.len() {
@@ -408,13 +381,48 @@ impl<M: Model> PredictionErrorLikelihood<M> {
         }
         let measurement = self.observations.measurement_std.as_deref();
         let stds = evaluation.computational_std.as_deref();
+        Ok(y.iter()
+            .zip(&evaluation.outputs)
+            .enumerate()
+            .map(move |(j, (&yj, &qj))| {
+                let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
+                let variance = self.errors.datum_variance(
+                    j,
+                    yj,
+                    measurement.map(|s| s[j]),
+                    qj,
+                    sc,
+                    sigma_m,
+                )?;
+                Ok((yj - qj, variance))
+            }))
+    }
+
+    /// The variances of the data under one outcome and σ_m, with their logarithms (empty where
+    /// the outcome gives no likelihood).
+    fn variance_logs(&self, outcome: &Outcome, sigma_m: f64) -> VarianceLogs {
+        let Ok(terms) = self.data_terms(outcome, sigma_m) else {
+            return VarianceLogs::default();
+        };
+        let variance: Option<Vec<f64>> = terms.map(|t| t.ok().map(|(_, v)| v)).collect();
+        let Some(variance) = variance else {
+            return VarianceLogs::default();
+        };
+        let log = variance.iter().map(|v| v.ln()).collect();
+        VarianceLogs { variance, log }
+    }
+
+    /// [`PredictionErrorLikelihood::log_likelihood_of`] with the logarithms of `memo`'s variances.
+    fn log_likelihood_with(
+        &self,
+        outcome: &Outcome,
+        sigma_m: f64,
+        memo: &VarianceLogs,
+    ) -> PointLogLikelihood {
         let mut sum = 0.0;
-        for (j, (&yj, &qj)) in y.iter().zip(&evaluation.outputs).enumerate() {
-            let sc = stds.and_then(|s| s.get(j)).copied().unwrap_or(0.0);
-            let variance =
-                self.errors
-                    .datum_variance(j, yj, measurement.map(|s| s[j]), qj, sc, sigma_m)?;
-            sum += deviance(yj - qj, variance, memo.log(j, variance));
+        for (j, term) in self.data_terms(outcome, sigma_m)?.enumerate() {
+            let (residual, variance) = term?;
+            sum += deviance(residual, variance, memo.log(j, variance));
         }
         Ok(-0.5 * sum)
     }

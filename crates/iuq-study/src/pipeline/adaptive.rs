@@ -1767,19 +1767,41 @@ pub(super) fn refine(
             return Err(StudyError::Interrupted);
         }
     }
-    Ok(AdaptiveOutcome {
+    Ok(AdaptiveOutcome::ended(
+        settings,
+        state,
         rounds,
-        converged: state.converged,
-        stop_reason: state.stop_reason.unwrap_or_default(),
         parameters,
-        tolerance: settings.tolerance,
-        log_likelihood_tolerance: settings.log_likelihood_tolerance,
-        surrogate_error_multiple: settings.surrogate_error_multiple,
         retrained_checks,
-        mixing_level: state.sampling.mixing_level,
-        run_rows: new_rows,
-        populations: state.previous_populations,
-    })
+        new_rows,
+    ))
+}
+
+impl AdaptiveOutcome {
+    /// The outcome of a loop that ended in `state` under `settings`, with its rounds (the
+    /// earlier loop's included), parameters, retrained checks and rows of `runs.csv`.
+    fn ended(
+        settings: &AdaptiveSettings,
+        state: EngineState,
+        rounds: Vec<AdaptiveRound>,
+        parameters: Vec<String>,
+        retrained_checks: Vec<RetrainedCheck>,
+        run_rows: Vec<Vec<f64>>,
+    ) -> Self {
+        Self {
+            rounds,
+            converged: state.converged,
+            stop_reason: state.stop_reason.unwrap_or_default(),
+            parameters,
+            tolerance: settings.tolerance,
+            log_likelihood_tolerance: settings.log_likelihood_tolerance,
+            surrogate_error_multiple: settings.surrogate_error_multiple,
+            retrained_checks,
+            mixing_level: state.sampling.mixing_level,
+            run_rows,
+            populations: state.previous_populations,
+        }
+    }
 }
 
 /// What choosing a round's runs needs besides the round's scoring: the same every round.
