@@ -6,22 +6,27 @@
 //! rather than on runs. The share of posterior samples with d > threshold is what a report shows
 //! as "posterior mass where the surrogate extrapolates".
 
+use rayon::prelude::*;
+
 use crate::error::{AdaptiveError, Result};
 
 /// d(θ): the distance from `point` to the nearest of `runs` in units of `length_scales`
 /// (infinite when there are no runs).
 pub fn nearest_run_distance(point: &[f64], runs: &[Vec<f64>], length_scales: &[f64]) -> f64 {
     runs.iter()
-        .map(|x| {
-            point
-                .iter()
-                .zip(x)
-                .zip(length_scales)
-                .map(|((p, q), l)| ((p - q) / l).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
+        .map(|x| distance(point, x, length_scales))
         .fold(f64::INFINITY, f64::min)
+}
+
+/// √(Σ_k ((p_k − x_k)/l_k)²).
+fn distance(point: &[f64], run: &[f64], length_scales: &[f64]) -> f64 {
+    point
+        .iter()
+        .zip(run)
+        .zip(length_scales)
+        .map(|((p, q), l)| ((p - q) / l).powi(2))
+        .sum::<f64>()
+        .sqrt()
 }
 
 /// The share of `samples` farther than `threshold` length scales from every run.
@@ -58,9 +63,15 @@ pub fn extrapolation_share(
     if samples.is_empty() {
         return Ok(0.0);
     }
+    // A sample is near as soon as one run lies within the threshold, which for a posterior
+    // sample is usually among the first runs looked at.
     let far = samples
-        .iter()
-        .filter(|s| nearest_run_distance(s, runs, length_scales) > threshold)
+        .par_iter()
+        .filter(|s| {
+            !runs
+                .iter()
+                .any(|x| distance(s, x, length_scales) <= threshold)
+        })
         .count();
     Ok(far as f64 / samples.len() as f64)
 }

@@ -84,10 +84,11 @@ fn main() {
                         .unwrap_or_else(|| "-".into())
                 };
                 println!(
-                    "  start {i}: subset {}; all points {}; merged into {:?}",
+                    "  start {i}: subset {}; all points {}; merged into {:?}; outranked by {:?}",
                     fmt(&s.on_subset),
                     fmt(&s.on_all_points),
-                    s.merged_into
+                    s.merged_into,
+                    s.outranked_by
                 );
             }
             println!(

@@ -169,7 +169,7 @@ impl GpBank {
         let gps = outputs
             .par_iter()
             .enumerate()
-            .map(|(j, y)| fit_with_stream(x, y, options, j as u64))
+            .map(|(j, y)| fit_with_stream(x, y, options, j as u64, None))
             .collect::<Result<Vec<_>>>()?;
         Self::new(input_names, output_names, gps)
     }

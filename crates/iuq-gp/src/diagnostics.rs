@@ -161,6 +161,10 @@ pub struct StartReport {
     pub on_all_points: Option<RunReport>,
     /// The start whose screening end point this one's coincided with (no own refinement).
     pub merged_into: Option<usize>,
+    /// The start with the best screening end point, when this one's subset LML lay more than
+    /// the refinement window below it (no own refinement; [`crate::screening`]).
+    #[serde(default)]
+    pub outranked_by: Option<usize>,
 }
 
 impl StartReport {

@@ -79,7 +79,7 @@ pub use bounds::Bounds;
 pub use classification::{CheckedClassifierOptions, ClassifierOptions, FailureClassifier};
 pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
 pub use error::{GpError, Result};
-pub use fit::{CheckedFitOptions, FitOptions, MAX_RESTARTS, fit};
+pub use fit::{CheckedFitOptions, FitOptions, MAX_RESTARTS, fit, fit_warm};
 pub use gaussian_process::GaussianProcess;
 pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};

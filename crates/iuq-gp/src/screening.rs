@@ -6,21 +6,35 @@
 //! to the full data's (the hyper-parameters describe the same function). So, when n > 2m:
 //! 1. every start is optimised on m training points taken at evenly spaced indices
 //!    ⌊i·n/m⌋ (the design's own density, whatever its order);
-//! 2. the end points are ranked by their subset LML; an end point within 0.01 (max-norm in
-//!    log space, i.e. 1 %) of a better one is merged into it — both would refine to the same
-//!    optimum;
-//! 3. each remaining end point is refined by an optimisation on all n points (with a 100×
+//! 2. the end points are ranked by their subset LML; an end point is merged into a better one
+//!    when both are the same optimum: within 0.01 of it (max-norm in log space, i.e. 1 %), or
+//!    with an LML within [`MERGE_LML`] of it (the optimiser's ends along a flat ridge of the
+//!    LML, which lie apart in θ but refine to the same surrogate);
+//! 3. a remaining end point whose subset LML lies more than [`REFINEMENT_WINDOW`] nats below
+//!    the best one's is not refined: the full data, a superset of the subset, widen an LML gap
+//!    about n/m-fold rather than close it;
+//! 4. each remaining end point is refined by an optimisation on all n points (with a 100×
 //!    tighter function tolerance, as there are few such runs).
 //!
-//! On the 500-point, 11-start benchmark of the crate's `timing` example this cuts the full-data
-//! LML evaluations from ≈ 590 to ≈ 110 (two distinct candidates refined) at an equal or better
-//! optimum.
+//! On the 500-run, 20-output benchmark of `scripts/bench/round_cost.py` (twoexp, 11 starts per
+//! output) steps 2–3 leave one refinement per output where the 1 % rule alone left 2–5, with the
+//! same optimum (the refined LMLs of those candidates agreed to 10⁻³ nats, or the lower basins'
+//! lay hundreds of nats below).
 
 use crate::data::ColumnMajor;
 use crate::gaussian_process::Prepared;
 
 /// Max-norm distance in log space below which two screening end points are merged.
 pub(crate) const MERGE_DISTANCE: f64 = 0.01;
+
+/// Subset LMLs closer than this (nats) are one optimum: the optimiser's function tolerance on
+/// a flat ridge leaves its end points 10⁻⁵–10⁻³ nats apart, while distinct local optima of the
+/// benchmarks lie more than a nat apart.
+pub(crate) const MERGE_LML: f64 = 0.01;
+
+/// End points whose subset LML lies more than this many nats below the best one's are not
+/// refined (a likelihood ratio of e² ≈ 7.4 on the subset alone).
+pub(crate) const REFINEMENT_WINDOW: f64 = 2.0;
 
 /// Factor applied to the function tolerance of the refinement runs.
 pub(crate) const REFINEMENT_TOLERANCE_FACTOR: f64 = 1e-2;
@@ -44,34 +58,53 @@ pub(crate) fn subset(prepared: &Prepared, m: usize) -> Prepared {
     }
 }
 
-/// For each screening end point (θ, LML; `None` for a failed run): `None` if it is to be
-/// refined, or `Some(j)` if it lies within [`MERGE_DISTANCE`] of the better end point j.
-/// Candidates are taken in order of decreasing LML (ties: lower index first).
-pub(crate) fn merge_duplicates(ends: &[(Vec<f64>, Option<f64>)]) -> Vec<Option<usize>> {
-    let mut order: Vec<usize> = (0..ends.len()).filter(|&i| ends[i].1.is_some()).collect();
-    order.sort_by(|&a, &b| {
-        let (la, lb) = (
-            ends[a].1.unwrap_or(f64::NEG_INFINITY),
-            ends[b].1.unwrap_or(f64::NEG_INFINITY),
-        );
-        lb.total_cmp(&la).then(a.cmp(&b))
-    });
-    let mut merged = vec![None; ends.len()];
-    let mut kept: Vec<usize> = Vec::new();
-    for i in order {
-        let close = kept.iter().copied().find(|&r| {
-            ends[i]
-                .0
-                .iter()
-                .zip(&ends[r].0)
-                .all(|(a, b)| (a - b).abs() <= MERGE_DISTANCE)
+/// What becomes of one screening end point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Plan {
+    /// Refined on all training points.
+    Refine,
+    /// The same optimum as the better end point j (no own refinement).
+    MergedInto(usize),
+    /// More than [`REFINEMENT_WINDOW`] nats below the best end point j on the subset.
+    Outranked(usize),
+    /// Its screening run failed.
+    Failed,
+}
+
+/// For each screening end point (θ, LML; `None` for a failed run) its [`Plan`]. Candidates are
+/// taken in order of decreasing LML (ties: lower index first); each is merged into the first
+/// kept one it coincides with (θ within [`MERGE_DISTANCE`], or LML within [`MERGE_LML`]).
+pub(crate) fn refinement_plan(ends: &[(Vec<f64>, Option<f64>)]) -> Vec<Plan> {
+    let mut order: Vec<(usize, f64)> = ends
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, lml))| lml.map(|v| (i, v)))
+        .collect();
+    order.sort_by(|&(a, la), &(b, lb)| lb.total_cmp(&la).then(a.cmp(&b)));
+    let mut plan = vec![Plan::Failed; ends.len()];
+    let Some(&(best, best_lml)) = order.first() else {
+        return plan;
+    };
+    let mut kept: Vec<(usize, f64)> = Vec::new();
+    for (i, lml) in order {
+        let same = kept.iter().copied().find(|&(r, kept_lml)| {
+            kept_lml - lml <= MERGE_LML
+                || ends[i]
+                    .0
+                    .iter()
+                    .zip(&ends[r].0)
+                    .all(|(a, b)| (a - b).abs() <= MERGE_DISTANCE)
         });
-        match close {
-            Some(r) => merged[i] = Some(r),
-            None => kept.push(i),
-        }
+        plan[i] = match same {
+            Some((r, _)) => Plan::MergedInto(r),
+            None if best_lml - lml > REFINEMENT_WINDOW => Plan::Outranked(best),
+            None => {
+                kept.push((i, lml));
+                Plan::Refine
+            }
+        };
     }
-    merged
+    plan
 }
 
 #[cfg(test)]
@@ -97,13 +130,44 @@ mod tests {
         let ends = vec![
             (vec![0.0, 1.0], Some(5.0)),
             (vec![0.005, 1.002], Some(6.0)),
-            (vec![2.0, 1.0], Some(1.0)),
+            (vec![2.0, 1.0], Some(5.5)),
             (vec![0.0, 1.0], None),
             (vec![0.003, 0.999], Some(6.0)),
         ];
         assert_eq!(
-            merge_duplicates(&ends),
-            vec![Some(1), None, None, None, Some(1)]
+            refinement_plan(&ends),
+            vec![
+                Plan::MergedInto(1),
+                Plan::Refine,
+                Plan::Refine,
+                Plan::Failed,
+                Plan::MergedInto(1)
+            ]
         );
+    }
+
+    /// Ends along a flat ridge (apart in θ, equal LML to the optimiser's precision) are one
+    /// candidate; an end point beyond the window below the best is not refined, one inside it
+    /// is.
+    #[test]
+    fn ridges_merge_and_far_worse_optima_are_not_refined() {
+        let ends = vec![
+            (vec![0.0, 1.0], Some(806.2954)),
+            (vec![0.4, 1.3], Some(806.2951)),
+            (vec![-3.0, 0.2], Some(-184.3)),
+            (vec![1.5, -1.0], Some(805.0)),
+            (vec![2.5, -2.0], Some(806.2954 - REFINEMENT_WINDOW - 1e-6)),
+        ];
+        assert_eq!(
+            refinement_plan(&ends),
+            vec![
+                Plan::Refine,
+                Plan::MergedInto(0),
+                Plan::Outranked(0),
+                Plan::Refine,
+                Plan::Outranked(0)
+            ]
+        );
+        assert_eq!(refinement_plan(&[(vec![0.0], None)]), vec![Plan::Failed]);
     }
 }

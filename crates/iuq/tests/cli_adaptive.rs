@@ -673,6 +673,93 @@ fn a_rerun_reads_each_rounds_measurement_back_from_the_store_and_recomputing_agr
     assert_ne!(other["posterior"], first["posterior"]);
 }
 
+/// With more than 256 runs per GP a round's fits start from the round before's optima (warm
+/// starts, recorded in the store with the round). A round measured again after a stop — here
+/// its records deleted from the store, as a kill during its sampling leaves them — fits from
+/// the recorded warm starts and measures what the uninterrupted run measured, bit for bit.
+#[test]
+fn a_round_measured_after_a_stop_warm_starts_its_fits_as_the_uninterrupted_run_did() {
+    let dir = cooling("warm-starts");
+    let study = per_time_study_with_model(&dir, CURVE_EXPRESSION)
+        .replace(
+            "design = { kind = \"lhs\", n = 8, seed = 1 }",
+            "design = { kind = \"lhs\", n = 260, seed = 1 }",
+        )
+        .replace(
+            "adaptive = { batch = 2, max_runs = 160, tolerance = 0.1 }",
+            "adaptive = { batch = 2, max_runs = 4000, max_rounds = 2, samples = 500, log_likelihood_tolerance = 1e-9 }",
+        )
+        .replace("samples = 10000", "samples = 1000");
+    assert!(study.contains("n = 260") && study.contains("max_rounds = 2"));
+    let path = dir.join("expression.toml");
+    std::fs::write(&path, &study).unwrap();
+    let whole = pipeline(&path, &dir.join("whole"));
+    let rounds = rounds_without_times(&dir.join("whole"));
+    assert_eq!(rounds.len(), 2, "{whole}");
+    assert!(
+        rounds[0]["new_runs"].as_u64().unwrap() > 0,
+        "{:?}",
+        rounds[0]
+    );
+
+    let store =
+        rusqlite::Connection::open(dir.join("expression.campaign/campaign.sqlite")).unwrap();
+    let count = |key: &str| -> i64 {
+        store
+            .query_row(
+                "SELECT COUNT(*) FROM derived_results WHERE key = ?1",
+                [key],
+                |row| row.get(0),
+            )
+            .unwrap()
+    };
+    let warm: serde_json::Value = serde_json::from_str(
+        &store
+            .query_row(
+                "SELECT value FROM derived_results WHERE key = 'adaptive-round-1/warm-starts'",
+                [],
+                |row| row.get::<_, String>(0),
+            )
+            .unwrap(),
+    )
+    .unwrap();
+    // One θ per data point (8 times): ln c and the two length scales' logarithms, and ln σ².
+    assert_eq!(warm.as_array().unwrap().len(), 8, "{warm}");
+    assert_eq!(warm[0].as_array().unwrap().len(), 4, "{warm}");
+    assert_eq!(count("adaptive-round-2/warm-starts"), 1);
+
+    store
+        .execute(
+            "DELETE FROM derived_results WHERE key LIKE 'adaptive-round-2/%'",
+            [],
+        )
+        .unwrap();
+    let again = pipeline(&path, &dir.join("again"));
+    assert!(dir.join("again/adaptive/round-2/replicate-1").is_dir());
+    assert!(!dir.join("again/adaptive/round-1").exists());
+    assert_eq!(rounds_without_times(&dir.join("again")), rounds);
+    assert_eq!(again["posterior"], whole["posterior"]);
+
+    // Without the recorded warm starts the round's fits start cold: the same optima, polished
+    // to other points within the refinement's tolerance, so the measurement differs in its last
+    // digits — which is what the record keeps a rerun from.
+    store
+        .execute(
+            "DELETE FROM derived_results WHERE key LIKE 'adaptive-round-2/%' OR key = 'adaptive-round-1/warm-starts'",
+            [],
+        )
+        .unwrap();
+    pipeline(&path, &dir.join("cold"));
+    let cold = rounds_without_times(&dir.join("cold"));
+    assert_eq!(cold[0], rounds[0]);
+    assert_ne!(cold[1], rounds[1]);
+    let (a, b) = (
+        cold[1]["log_evidence"].as_f64().unwrap(),
+        rounds[1]["log_evidence"].as_f64().unwrap(),
+    );
+    assert!((a - b).abs() < 0.05, "log evidence {a} cold vs {b} warm");
+}
+
 #[test]
 fn a_umbridge_model_with_an_abscissa_is_calibrated_through_its_server() {
     let dir = cooling("umbridge");

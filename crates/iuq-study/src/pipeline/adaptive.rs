@@ -67,7 +67,7 @@ use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::{Acquisition, AdaptiveSettings, PosteriorSampling};
-use super::surrogate::{Emulation, Surrogate};
+use super::surrogate::{Emulation, GpStarts, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
 use crate::posterior::build_posterior_with;
@@ -1081,7 +1081,7 @@ fn measure_round(
     round: usize,
     sampling: &RoundSampling,
     groups: &[GroupRuns],
-    carried: &mut [Option<BasisState>],
+    carry: &mut RoundCarry,
 ) -> Result<(RoundMeasurement, RoundScoring)> {
     let RoundInputs {
         study,
@@ -1103,10 +1103,14 @@ fn measure_round(
         runs,
         inputs.low_fidelity,
         &study.space,
-        training_seed,
+        GpStarts {
+            seed: training_seed,
+            warm: carry.warm_starts.as_deref(),
+        },
         emulation,
         describe,
     )?;
+    carry.warm_starts = surrogate.emulator.warm_starts();
     let posterior = build_posterior_with(study, || Ok(surrogate.clone()))?;
     let context = RoundContext {
         study,
@@ -1124,7 +1128,7 @@ fn measure_round(
         carried_replicates,
         surrogate_evaluations,
         surrogate_screenings,
-    } = sample_replicates(&context, &posterior, carried)?;
+    } = sample_replicates(&context, &posterior, &mut carry.populations)?;
     let moments = pooled.moments.clone();
     let state = &pooled;
     // The measurement (u, ε) is made on `candidates` distinct samples; a round that looks wider
@@ -1285,25 +1289,36 @@ impl RoundMeasurement {
     }
 }
 
+/// What one round hands the next.
+struct RoundCarry {
+    /// Each replicate's population (`sampling = "sequential"`; `None`: anneal from the prior).
+    populations: Vec<Option<BasisState>>,
+    /// The fingerprint of the round the populations come from.
+    from: Option<String>,
+    /// Each data point's GP θ, the next fit's warm starts ([`GpStarts`]).
+    warm_starts: Option<Vec<Vec<f64>>>,
+}
+
 /// Round `state.round`'s measurement: read back from the store where it was recorded for the
 /// same inputs and nothing new is to be chosen from it (the round stops, or its runs are
 /// recorded), else measured (the surrogate fitted, its posterior sampled) and recorded.
-/// `carried` holds each replicate's population of the round before and receives this round's.
+/// `carry` holds what the round before handed on (populations, warm starts) and receives this
+/// round's.
 fn measure_or_read_round(
     inputs: &RoundInputs<'_>,
     engine: &AdaptiveEngine,
     state: &EngineState,
     groups: &[GroupRuns],
-    carried: &mut [Option<BasisState>],
-    carried_from: Option<&str>,
+    carry: &mut RoundCarry,
     runs_recorded: bool,
 ) -> Result<MeasuredRound> {
     let round = state.round;
     let label = format!("adaptive-round-{round}");
     let made: usize = groups.iter().map(GroupRuns::len).sum();
-    let fingerprint = round_fingerprint(inputs, &state.sampling, groups, carried_from)?;
+    let fingerprint = round_fingerprint(inputs, &state.sampling, groups, carry.from.as_deref())?;
     let key = format!("{label}/assessment");
     let population_key = format!("{label}/population");
+    let warm_starts_key = format!("{label}/warm-starts");
     let runs = inputs.runs;
     let cached = runs
         .derived_result(&key, &fingerprint)?
@@ -1326,7 +1341,12 @@ fn measure_or_read_round(
             .is_some();
         if stops || runs_recorded {
             let fresh = vec![None; inputs.settings.replicates];
-            carried.clone_from_slice(&recorded_populations.unwrap_or(fresh));
+            carry
+                .populations
+                .clone_from_slice(&recorded_populations.unwrap_or(fresh));
+            carry.warm_starts = runs
+                .derived_result(&warm_starts_key, &fingerprint)?
+                .and_then(|text| serde_json::from_str(&text).ok());
             return Ok(MeasuredRound {
                 measurement: m.clone(),
                 scoring: None,
@@ -1334,9 +1354,19 @@ fn measure_or_read_round(
             });
         }
     }
-    let (m, scoring) = measure_round(inputs, round, &state.sampling, groups, carried)?;
+    let (m, scoring) = measure_round(inputs, round, &state.sampling, groups, carry)?;
+    // Recorded before the assessment: a round read back from the store has its warm starts.
+    if let Some(warm_starts) = &carry.warm_starts {
+        let text = serde_json::to_string(warm_starts).map_err(|e| {
+            StudyError::failure(format!(
+                "adaptive round {round}: cannot record the GPs' hyper-parameters: {e}"
+            ))
+            .with_source(e)
+        })?;
+        runs.record_derived_result(&warm_starts_key, &fingerprint, &text)?;
+    }
     if inputs.keeps_populations() {
-        let text = serde_json::to_string(&carried).map_err(|e| {
+        let text = serde_json::to_string(&carry.populations).map_err(|e| {
             StudyError::failure(format!(
                 "adaptive round {round}: cannot record the population: {e}"
             ))
@@ -1670,8 +1700,11 @@ pub(super) fn refine(
     // Each replicate's population, carried from round to round (`sampling = "sequential"`),
     // and the fingerprint of the round it comes from.
     let sequential = settings.sampling == PosteriorSampling::Sequential;
-    let mut carried: Vec<Option<BasisState>> = vec![None; settings.replicates];
-    let mut carried_from: Option<String> = None;
+    let mut carry = RoundCarry {
+        populations: vec![None; settings.replicates],
+        from: None,
+        warm_starts: None,
+    };
     while state.stop_reason.is_none() {
         events.check_interrupt()?;
         let round = state.round;
@@ -1690,19 +1723,19 @@ pub(super) fn refine(
             &engine,
             &state,
             groups,
-            &mut carried,
-            carried_from.as_deref(),
+            &mut carry,
             recorded.is_some(),
         )?;
         if sequential {
-            carried_from = carried
+            carry.from = carry
+                .populations
                 .iter()
                 .any(Option::is_some)
                 .then(|| fingerprint.clone());
         }
         parameters = measured.parameters.clone();
         let populations = if inputs.keeps_populations() {
-            populations_of(&carried)
+            populations_of(&carry.populations)
         } else {
             None
         };

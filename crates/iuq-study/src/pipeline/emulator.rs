@@ -183,6 +183,18 @@ impl Emulator {
         }
     }
 
+    /// Each data point's GP θ ([`GaussianProcess::theta`]) where each has a GP of its own
+    /// fitted to the runs alone (`None` for a reduced basis or two fidelities): the next
+    /// round's warm starts ([`super::surrogate::GpStarts`]).
+    pub fn warm_starts(&self) -> Option<Vec<Vec<f64>>> {
+        match self {
+            Emulator::PerOutput(bank) => {
+                Some(bank.gps().iter().map(GaussianProcess::theta).collect())
+            }
+            Emulator::ReducedBasis(_) | Emulator::TwoFidelity(_) => None,
+        }
+    }
+
     /// Every output's latent posterior covariance over `points`, where each output has an
     /// emulator of its own (`None` for a reduced basis, whose outputs share its components').
     pub fn output_covariances(&self, points: &[Vec<f64>]) -> Result<Option<Vec<Vec<Vec<f64>>>>> {

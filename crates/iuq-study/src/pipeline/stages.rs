@@ -24,7 +24,7 @@ use super::report_data::{PipelineResults, PointRuns, write_pipeline_report};
 use super::run_groups::{GroupRuns, RunOrigin};
 use super::settings::PIPELINE_FINAL_SAMPLES;
 use super::settings::{PipelineSettings, ReducedBasisChoice, parse_pipeline_settings};
-use super::surrogate::{Emulation, Surrogate};
+use super::surrogate::{Emulation, GpStarts, Surrogate};
 use super::{PipelineOptions, PipelineOutcome, cell_portraits, emulator, model_posterior};
 use crate::error::{BadInput, Context, Result, input_error};
 use crate::likelihood_section::DataLikelihood;
@@ -456,7 +456,7 @@ impl<'a> PipelineRun<'a> {
             &self.model_runs,
             self.low_fidelity.as_ref(),
             &self.study.space,
-            self.settings.training_seed,
+            GpStarts::cold(self.settings.training_seed),
             &self.emulation,
             |j| self.describe(j),
         )?;

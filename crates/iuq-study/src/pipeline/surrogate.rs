@@ -14,6 +14,8 @@ use iuq_gp::{
     MultiFidelityGp, ReducedBasis, ReducedBasisOptions,
 };
 
+use rayon::prelude::*;
+
 use super::emulator::{Emulator, ReducedBasisSettings};
 use super::low_fidelity::LowFidelity;
 use super::model_runs::ModelRuns;
@@ -88,9 +90,29 @@ fn classifier_bounds(space: &ParameterSpace, points: &[Vec<f64>]) -> Vec<(f64, f
         .collect()
 }
 
+/// How a surrogate's GP fits start: the seed of their multi-start designs, and optionally each
+/// data point's θ from an earlier fit (`iuq_gp::fit_warm`; the adaptive engine passes the round
+/// before's, so that a round on a few more runs polishes the same optimum instead of refining
+/// its multi-start from the subset's).
+#[derive(Debug, Clone, Copy)]
+pub struct GpStarts<'a> {
+    /// GP j's multi-start design is drawn with seed `seed + j`.
+    pub seed: u64,
+    /// θ per data point of an earlier fit of one GP per data point (ignored by other emulators).
+    pub warm: Option<&'a [Vec<f64>]>,
+}
+
+impl GpStarts<'_> {
+    /// Cold starts from `seed`.
+    pub fn cold(seed: u64) -> Self {
+        GpStarts { seed, warm: None }
+    }
+}
+
 impl Surrogate {
-    /// Fit the emulator (GP j with seed `seed + j`; component k of a reduced basis with seed
-    /// `seed + k`) and the classifiers of `groups`.
+    /// Fit the emulator (GP j with seed `starts.seed + j`, warm-started from `starts.warm[j]`
+    /// where given; component k of a reduced basis with seed `starts.seed + k`) and the
+    /// classifiers of `groups`.
     ///
     /// # Errors
     /// A data point with fewer than 3 successful training runs, or a fit that fails.
@@ -102,16 +124,17 @@ impl Surrogate {
         runs: &ModelRuns,
         low: Option<&LowFidelity>,
         space: &ParameterSpace,
-        seed: u64,
+        starts: GpStarts<'_>,
         emulation: &Emulation,
         describe: impl Fn(usize) -> String,
     ) -> Result<Self> {
+        let seed = starts.seed;
         if let Emulation::ReducedBasis { settings, scale } = emulation {
             return Self::fit_reduced_basis(groups, runs, space, seed, settings, scale, describe);
         }
-        let mut two_fidelity = Vec::new();
-        let mut gps = Vec::with_capacity(runs.output_names().len());
-        let mut classifiers = Vec::with_capacity(groups.len());
+        // Every data point's training runs, checked in order; then the fits, in parallel (each
+        // is deterministic, so the surrogate does not depend on the number of threads).
+        let mut tasks = Vec::with_capacity(runs.output_names().len());
         for (g, group) in groups.iter().enumerate() {
             for (k, j) in runs.group_outputs(g).enumerate() {
                 let training = group.training(k);
@@ -129,24 +152,43 @@ impl Surrogate {
                 let options = FitOptions {
                     seed: seed.wrapping_add(j as u64),
                     ..Default::default()
-                };
-                if let Some(low) = low {
-                    let cheap = low.training(j)?;
-                    let gp = MultiFidelityGp::fit(
-                        &cheap.x,
-                        &cheap.y,
-                        &training.x,
-                        &training.y,
-                        &options.check()?,
-                    )
-                    .with_context(|| format!("two-fidelity GP fit {}", describe(j)))?;
-                    two_fidelity.push(gp);
-                    continue;
                 }
-                let gp = GaussianProcess::fit(&training.x, &training.y, &options.check()?)
-                    .with_context(|| format!("GP fit {}", describe(j)))?;
-                gps.push(gp);
+                .check()?;
+                let cheap = low.map(|low| low.training(j)).transpose()?;
+                tasks.push((j, training, cheap, options));
             }
+        }
+        let fits: Vec<_> = tasks
+            .par_iter()
+            .map(|(j, training, cheap, options)| match cheap {
+                Some(cheap) => {
+                    MultiFidelityGp::fit(&cheap.x, &cheap.y, &training.x, &training.y, options)
+                        .map(|gp| FittedOutput::TwoFidelity(Box::new(gp)))
+                }
+                None => match starts.warm.and_then(|warm| warm.get(*j)) {
+                    Some(warm) => {
+                        GaussianProcess::fit_warm(&training.x, &training.y, options, warm)
+                    }
+                    None => GaussianProcess::fit(&training.x, &training.y, options),
+                }
+                .map(|gp| FittedOutput::Single(Box::new(gp))),
+            })
+            .collect();
+        let mut two_fidelity = Vec::new();
+        let mut gps = Vec::with_capacity(fits.len());
+        for ((j, _, cheap, _), fit) in tasks.iter().zip(fits) {
+            let kind = if cheap.is_some() {
+                "two-fidelity GP fit"
+            } else {
+                "GP fit"
+            };
+            match fit.with_context(|| format!("{kind} {}", describe(*j)))? {
+                FittedOutput::Single(gp) => gps.push(*gp),
+                FittedOutput::TwoFidelity(gp) => two_fidelity.push(*gp),
+            }
+        }
+        let mut classifiers = Vec::with_capacity(groups.len());
+        for (g, group) in groups.iter().enumerate() {
             let (points, failed) = group.failure_labels();
             let bounds = classifier_bounds(space, &points);
             let classifier = FailureClassifier::fit(
@@ -301,4 +343,10 @@ impl Surrogate {
         }
         Ok(outcomes)
     }
+}
+
+/// One data point's fitted emulator.
+enum FittedOutput {
+    Single(Box<GaussianProcess>),
+    TwoFidelity(Box<MultiFidelityGp>),
 }
