@@ -83,7 +83,8 @@ pub use error::{BasisError, Result};
 pub use likelihood::{FnLikelihood, LogDensityLikelihood, LogLikelihood, PointLogLikelihood};
 pub use model_posterior::{
     ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings, ModelPosteriorStage,
-    ModelPosteriorStop, SurrogatePopulation, model_posterior, selected_members,
+    ModelPosteriorStop, SurrogatePopulation, Tempering, model_posterior, resume_model_posterior,
+    selected_members,
 };
 pub use moment_matching::{GaussianLogRatio, ProposalMismatch, proposal_mismatch};
 pub use pareto_smoothing::{

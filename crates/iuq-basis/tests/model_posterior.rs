@@ -13,7 +13,8 @@
 
 use iuq_basis::{
     FnLikelihood, LogLikelihood, ModelPosterior, ModelPosteriorEvent, ModelPosteriorSettings,
-    ModelPosteriorStop, SurrogatePopulation, model_posterior, pareto_k_threshold,
+    ModelPosteriorStop, SurrogatePopulation, Tempering, model_posterior, pareto_k_threshold,
+    resume_model_posterior,
 };
 use iuq_core::random::stream;
 use iuq_core::{Control, Parameter, ParameterSpace, Prior};
@@ -146,6 +147,9 @@ fn seeded_run(
                 }
                 ModelPosteriorEvent::CorrectionNotMade(reason) => {
                     not_made = Some(reason.to_string())
+                }
+                ModelPosteriorEvent::Bridged(state) => {
+                    assert_eq!(state.stages(), &stages[..], "a bridge follows its stage")
                 }
             }
             Control::Continue
@@ -371,6 +375,95 @@ fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
         calls.load(std::sync::atomic::Ordering::Relaxed)
     );
     assert_matches(&bridged, &mean, &std, "narrow surrogate, bridged");
+}
+
+/// The state between two stages, written as JSON after a bridge and read back, goes on to the
+/// uninterrupted run's posterior bit for bit, without the bridges before it (only the first
+/// batch is asked of the model again, as a rerun asks a campaign store); a state of another
+/// run is refused.
+#[test]
+fn a_tempering_resumed_from_its_checkpoint_ends_where_the_uninterrupted_run_did() {
+    let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
+    let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
+    let calls = std::sync::atomic::AtomicUsize::new(0);
+    let model = FnLikelihood::new(2, {
+        let f = gaussian(mean.clone(), std.clone());
+        let calls = &calls;
+        move |x: &[f64]| {
+            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            f(x)
+        }
+    });
+    let settings = ModelPosteriorSettings {
+        samples: 400,
+        corrections: 0,
+        ..Default::default()
+    };
+    let space = space(2);
+    let surrogate = FnLikelihood::new(2, gaussian(mean.clone(), s_std.clone()));
+    let (samples, ll, lp) = seeded_population(7, 4000, &mean, &s_std, &surrogate, &space);
+    let population = || SurrogatePopulation {
+        samples: &samples,
+        log_likelihood: &ll,
+        log_prior: &lp,
+        log_evidence: 0.0,
+    };
+    let mut checkpoints: Vec<String> = Vec::new();
+    let whole = model_posterior(
+        &space,
+        population(),
+        &surrogate,
+        &model,
+        &settings,
+        &mut |event: &ModelPosteriorEvent<'_>| {
+            if let ModelPosteriorEvent::Bridged(state) = event {
+                checkpoints.push(serde_json::to_string(state).unwrap());
+            }
+            Control::Continue
+        },
+    )
+    .unwrap();
+    assert!(whole.certified(), "{}", whole.stop);
+    assert!(whole.stages.len() >= 3, "{:#?}", whole.stages);
+    assert_eq!(checkpoints.len(), whole.stages.len() - 1, "one per bridge");
+
+    let first: Tempering = serde_json::from_str(&checkpoints[0]).unwrap();
+    assert_eq!(first.stages(), &whole.stages[..1]);
+    assert!(first.beta() > 0.0 && first.beta() < 1.0);
+    calls.store(0, std::sync::atomic::Ordering::Relaxed);
+    let resumed = resume_model_posterior(
+        &space,
+        population(),
+        &surrogate,
+        &model,
+        &settings,
+        first.clone(),
+        &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
+    )
+    .unwrap();
+    assert_eq!(resumed, whole);
+    assert_eq!(
+        calls.load(std::sync::atomic::Ordering::Relaxed),
+        400 + whole.model_evaluations - first.model_evaluations(),
+        "the first batch again, then only the bridges after the checkpoint"
+    );
+
+    let other = resume_model_posterior(
+        &space,
+        population(),
+        &surrogate,
+        &model,
+        &ModelPosteriorSettings {
+            samples: 300,
+            ..settings
+        },
+        first,
+        &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
+    );
+    assert!(
+        matches!(other, Err(iuq_basis::BasisError::CheckpointMismatch(_))),
+        "{other:?}"
+    );
 }
 
 /// Stopped short of β = 1 (`max_stages = 1`, no correction) the result says so: not certified,

@@ -30,11 +30,11 @@ pub(crate) const MERGE_DISTANCE: f64 = 0.01;
 /// Subset LMLs closer than this (nats) are one optimum: the optimiser's function tolerance on
 /// a flat ridge leaves its end points 10⁻⁵–10⁻³ nats apart, while distinct local optima of the
 /// benchmarks lie more than a nat apart.
-pub(crate) const MERGE_LML: f64 = 0.01;
+pub const MERGE_LML: f64 = 0.01;
 
 /// End points whose subset LML lies more than this many nats below the best one's are not
 /// refined (a likelihood ratio of e² ≈ 7.4 on the subset alone).
-pub(crate) const REFINEMENT_WINDOW: f64 = 2.0;
+pub const REFINEMENT_WINDOW: f64 = 2.0;
 
 /// Factor applied to the function tolerance of the refinement runs.
 pub(crate) const REFINEMENT_TOLERANCE_FACTOR: f64 = 1e-2;

@@ -3,6 +3,7 @@
 //! where a correction's posterior leaves its batch.
 
 use iuq_core::ParameterSpace;
+use serde::{Deserialize, Serialize};
 
 use super::settings::MIN_CORRECTED_WITHIN_BATCH;
 use crate::error::{BasisError, Result};
@@ -10,11 +11,16 @@ use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 use crate::pareto_smoothing::normalised_weights;
 use crate::spread_ratio::widest_spread_ratio;
 
-/// Members with their surrogate and model log-likelihoods and log-priors.
+/// Members with their surrogate and model log-likelihoods and log-priors (−∞, a failed run,
+/// written as `null` in a checkpoint).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Members {
     pub(crate) theta: Vec<Vec<f64>>,
+    #[serde(with = "crate::json_numbers::negative_infinity_as_null")]
     pub(crate) surrogate: Vec<f64>,
+    #[serde(with = "crate::json_numbers::negative_infinity_as_null")]
     pub(crate) model: Vec<f64>,
+    #[serde(with = "crate::json_numbers::negative_infinity_as_null")]
     pub(crate) prior: Vec<f64>,
 }
 
@@ -155,7 +161,7 @@ pub(crate) fn coefficient_of_variation(log_weights: &[f64]) -> f64 {
 }
 
 /// The best model-evaluated point so far (largest ℓ_m + ln π; the first one on ties).
-#[derive(Default)]
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub(crate) struct Best {
     pub(super) point: Option<(Vec<f64>, f64, f64)>,
 }

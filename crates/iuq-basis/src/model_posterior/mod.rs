@@ -89,7 +89,7 @@ use members::{
     Best, BoxedCorrection, CorrectedLikelihood, Members, coefficient_of_variation, evaluate,
     largest_finite, log_ratios, recorded_spread_ratio,
 };
-use records::EventObserver;
+use records::{EventObserver, report};
 pub use records::{
     ModelPosterior, ModelPosteriorEvent, ModelPosteriorStage, ModelPosteriorStop,
     SurrogateCorrection, SurrogatePopulation,
@@ -101,6 +101,7 @@ pub use settings::{
 
 use iuq_core::ParameterSpace;
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
+use serde::{Deserialize, Serialize};
 
 use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
@@ -126,6 +127,50 @@ pub fn model_posterior(
     surrogate: &dyn LogLikelihood,
     model: &dyn LogLikelihood,
     settings: &ModelPosteriorSettings,
+    observer: &mut dyn for<'a> Observer<ModelPosteriorEvent<'a>>,
+) -> Result<ModelPosterior> {
+    run_method(
+        space, population, surrogate, model, settings, None, observer,
+    )
+}
+
+/// [`model_posterior`] going on from `checkpoint`, the state a run of the same inputs reported
+/// after one of its bridges ([`ModelPosteriorEvent::Bridged`]): the first batch and any
+/// correction are made again (the same model points in the same order, which a campaign store
+/// answers from its runs), the stages up to the checkpoint are not, and the result is the
+/// uninterrupted run's, bit for bit.
+///
+/// # Errors
+/// As [`model_posterior`]; [`BasisError::CheckpointMismatch`] where `checkpoint` is not a
+/// state of this run's tempering (another member count or other stages before it).
+pub fn resume_model_posterior(
+    space: &ParameterSpace,
+    population: SurrogatePopulation<'_>,
+    surrogate: &dyn LogLikelihood,
+    model: &dyn LogLikelihood,
+    settings: &ModelPosteriorSettings,
+    checkpoint: Tempering,
+    observer: &mut dyn for<'a> Observer<ModelPosteriorEvent<'a>>,
+) -> Result<ModelPosterior> {
+    run_method(
+        space,
+        population,
+        surrogate,
+        model,
+        settings,
+        Some(checkpoint),
+        observer,
+    )
+}
+
+/// The body of [`model_posterior`] and [`resume_model_posterior`].
+fn run_method(
+    space: &ParameterSpace,
+    population: SurrogatePopulation<'_>,
+    surrogate: &dyn LogLikelihood,
+    model: &dyn LogLikelihood,
+    settings: &ModelPosteriorSettings,
+    resume: Option<Tempering>,
     observer: &mut dyn for<'a> Observer<ModelPosteriorEvent<'a>>,
 ) -> Result<ModelPosterior> {
     settings.check()?;
@@ -168,7 +213,7 @@ pub fn model_posterior(
     {
         state.adopt_mixture(certified, observer)
     } else {
-        state.temper(&inputs, observer)?
+        state.temper(&inputs, resume, observer)?
     };
     state.into_posterior(space, settings, weights, population.samples)
 }
@@ -365,19 +410,26 @@ impl MethodState {
     fn temper(
         &mut self,
         bridge: &MethodInputs<'_>,
+        resume: Option<Tempering>,
         observer: &mut EventObserver<'_>,
     ) -> Result<TemperedWeights> {
-        let mut tempering = Tempering {
-            members: self.take_members(),
-            ancestor: std::mem::take(&mut self.ancestor),
-            beta: 0.0,
-            log_evidence_ratio: self.log_evidence_ratio,
-            stages: std::mem::take(&mut self.stages),
-            stage_evaluations: self.stage_evaluations,
-            bridge_rates: (None, None),
-            evaluations: self.evaluations,
-            failures: self.failures,
-            best: std::mem::take(&mut self.best),
+        let mut tempering = match resume {
+            Some(resumed) => {
+                resumed.check_resumes(self)?;
+                resumed
+            }
+            None => Tempering {
+                members: self.take_members(),
+                ancestor: std::mem::take(&mut self.ancestor),
+                beta: 0.0,
+                log_evidence_ratio: self.log_evidence_ratio,
+                stages: std::mem::take(&mut self.stages),
+                stage_evaluations: self.stage_evaluations,
+                bridge_rates: (None, None),
+                evaluations: self.evaluations,
+                failures: self.failures,
+                best: std::mem::take(&mut self.best),
+            },
         };
         let weights = loop {
             if let Some(done) = tempering.step(bridge, self.threshold, observer)? {
@@ -568,8 +620,11 @@ fn weighted_moments(
 }
 
 /// The tempered stages from the (corrected) surrogate's posterior, β = 0, to the model's,
-/// β = 1: the state between two stages, one [`Tempering::step`] per stage (argmin's shape).
-struct Tempering {
+/// β = 1: the state between two stages, one step per stage (argmin's shape). Reported after
+/// every bridge ([`ModelPosteriorEvent::Bridged`]) and serialisable (JSON: −∞ as `null`), so a
+/// run stopped there goes on with [`resume_model_posterior`] without the bridges' model runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tempering {
     members: Members,
     /// Each member's ancestor in the batch the stages started from (itself until a bridge
     /// resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
@@ -702,7 +757,44 @@ impl Tempering {
             Some(moved.screen_acceptance),
             Some(moved.confirm_acceptance),
         );
+        report(observer, ModelPosteriorEvent::Bridged(self))?;
         Ok(None)
+    }
+
+    /// The stages so far.
+    pub fn stages(&self) -> &[ModelPosteriorStage] {
+        &self.stages
+    }
+
+    /// β reached so far.
+    pub fn beta(&self) -> f64 {
+        self.beta
+    }
+
+    /// Model evaluations so far, every batch and bridge together.
+    pub fn model_evaluations(&self) -> usize {
+        self.evaluations
+    }
+
+    /// Whether this state can go on in `state`'s run: the same members' count and the same
+    /// record of the stages before the tempering began.
+    fn check_resumes(&self, state: &MethodState) -> Result<()> {
+        let before = state.stages.len();
+        if self.members.theta.len() != state.members.theta.len()
+            || self.stages.len() <= before
+            || self.stages[..before] != state.stages[..]
+            || self.beta <= 0.0
+        {
+            return Err(BasisError::CheckpointMismatch(format!(
+                "the tempering state holds {} members after {} stages at β = {}; this run has {} members and {} stages before its tempering",
+                self.members.theta.len(),
+                self.stages.len(),
+                self.beta,
+                state.members.theta.len(),
+                before
+            )));
+        }
+        Ok(())
     }
 }
 

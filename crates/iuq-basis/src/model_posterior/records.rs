@@ -294,6 +294,10 @@ pub enum ModelPosteriorEvent<'a> {
     CorrectionNotMade(&'a str),
     /// A stage ended.
     Stage(&'a ModelPosteriorStage),
+    /// A bridge ended: the state between two stages, from which
+    /// [`resume_model_posterior`](super::resume_model_posterior()) goes on (serialisable, as
+    /// BASIS's [`BasisState`](crate::BasisState) is).
+    Bridged(&'a super::Tempering),
 }
 
 /// The observer of [`model_posterior`](super::model_posterior())'s events, inside the method.

@@ -596,6 +596,9 @@ fn estimate(
                 ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
                     "model posterior: no correction of the surrogate: {reason}"
                 )),
+                // A rerun goes on through the store, which answers the same model points in
+                // the same order from its runs; the state between stages is not kept.
+                ModelPosteriorEvent::Bridged(_) => {}
             }
             Control::Continue
         },
