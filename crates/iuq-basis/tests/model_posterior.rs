@@ -448,21 +448,59 @@ fn a_tempering_resumed_from_its_checkpoint_ends_where_the_uninterrupted_run_did(
         "the first batch again, then only the bridges after the checkpoint"
     );
 
-    let other = resume_model_posterior(
-        &space,
-        population(),
-        &surrogate,
-        &model,
-        &ModelPosteriorSettings {
-            samples: 300,
-            ..settings
-        },
-        first,
-        &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
+    // Refused: another member count (before any model run), another population of the same
+    // size, other settings, and a state whose parts do not fit together.
+    let refused = |result: Result<ModelPosterior, iuq_basis::BasisError>, what: &str| {
+        assert!(
+            matches!(result, Err(iuq_basis::BasisError::CheckpointMismatch(_))),
+            "{what}: {result:?}"
+        );
+    };
+    calls.store(0, std::sync::atomic::Ordering::Relaxed);
+    let resume = |population: SurrogatePopulation<'_>,
+                  settings: &ModelPosteriorSettings,
+                  checkpoint: Tempering| {
+        resume_model_posterior(
+            &space,
+            population,
+            &surrogate,
+            &model,
+            settings,
+            checkpoint,
+            &mut |_: &ModelPosteriorEvent<'_>| Control::Continue,
+        )
+    };
+    let fewer = ModelPosteriorSettings {
+        samples: 300,
+        ..settings.clone()
+    };
+    refused(resume(population(), &fewer, first.clone()), "300 members");
+    assert_eq!(calls.load(std::sync::atomic::Ordering::Relaxed), 0);
+    let (samples8, ll8, lp8) = seeded_population(8, 4000, &mean, &s_std, &surrogate, &space);
+    let another = SurrogatePopulation {
+        samples: &samples8,
+        log_likelihood: &ll8,
+        log_prior: &lp8,
+        log_evidence: 0.0,
+    };
+    refused(
+        resume(another, &settings, first.clone()),
+        "another population",
     );
-    assert!(
-        matches!(other, Err(iuq_basis::BasisError::CheckpointMismatch(_))),
-        "{other:?}"
+    let reseeded = ModelPosteriorSettings {
+        seed: settings.seed + 1,
+        ..settings.clone()
+    };
+    refused(
+        resume(population(), &reseeded, first.clone()),
+        "another seed",
+    );
+    let mut corrupt: serde_json::Value = serde_json::from_str(&checkpoints[0]).unwrap();
+    corrupt["ancestor"][0] = serde_json::json!(100_000);
+    let corrupt: Tempering = serde_json::from_value(corrupt).unwrap();
+    refused(
+        resume(population(), &settings, corrupt),
+        "an ancestor out of range",
     );
 }
 

@@ -165,6 +165,10 @@ pub struct StartReport {
     /// the refinement window below it (no own refinement; [`crate::screening`]).
     #[serde(default)]
     pub outranked_by: Option<usize>,
+    /// The start whose θ the refinement on all points began at, where not this start's own
+    /// screening end point: the warm start ([`crate::fit_warm`]).
+    #[serde(default)]
+    pub refined_from: Option<usize>,
 }
 
 impl StartReport {

@@ -180,12 +180,14 @@ pub fn fit(x: &[Vec<f64>], y: &[f64], options: &CheckedFitOptions) -> Result<Gau
 /// [`fit`] with `warm`, the θ (log space, [`GaussianProcess::theta`]) of an earlier fit of the
 /// same output — typically on most of the same runs — as one more start.
 ///
-/// The warm start changes where the winning optimum is polished, not which optimum wins: it
-/// is screened on the subset with the other starts, and the best candidate of the screening
-/// ([`crate::screening`]) is refined on all points from the warm θ instead of from its subset
-/// end point when the warm start's subset run ended at that same optimum. From there the
-/// refinement takes a few LML evaluations instead of tens, as an optimum moves little when a
-/// few runs join. Without screening (n ≤ 2·[`FitOptions::screening_points`]), or with a θ of
+/// The warm start changes where an optimum is polished, not which optima are refined nor so
+/// which wins: it is screened on the subset after the other starts, the candidates to refine
+/// are chosen among the other starts' end points alone ([`crate::screening`]), and the
+/// candidate whose optimum the warm start's subset run ended at (the same θ within 1 % or the
+/// same subset LML within [`crate::screening::MERGE_LML`]) is refined on all points from the
+/// warm θ instead of from its subset end point; a warm start that ended elsewhere is not
+/// refined. From the warm θ the refinement takes a few LML evaluations instead of tens, as an
+/// optimum moves little when a few runs join. Without screening (n ≤ 2·[`FitOptions::screening_points`]), or with a θ of
 /// the wrong length, `warm` is ignored and the fit is [`fit`]'s.
 ///
 /// # Errors
@@ -262,6 +264,7 @@ pub(crate) fn fit_with_stream(
                 on_all_points: Some(run(&prepared, &kernel, options, start, &lower, &upper, 1.0)),
                 merged_into: None,
                 outranked_by: None,
+                refined_from: None,
             })
             .collect();
     }
@@ -404,22 +407,25 @@ fn screened_runs(
         .iter()
         .map(|r| (r.theta.clone(), r.log_marginal_likelihood))
         .collect();
-    let plan = screening::refinement_plan(&ends);
+    // The plan of the multi-start alone: the warm start only chooses where the candidate it
+    // screened into is refined from, never which candidates are refined.
+    let cold = warm.unwrap_or(starts.len());
+    let mut plan = screening::refinement_plan(&ends[..cold]);
+    let warm_candidate = warm.and_then(|w| screening::coinciding_candidate(&ends, &plan, w));
+    if warm.is_some() {
+        plan.push(match warm_candidate {
+            Some(r) => screening::Plan::MergedInto(r),
+            None => screening::Plan::Unmatched,
+        });
+    }
     let refine: Vec<usize> = (0..starts.len())
         .filter(|&i| plan[i] == screening::Plan::Refine)
         .collect();
-    let warm_candidate = warm.and_then(|w| match plan[w] {
-        screening::Plan::Refine => Some(w),
-        screening::Plan::MergedInto(r) => Some(r),
-        _ => None,
-    });
+    let refined_from = |i: usize| warm.filter(|_| warm_candidate == Some(i));
     let refined: Vec<RunReport> = refine
         .par_iter()
         .map(|&i| {
-            let from = match warm {
-                Some(w) if warm_candidate == Some(i) => &starts[w],
-                _ => &coarse[i].theta,
-            };
+            let from = refined_from(i).map_or(&coarse[i].theta, |w| &starts[w]);
             run(
                 prepared,
                 kernel,
@@ -436,18 +442,22 @@ fn screened_runs(
         .iter()
         .zip(coarse)
         .enumerate()
-        .map(|(i, (start, on_subset))| StartReport {
-            start: start.clone(),
-            on_subset: Some(on_subset),
-            on_all_points: refined.next_if(|(j, _)| *j == i).map(|(_, r)| r),
-            merged_into: match plan[i] {
-                screening::Plan::MergedInto(j) => Some(j),
-                _ => None,
-            },
-            outranked_by: match plan[i] {
-                screening::Plan::Outranked(j) => Some(j),
-                _ => None,
-            },
+        .map(|(i, (start, on_subset))| {
+            let on_all_points = refined.next_if(|(j, _)| *j == i).map(|(_, r)| r);
+            StartReport {
+                start: start.clone(),
+                on_subset: Some(on_subset),
+                refined_from: on_all_points.as_ref().and_then(|_| refined_from(i)),
+                on_all_points,
+                merged_into: match plan[i] {
+                    screening::Plan::MergedInto(j) => Some(j),
+                    _ => None,
+                },
+                outranked_by: match plan[i] {
+                    screening::Plan::Outranked(j) => Some(j),
+                    _ => None,
+                },
+            }
         })
         .collect()
 }

@@ -69,6 +69,47 @@ pub(crate) enum Plan {
     Outranked(usize),
     /// Its screening run failed.
     Failed,
+    /// A warm start ([`crate::fit_warm`]) whose end point coincides with no candidate's.
+    Unmatched,
+}
+
+/// Whether two end points are one optimum: θ within [`MERGE_DISTANCE`] (max-norm) or LML
+/// within [`MERGE_LML`].
+fn coincide(a: &(Vec<f64>, Option<f64>), b: &(Vec<f64>, Option<f64>)) -> bool {
+    let (Some(la), Some(lb)) = (a.1, b.1) else {
+        return false;
+    };
+    (la - lb).abs() <= MERGE_LML
+        || a.0
+            .iter()
+            .zip(&b.0)
+            .all(|(x, y)| (x - y).abs() <= MERGE_DISTANCE)
+}
+
+/// The candidate to refine (`Plan::Refine`) whose cluster the end point `ends[w]` coincides
+/// with, taking the cluster members in order of decreasing LML; `plan` covers the end points
+/// before `w`.
+pub(crate) fn coinciding_candidate(
+    ends: &[(Vec<f64>, Option<f64>)],
+    plan: &[Plan],
+    w: usize,
+) -> Option<usize> {
+    let mut order: Vec<usize> = (0..plan.len()).filter(|&i| ends[i].1.is_some()).collect();
+    order.sort_by(|&a, &b| {
+        let (la, lb) = (
+            ends[a].1.unwrap_or(f64::NEG_INFINITY),
+            ends[b].1.unwrap_or(f64::NEG_INFINITY),
+        );
+        lb.total_cmp(&la).then(a.cmp(&b))
+    });
+    order.into_iter().find_map(|i| {
+        let candidate = match plan[i] {
+            Plan::Refine => i,
+            Plan::MergedInto(r) => r,
+            _ => return None,
+        };
+        coincide(&ends[w], &ends[i]).then_some(candidate)
+    })
 }
 
 /// For each screening end point (θ, LML; `None` for a failed run) its [`Plan`]. Candidates are
@@ -87,14 +128,10 @@ pub(crate) fn refinement_plan(ends: &[(Vec<f64>, Option<f64>)]) -> Vec<Plan> {
     };
     let mut kept: Vec<(usize, f64)> = Vec::new();
     for (i, lml) in order {
-        let same = kept.iter().copied().find(|&(r, kept_lml)| {
-            kept_lml - lml <= MERGE_LML
-                || ends[i]
-                    .0
-                    .iter()
-                    .zip(&ends[r].0)
-                    .all(|(a, b)| (a - b).abs() <= MERGE_DISTANCE)
-        });
+        let same = kept
+            .iter()
+            .copied()
+            .find(|&(r, _)| coincide(&ends[i], &ends[r]));
         plan[i] = match same {
             Some((r, _)) => Plan::MergedInto(r),
             None if best_lml - lml > REFINEMENT_WINDOW => Plan::Outranked(best),
@@ -169,5 +206,26 @@ mod tests {
             ]
         );
         assert_eq!(refinement_plan(&[(vec![0.0], None)]), vec![Plan::Failed]);
+    }
+
+    /// A warm start's end point goes to the candidate of the cluster it coincides with (by θ
+    /// or by LML), and to none where it ended in an optimum of its own.
+    #[test]
+    fn a_warm_end_point_joins_the_candidate_it_coincides_with() {
+        let mut ends = vec![
+            (vec![0.0, 1.0], Some(806.2954)),
+            (vec![0.4, 1.3], Some(806.2951)),
+            (vec![1.5, -1.0], Some(805.0)),
+        ];
+        let plan = refinement_plan(&ends);
+        assert_eq!(plan, vec![Plan::Refine, Plan::MergedInto(0), Plan::Refine]);
+        ends.push((vec![0.405, 1.295], Some(806.10)));
+        assert_eq!(coinciding_candidate(&ends, &plan, 3), Some(0));
+        ends[3] = (vec![1.504, -1.002], Some(804.9));
+        assert_eq!(coinciding_candidate(&ends, &plan, 3), Some(2));
+        ends[3] = (vec![3.0, 3.0], Some(900.0));
+        assert_eq!(coinciding_candidate(&ends, &plan, 3), None);
+        ends[3] = (vec![0.0, 1.0], None);
+        assert_eq!(coinciding_candidate(&ends, &plan, 3), None);
     }
 }

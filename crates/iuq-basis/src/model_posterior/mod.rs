@@ -92,7 +92,7 @@ use members::{
 use records::{EventObserver, report};
 pub use records::{
     ModelPosterior, ModelPosteriorEvent, ModelPosteriorStage, ModelPosteriorStop,
-    SurrogateCorrection, SurrogatePopulation,
+    SurrogateCorrection, SurrogatePopulation, Tempering,
 };
 pub use settings::{
     MIN_CORRECTED_WITHIN_BATCH, MIN_SAMPLES, ModelPosteriorSettings, NEARLY_EQUAL_CV, STREAM_BASE,
@@ -101,7 +101,6 @@ pub use settings::{
 
 use iuq_core::ParameterSpace;
 use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
-use serde::{Deserialize, Serialize};
 
 use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
@@ -118,9 +117,9 @@ use crate::spread_ratio::within_proposal_spread;
 
 /// The model's posterior from the surrogate's `population` (see the module documentation):
 /// `surrogate` and `model` are the two log-likelihoods of the same parameters on `space`;
-/// `observer` sees each correction before its batch and every stage as it ends; its
-/// [`Control::Stop`] ends the method with [`BasisError::Interrupted`] (unless the event was its
-/// last stage).
+/// `observer` sees each correction before its batch, every stage as it ends and the state
+/// after every bridge ([`ModelPosteriorEvent::Bridged`]); its [`Control::Stop`] ends the method
+/// with [`BasisError::Interrupted`] (unless the event was its last stage).
 pub fn model_posterior(
     space: &ParameterSpace,
     population: SurrogatePopulation<'_>,
@@ -176,6 +175,21 @@ fn run_method(
     settings.check()?;
     check_inputs(space, &population, surrogate, model)?;
     let s = settings.samples.min(population.samples.len());
+    // Refused before any model run: a state of another member count, or of a method that
+    // does not temper.
+    if let Some(checkpoint) = &resume
+        && (checkpoint.members.theta.len() != s || settings.pseudo_marginal)
+    {
+        return Err(BasisError::CheckpointMismatch(format!(
+            "the tempering state holds {} members; this run weighs {s}{}",
+            checkpoint.members.theta.len(),
+            if settings.pseudo_marginal {
+                " in one step (pseudo_marginal), without stages"
+            } else {
+                ""
+            }
+        )));
+    }
     let widths: Vec<f64> = space.ranges().iter().map(|(lo, hi)| hi - lo).collect();
     let mut state = MethodState::first_batch(model, &population, settings)?;
     let corrected_holder: CorrectedLikelihood<'_, BoxedCorrection>;
@@ -211,6 +225,11 @@ fn run_method(
     } else if let Some(certified) =
         mixture.and_then(|(members, raw)| certified_mixture(members, raw, s, state.failures))
     {
+        if resume.is_some() {
+            return Err(BasisError::CheckpointMismatch(
+                "this run's two batches hold in one step, without the stages the tempering state comes from".into(),
+            ));
+        }
         state.adopt_mixture(certified, observer)
     } else {
         state.temper(&inputs, resume, observer)?
@@ -415,10 +434,11 @@ impl MethodState {
     ) -> Result<TemperedWeights> {
         let mut tempering = match resume {
             Some(resumed) => {
-                resumed.check_resumes(self)?;
+                resumed.check_resumes(self, bridge.settings)?;
                 resumed
             }
             None => Tempering {
+                origin: Tempering::origin_of(&self.members, bridge.settings),
                 members: self.take_members(),
                 ancestor: std::mem::take(&mut self.ancestor),
                 beta: 0.0,
@@ -619,28 +639,6 @@ fn weighted_moments(
     Ok((weights, mean, std, quantiles))
 }
 
-/// The tempered stages from the (corrected) surrogate's posterior, β = 0, to the model's,
-/// β = 1: the state between two stages, one step per stage (argmin's shape). Reported after
-/// every bridge ([`ModelPosteriorEvent::Bridged`]) and serialisable (JSON: −∞ as `null`), so a
-/// run stopped there goes on with [`resume_model_posterior`] without the bridges' model runs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Tempering {
-    members: Members,
-    /// Each member's ancestor in the batch the stages started from (itself until a bridge
-    /// resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
-    ancestor: Vec<usize>,
-    beta: f64,
-    log_evidence_ratio: f64,
-    stages: Vec<ModelPosteriorStage>,
-    /// Model evaluations and failures of the batch the next stage weighs.
-    stage_evaluations: (usize, usize),
-    /// The last bridge's screen and confirmation acceptance rates.
-    bridge_rates: (Option<f64>, Option<f64>),
-    evaluations: usize,
-    failures: usize,
-    best: Best,
-}
-
 /// A finished tempering: the raw and Pareto-smoothed log-weights of the final step, its k̂ and
 /// why it stopped.
 type TemperedWeights = (Vec<f64>, Vec<f64>, f64, ModelPosteriorStop);
@@ -761,38 +759,41 @@ impl Tempering {
         Ok(None)
     }
 
-    /// The stages so far.
-    pub fn stages(&self) -> &[ModelPosteriorStage] {
-        &self.stages
-    }
-
-    /// β reached so far.
-    pub fn beta(&self) -> f64 {
-        self.beta
-    }
-
-    /// Model evaluations so far, every batch and bridge together.
-    pub fn model_evaluations(&self) -> usize {
-        self.evaluations
-    }
-
-    /// Whether this state can go on in `state`'s run: the same members' count and the same
-    /// record of the stages before the tempering began.
-    fn check_resumes(&self, state: &MethodState) -> Result<()> {
-        let before = state.stages.len();
-        if self.members.theta.len() != state.members.theta.len()
-            || self.stages.len() <= before
-            || self.stages[..before] != state.stages[..]
-            || self.beta <= 0.0
+    /// Whether this state can go on in `state`'s run: it began from the same members (θ, both
+    /// log-likelihoods, log-priors) under the same settings, and its own parts fit together.
+    fn check_resumes(&self, state: &MethodState, settings: &ModelPosteriorSettings) -> Result<()> {
+        let mismatch = |what: String| Err(BasisError::CheckpointMismatch(what));
+        if self.origin != Tempering::origin_of(&state.members, settings) {
+            return mismatch(
+                "the tempering state began from other members or under other settings than this run's"
+                    .into(),
+            );
+        }
+        let s = self.members.theta.len();
+        let d = state.members.theta.first().map_or(0, Vec::len);
+        let lengths = [
+            self.members.surrogate.len(),
+            self.members.model.len(),
+            self.members.prior.len(),
+            self.ancestor.len(),
+        ];
+        if s != state.members.theta.len()
+            || lengths.iter().any(|&n| n != s)
+            || self.members.theta.iter().any(|t| t.len() != d)
+            || self.ancestor.iter().any(|&a| a >= s)
         {
-            return Err(BasisError::CheckpointMismatch(format!(
-                "the tempering state holds {} members after {} stages at β = {}; this run has {} members and {} stages before its tempering",
-                self.members.theta.len(),
-                self.stages.len(),
-                self.beta,
-                state.members.theta.len(),
-                before
-            )));
+            return mismatch(format!(
+                "the tempering state's members do not fit together or this run's {} members of {d} parameters",
+                state.members.theta.len()
+            ));
+        }
+        if !(self.beta > 0.0 && self.beta < 1.0)
+            || self.stages.last().map(|stage| stage.beta) != Some(self.beta)
+        {
+            return mismatch(format!(
+                "the tempering state's β = {} is not that of its last stage, between 0 and 1",
+                self.beta
+            ));
         }
         Ok(())
     }

@@ -5,7 +5,8 @@ use serde::{Deserialize, Serialize};
 
 use iuq_core::weighted_statistics::effective_sample_size;
 
-use super::members::recorded_spread_ratio;
+use super::members::{Best, Members, recorded_spread_ratio};
+use super::settings::ModelPosteriorSettings;
 use crate::error::{BasisError, Result};
 use crate::moment_matching::ProposalMismatch;
 use crate::paired_estimate::PairedErrors;
@@ -36,8 +37,11 @@ pub struct ModelPosteriorStage {
     /// The step Δβ taken.
     pub step: f64,
     /// CV of the stage's incremental weights exp(Δβ·r).
+    #[serde(deserialize_with = "crate::json_numbers::infinity_from_null::deserialize")]
     pub cv: f64,
-    /// k̂ of those weights.
+    /// k̂ of those weights (+∞ where they are nearly equal and have no tail to fit; `null` in
+    /// JSON).
+    #[serde(deserialize_with = "crate::json_numbers::infinity_from_null::deserialize")]
     pub pareto_k: f64,
     /// The step the CV rule alone gave (larger than `step` when k̂ halved it).
     pub cv_step: f64,
@@ -297,7 +301,7 @@ pub enum ModelPosteriorEvent<'a> {
     /// A bridge ended: the state between two stages, from which
     /// [`resume_model_posterior`](super::resume_model_posterior()) goes on (serialisable, as
     /// BASIS's [`BasisState`](crate::BasisState) is).
-    Bridged(&'a super::Tempering),
+    Bridged(&'a Tempering),
 }
 
 /// The observer of [`model_posterior`](super::model_posterior())'s events, inside the method.
@@ -312,5 +316,69 @@ pub(crate) fn report(
     match observer.observe(&event) {
         Control::Continue => Ok(()),
         Control::Stop => Err(BasisError::Interrupted),
+    }
+}
+
+/// The tempered stages from the (corrected) surrogate's posterior, β = 0, to the model's,
+/// β = 1: the state between two stages, one step per stage (argmin's shape). Reported after
+/// every bridge ([`ModelPosteriorEvent::Bridged`]) and serialisable (JSON: −∞ as `null`), so a
+/// run stopped there goes on with [`resume_model_posterior`](super::resume_model_posterior())
+/// without the bridges' model runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tempering {
+    /// A digest of the members the stages began from and of the settings: a state goes on
+    /// only in the run it came from.
+    pub(crate) origin: u64,
+    pub(crate) members: Members,
+    /// Each member's ancestor in the batch the stages started from (itself until a bridge
+    /// resamples): the grouping of the standard errors ([`crate::ancestral_variance`]).
+    pub(crate) ancestor: Vec<usize>,
+    pub(crate) beta: f64,
+    pub(crate) log_evidence_ratio: f64,
+    pub(crate) stages: Vec<ModelPosteriorStage>,
+    /// Model evaluations and failures of the batch the next stage weighs.
+    pub(crate) stage_evaluations: (usize, usize),
+    /// The last bridge's screen and confirmation acceptance rates.
+    pub(crate) bridge_rates: (Option<f64>, Option<f64>),
+    pub(crate) evaluations: usize,
+    pub(crate) failures: usize,
+    pub(crate) best: Best,
+}
+
+impl Tempering {
+    /// The stages so far.
+    pub fn stages(&self) -> &[ModelPosteriorStage] {
+        &self.stages
+    }
+
+    /// β reached so far.
+    pub fn beta(&self) -> f64 {
+        self.beta
+    }
+
+    /// Model evaluations so far, every batch and bridge together.
+    pub fn model_evaluations(&self) -> usize {
+        self.evaluations
+    }
+
+    /// The digest of `members` (the bits of every θ, log-likelihood and log-prior) and of
+    /// `settings` (their JSON), folded with SplitMix64.
+    pub(crate) fn origin_of(members: &Members, settings: &ModelPosteriorSettings) -> u64 {
+        let mix = |h: u64, bits: u64| iuq_core::random::splitmix64(h ^ bits);
+        let settings_text = serde_json::to_string(settings).unwrap_or_default();
+        let mut h = settings_text
+            .bytes()
+            .fold(0x6d6f_6465_6c5f_706fu64, |h, b| mix(h, u64::from(b)));
+        for value in members
+            .theta
+            .iter()
+            .flatten()
+            .chain(&members.surrogate)
+            .chain(&members.model)
+            .chain(&members.prior)
+        {
+            h = mix(h, value.to_bits());
+        }
+        h
     }
 }

@@ -280,6 +280,10 @@ pub struct AdaptiveOutcome {
     /// goes on after a failed check.
     #[serde(skip)]
     populations: Option<Vec<Vec<Vec<f64>>>>,
+    /// The last round's GP θ per data point: the final surrogate's warm starts, so that it
+    /// polishes the optima the last round's surrogate had ([`GpStarts`]).
+    #[serde(skip)]
+    warm_starts: Option<Vec<Vec<f64>>>,
 }
 
 /// A posterior check that failed its test: its runs joined the training runs and the rounds went
@@ -297,6 +301,14 @@ pub struct RetrainedCheck {
 }
 
 impl AdaptiveOutcome {
+    /// The final surrogate's fits: seeded by `seed`, warm-started from the last round's optima.
+    pub fn final_gp_starts(&self, seed: u64) -> GpStarts<'_> {
+        GpStarts {
+            seed,
+            warm: self.warm_starts.as_deref(),
+        }
+    }
+
     /// Judge the final posterior sample (`mean`, `std`, of the same surrogate as the last round)
     /// against the last round's pooled posterior: where a mean or std differs by more than
     /// `tolerance` posterior stds beyond twice the round's Monte Carlo error, the sample is too
@@ -1344,9 +1356,18 @@ fn measure_or_read_round(
             carry
                 .populations
                 .clone_from_slice(&recorded_populations.unwrap_or(fresh));
-            carry.warm_starts = runs
-                .derived_result(&warm_starts_key, &fingerprint)?
-                .and_then(|text| serde_json::from_str(&text).ok());
+            carry.warm_starts = match runs.derived_result(&warm_starts_key, &fingerprint)? {
+                Some(text) => match serde_json::from_str(&text) {
+                    Ok(warm_starts) => Some(warm_starts),
+                    Err(e) => {
+                        inputs.events.message(format!(
+                            "adaptive round {round}: the recorded GP optima do not parse ({e}); the next round's GPs are fitted without warm starts"
+                        ));
+                        None
+                    }
+                },
+                None => None,
+            };
             return Ok(MeasuredRound {
                 measurement: m.clone(),
                 scoring: None,
@@ -1807,12 +1828,14 @@ pub(super) fn refine(
         parameters,
         retrained_checks,
         new_rows,
+        carry.warm_starts,
     ))
 }
 
 impl AdaptiveOutcome {
     /// The outcome of a loop that ended in `state` under `settings`, with its rounds (the
-    /// earlier loop's included), parameters, retrained checks and rows of `runs.csv`.
+    /// earlier loop's included), parameters, retrained checks, rows of `runs.csv` and the last
+    /// round's GP optima.
     fn ended(
         settings: &AdaptiveSettings,
         state: EngineState,
@@ -1820,6 +1843,7 @@ impl AdaptiveOutcome {
         parameters: Vec<String>,
         retrained_checks: Vec<RetrainedCheck>,
         run_rows: Vec<Vec<f64>>,
+        warm_starts: Option<Vec<Vec<f64>>>,
     ) -> Self {
         Self {
             rounds,
@@ -1833,6 +1857,7 @@ impl AdaptiveOutcome {
             mixing_level: state.sampling.mixing_level,
             run_rows,
             populations: state.previous_populations,
+            warm_starts,
         }
     }
 }

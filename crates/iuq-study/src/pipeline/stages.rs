@@ -456,7 +456,11 @@ impl<'a> PipelineRun<'a> {
             &self.model_runs,
             self.low_fidelity.as_ref(),
             &self.study.space,
-            GpStarts::cold(self.settings.training_seed),
+            adaptive
+                .as_ref()
+                .map_or(GpStarts::cold(self.settings.training_seed), |outcome| {
+                    outcome.final_gp_starts(self.settings.training_seed)
+                }),
             &self.emulation,
             |j| self.describe(j),
         )?;
