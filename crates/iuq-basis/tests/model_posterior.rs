@@ -89,6 +89,19 @@ fn seeded_population(
     (samples, ll, lp)
 }
 
+/// [`gaussian`] as a model that counts its evaluations in `calls`.
+fn counted_gaussian<'a>(
+    mean: &[f64],
+    std: &[f64],
+    calls: &'a std::sync::atomic::AtomicUsize,
+) -> FnLikelihood<impl Fn(&[f64]) -> f64 + Send + Sync + 'a> {
+    let f = gaussian(mean.to_vec(), std.to_vec());
+    FnLikelihood::new(mean.len(), move |x: &[f64]| {
+        calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        f(x)
+    })
+}
+
 fn run(
     d: usize,
     surrogate_mean: &[f64],
@@ -265,14 +278,7 @@ fn a_nearly_exact_surrogate_pairs_the_members_with_its_population() {
 fn a_surrogate_that_misses_the_tails_is_flagged_and_bridged() {
     let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
     let calls = std::sync::atomic::AtomicUsize::new(0);
-    let model = FnLikelihood::new(2, {
-        let f = gaussian(mean.clone(), std.clone());
-        let calls = &calls;
-        move |x: &[f64]| {
-            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            f(x)
-        }
-    });
+    let model = counted_gaussian(&mean, &std, &calls);
     // Half as wide as the model's posterior: the weights exp(1.5 z²) have no finite variance.
     let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
     let settings = ModelPosteriorSettings {
@@ -386,14 +392,7 @@ fn a_tempering_resumed_from_its_checkpoint_ends_where_the_uninterrupted_run_did(
     let (mean, std) = (vec![0.0, 3.0], vec![1.0, 0.5]);
     let s_std: Vec<f64> = std.iter().map(|s| 0.5 * s).collect();
     let calls = std::sync::atomic::AtomicUsize::new(0);
-    let model = FnLikelihood::new(2, {
-        let f = gaussian(mean.clone(), std.clone());
-        let calls = &calls;
-        move |x: &[f64]| {
-            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            f(x)
-        }
-    });
+    let model = counted_gaussian(&mean, &std, &calls);
     let settings = ModelPosteriorSettings {
         samples: 400,
         corrections: 0,
@@ -720,14 +719,7 @@ fn a_correction_that_would_move_the_posterior_beyond_its_batch_is_refused_before
     // of 1,200 cell-model runs at the prior's corner: refused, without a model run, and the
     // bounded moment-matched correction is tried in its place.
     let calls = std::sync::atomic::AtomicUsize::new(0);
-    let model = FnLikelihood::new(2, {
-        let f = gaussian(vec![0.0, 0.0], vec![1.0, 8.0]);
-        let calls = &calls;
-        move |x: &[f64]| {
-            calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-            f(x)
-        }
-    });
+    let model = counted_gaussian(&[0.0, 0.0], &[1.0, 8.0], &calls);
     let settings = ModelPosteriorSettings {
         samples: 400,
         ..Default::default()

@@ -58,6 +58,18 @@ pub(crate) fn subset(prepared: &Prepared, m: usize) -> Prepared {
     }
 }
 
+/// The end points that have an LML, as (index, LML) in order of decreasing LML (ties: lower
+/// index first).
+fn by_decreasing_lml(ends: &[(Vec<f64>, Option<f64>)]) -> Vec<(usize, f64)> {
+    let mut order: Vec<(usize, f64)> = ends
+        .iter()
+        .enumerate()
+        .filter_map(|(i, (_, lml))| lml.map(|v| (i, v)))
+        .collect();
+    order.sort_by(|&(a, la), &(b, lb)| lb.total_cmp(&la).then(a.cmp(&b)));
+    order
+}
+
 /// What becomes of one screening end point.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Plan {
@@ -94,34 +106,23 @@ pub(crate) fn coinciding_candidate(
     plan: &[Plan],
     w: usize,
 ) -> Option<usize> {
-    let mut order: Vec<usize> = (0..plan.len()).filter(|&i| ends[i].1.is_some()).collect();
-    order.sort_by(|&a, &b| {
-        let (la, lb) = (
-            ends[a].1.unwrap_or(f64::NEG_INFINITY),
-            ends[b].1.unwrap_or(f64::NEG_INFINITY),
-        );
-        lb.total_cmp(&la).then(a.cmp(&b))
-    });
-    order.into_iter().find_map(|i| {
-        let candidate = match plan[i] {
-            Plan::Refine => i,
-            Plan::MergedInto(r) => r,
-            _ => return None,
-        };
-        coincide(&ends[w], &ends[i]).then_some(candidate)
-    })
+    by_decreasing_lml(&ends[..plan.len()])
+        .into_iter()
+        .find_map(|(i, _)| {
+            let candidate = match plan[i] {
+                Plan::Refine => i,
+                Plan::MergedInto(r) => r,
+                _ => return None,
+            };
+            coincide(&ends[w], &ends[i]).then_some(candidate)
+        })
 }
 
 /// For each screening end point (θ, LML; `None` for a failed run) its [`Plan`]. Candidates are
 /// taken in order of decreasing LML (ties: lower index first); each is merged into the first
 /// kept one it coincides with (θ within [`MERGE_DISTANCE`], or LML within [`MERGE_LML`]).
 pub(crate) fn refinement_plan(ends: &[(Vec<f64>, Option<f64>)]) -> Vec<Plan> {
-    let mut order: Vec<(usize, f64)> = ends
-        .iter()
-        .enumerate()
-        .filter_map(|(i, (_, lml))| lml.map(|v| (i, v)))
-        .collect();
-    order.sort_by(|&(a, la), &(b, lb)| lb.total_cmp(&la).then(a.cmp(&b)));
+    let order = by_decreasing_lml(ends);
     let mut plan = vec![Plan::Failed; ends.len()];
     let Some(&(best, best_lml)) = order.first() else {
         return plan;
