@@ -792,10 +792,21 @@ struct ReplicateSampling {
     surrogate_screenings: usize,
 }
 
+/// One replicate's sampling: its final state and summary moments, with the evaluations its
+/// carried population's reweighting spent where it collapsed.
+struct ReplicateRun {
+    state: BasisState,
+    moments: (Vec<f64>, Vec<f64>),
+    carried: bool,
+    collapsed_evaluations: usize,
+}
+
 /// Sample the surrogate `posterior` with the round's replicates, each from its population
 /// carried from the round before where `sampling = "sequential"`, `carried` holds one and the
 /// reweighting's ESS holds (`iuq_basis::carried_population`), else from the prior; `carried`
-/// receives each replicate's new population. Every second replicate mixes a level harder: the check of the sampler.
+/// receives each replicate's new population. Every second replicate mixes a level harder: the
+/// check of the sampler. The replicates run side by side (each from its own seed, so the pooled
+/// result is the same for any number of threads) and are pooled in their order.
 fn sample_replicates(
     ctx: &RoundContext<'_>,
     posterior: &crate::posterior::StudyPosterior,
@@ -815,68 +826,23 @@ fn sample_replicates(
     // With two replicates or more, every second one mixes a level harder: the check of the
     // sampler (`iuq_adaptive::sampler_agreement`).
     let checked = ctx.settings.replicates >= 2;
-    for replicate in 0..ctx.settings.replicates {
-        let harder = u32::from(checked && replicate % 2 == 1);
-        let sampler = parse_sampler(
-            ctx.study,
-            &SamplerOverrides {
-                samples: Some(ctx.sampling.samples),
-                seed: Some(
-                    ctx.base_seed
-                        .wrapping_add((ctx.round * ctx.settings.replicates + replicate) as u64),
-                ),
-                ..Default::default()
-            },
-        )?
-        .with_stronger_mixing(ctx.sampling.mixing_level + harder);
-        // A population carried from the round before, reweighted to this surrogate (None: the
-        // first round, `sampling = "from-prior"`, or an ESS that collapsed).
-        let carries = ctx.settings.sampling == PosteriorSampling::Sequential;
-        let start = match carried
-            .get(replicate)
-            .and_then(Option::as_ref)
-            .filter(|_| carries)
-        {
-            Some(previous) => {
-                let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
-                    .map_err(|e| {
-                        StudyError::failure(format!("adaptive round {}: {e}", ctx.round))
-                            .with_source(e)
-                    })?;
-                match carry(&basis, previous).map_err(|e| {
-                    StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
-                })? {
-                    Carried::Ready(state) => {
-                        carried_replicates += 1;
-                        Some(*state)
-                    }
-                    Carried::Collapsed { ess_fraction } => {
-                        surrogate_evaluations += previous.samples.len();
-                        ctx.events.message(format!(
-                            "adaptive round {}: replicate {}: the previous population's ESS fell to {:.1} % under this surrogate; annealing from the prior",
-                            ctx.round,
-                            replicate + 1,
-                            100.0 * ess_fraction
-                        ));
-                        None
-                    }
-                }
-            }
-            None => None,
-        };
-        let sampled = ctx.events.sample(
-            ROUND_LABEL,
-            ctx.study,
-            posterior,
-            sampler,
-            &ctx.dir
-                .join(format!("round-{}", ctx.round))
-                .join(format!("replicate-{}", replicate + 1)),
-            start,
-        )?;
-        let state = sampled.run.state;
+    let previous: Vec<Option<&BasisState>> = (0..ctx.settings.replicates)
+        .map(|r| carried.get(r).and_then(Option::as_ref))
+        .collect();
+    let runs: Vec<Result<ReplicateRun>> = previous
+        .par_iter()
+        .enumerate()
+        .with_max_len(1)
+        .map(|(replicate, previous)| {
+            sample_replicate(ctx, posterior, replicate, checked, *previous)
+        })
+        .collect();
+    for (replicate, run) in runs.into_iter().enumerate() {
+        let run = run?;
+        let state = run.state;
+        carried_replicates += usize::from(run.carried);
         // A carried state counts its reweighting's evaluations as well as its moves'.
-        surrogate_evaluations += state.evaluations;
+        surrogate_evaluations += run.collapsed_evaluations + state.evaluations;
         surrogate_screenings += state
             .diagnostics
             .iter()
@@ -890,7 +856,7 @@ fn sample_replicates(
         pooled.log_likelihood.extend(state.log_likelihood);
         pooled.log_prior.extend(state.log_prior);
         pooled.log_evidence += state.log_evidence / ctx.settings.replicates as f64;
-        replicate_moments.push((sampled.summary.mean, sampled.summary.std));
+        replicate_moments.push(run.moments);
     }
     pooled.moments = PosteriorMoments::pooled(&replicate_moments).map_err(|e| {
         StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
@@ -926,6 +892,75 @@ fn sample_replicates(
         carried_replicates,
         surrogate_evaluations,
         surrogate_screenings,
+    })
+}
+
+/// Replicate `replicate` of the round: its sampler (seeded by round and replicate, a mixing
+/// level harder for every second one where the sampler is `checked`), started from `previous`
+/// reweighted to this surrogate where it carries, else from the prior.
+fn sample_replicate(
+    ctx: &RoundContext<'_>,
+    posterior: &crate::posterior::StudyPosterior,
+    replicate: usize,
+    checked: bool,
+    previous: Option<&BasisState>,
+) -> Result<ReplicateRun> {
+    let harder = u32::from(checked && replicate % 2 == 1);
+    let sampler = parse_sampler(
+        ctx.study,
+        &SamplerOverrides {
+            samples: Some(ctx.sampling.samples),
+            seed: Some(
+                ctx.base_seed
+                    .wrapping_add((ctx.round * ctx.settings.replicates + replicate) as u64),
+            ),
+            ..Default::default()
+        },
+    )?
+    .with_stronger_mixing(ctx.sampling.mixing_level + harder);
+    let failure = |e: iuq_basis::BasisError| {
+        StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
+    };
+    // A population carried from the round before, reweighted to this surrogate (None: the
+    // first round, `sampling = "from-prior"`, or an ESS that collapsed).
+    let carries = ctx.settings.sampling == PosteriorSampling::Sequential;
+    let mut collapsed_evaluations = 0;
+    let start = match previous.filter(|_| carries) {
+        Some(previous) => {
+            let basis = Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
+                .map_err(failure)?;
+            match carry(&basis, previous).map_err(failure)? {
+                Carried::Ready(state) => Some(*state),
+                Carried::Collapsed { ess_fraction } => {
+                    collapsed_evaluations = previous.samples.len();
+                    ctx.events.message(format!(
+                        "adaptive round {}: replicate {}: the previous population's ESS fell to {:.1} % under this surrogate; annealing from the prior",
+                        ctx.round,
+                        replicate + 1,
+                        100.0 * ess_fraction
+                    ));
+                    None
+                }
+            }
+        }
+        None => None,
+    };
+    let carried = start.is_some();
+    let sampled = ctx.events.sample(
+        ROUND_LABEL,
+        ctx.study,
+        posterior,
+        sampler,
+        &ctx.dir
+            .join(format!("round-{}", ctx.round))
+            .join(format!("replicate-{}", replicate + 1)),
+        start,
+    )?;
+    Ok(ReplicateRun {
+        state: sampled.run.state,
+        moments: (sampled.summary.mean, sampled.summary.std),
+        carried,
+        collapsed_evaluations,
     })
 }
 
