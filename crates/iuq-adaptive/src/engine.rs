@@ -73,6 +73,15 @@ use crate::sampler_agreement::SamplerAgreement;
 /// smaller population decides the same runs.
 pub const FAR: f64 = 10.0;
 
+/// The most burn-in steps per stage of a round sampled with
+/// [`EngineSettings::exploring_samples`] (the chains' own `max_burn_in` where it is lower): such
+/// a population only has to locate a posterior that will move by more than a posterior std, and
+/// on an early surrogate's posterior (curved, often of several modes) the chains reach the
+/// correlation target of the sampler's adaptive mixing in no number of steps, so every stage ran
+/// its whole `max_burn_in` (50) at 7–35 % acceptance. Each level of stronger mixing doubles it,
+/// so that the check's replicates still mix harder than the others.
+pub const EXPLORING_MAX_BURN_IN: usize = 20;
+
 /// How many times the candidates may widen (×[`CANDIDATE_WIDENING`] each) when no run is worth
 /// making, before the engine gives up with the reason.
 pub const CANDIDATE_WIDENING: usize = 4;

@@ -296,6 +296,25 @@ impl CheckedSettings {
         }
         CheckedSettings(s)
     }
+
+    /// The same settings with [`Mixing::Adaptive`]'s `max_burn_in` at most `cap` (never below
+    /// `burn_in`): a population that only has to locate a posterior, not to resolve it (the
+    /// adaptive engine's exploring rounds), stops its chains' burn-in early. [`Mixing::Fixed`]
+    /// is unchanged.
+    pub fn with_burn_in_cap(&self, cap: usize) -> CheckedSettings {
+        let mut s = self.0;
+        if let Mixing::Adaptive {
+            correlation,
+            max_burn_in,
+        } = s.mixing
+        {
+            s.mixing = Mixing::Adaptive {
+                correlation,
+                max_burn_in: max_burn_in.min(cap.max(s.burn_in).max(1)),
+            };
+        }
+        CheckedSettings(s)
+    }
 }
 
 impl std::ops::Deref for CheckedSettings {
@@ -316,6 +335,40 @@ impl<'de> Deserialize<'de> for CheckedSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_burn_in_cap_lowers_only_an_adaptive_max_burn_in_and_never_below_the_burn_in() {
+        let adaptive = BasisSettings::default().check().unwrap();
+        let capped = |s: &CheckedSettings, cap| s.with_burn_in_cap(cap).mixing;
+        assert_eq!(
+            capped(&adaptive, 20),
+            Mixing::Adaptive {
+                correlation: 0.3,
+                max_burn_in: 20
+            }
+        );
+        assert_eq!(capped(&adaptive, 80), adaptive.mixing);
+        let burn = BasisSettings {
+            burn_in: 30,
+            ..Default::default()
+        }
+        .check()
+        .unwrap();
+        assert_eq!(
+            capped(&burn, 20),
+            Mixing::Adaptive {
+                correlation: 0.3,
+                max_burn_in: 30
+            }
+        );
+        let fixed = BasisSettings {
+            mixing: Mixing::Fixed,
+            ..Default::default()
+        }
+        .check()
+        .unwrap();
+        assert_eq!(capped(&fixed, 5), Mixing::Fixed);
+    }
 
     #[test]
     fn defaults_are_the_study_settings_and_valid() {
