@@ -143,8 +143,9 @@ fn an_under_sampled_posterior_is_caught_never_called_converged_and_then_sampled_
     assert_eq!(agreement["disagrees"], true, "{first}");
     assert!(agreement["disagreement"].as_f64().unwrap() > 0.1, "{first}");
     // No round that samples at the study's own level is called converged, and after the first
-    // round sampled with the full population (4 replicates of 2000; round 1 explores with a
-    // quarter, whose check does not raise the level) every round mixes harder.
+    // round sampled with the full population (4 replicates of the study's `samples = 1000`, 4000
+    // in all; round 1 explores with a quarter, whose check does not raise the level) every round
+    // mixes harder.
     for r in rounds {
         if r["mixing_level"] == 0 {
             assert_eq!(r["converged"], false, "{r}");
@@ -152,7 +153,7 @@ fn an_under_sampled_posterior_is_caught_never_called_converged_and_then_sampled_
     }
     let full = rounds
         .iter()
-        .position(|r| r["samples"].as_u64().unwrap() >= 8000)
+        .position(|r| r["samples"].as_u64().unwrap() >= 4 * 1000)
         .expect("a round sampled in full");
     assert!(
         rounds[full + 1..]
