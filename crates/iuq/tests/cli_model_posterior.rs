@@ -952,8 +952,9 @@ fn kill_and_rerun(
     env: &str,
     model_posterior: &str,
     design_size: usize,
-    kill_after: usize,
-) -> (serde_json::Value, serde_json::Value, Vec<String>) {
+    kill: Kill,
+) -> (serde_json::Value, serde_json::Value, Vec<String>, String) {
+    let kill_after = kill.runs;
     let dir = cooling(suite);
     let log = dir.join("finished-runs.jsonl");
     // The program of the curve, one run per parameter vector; each run takes `sleep` s.
@@ -1002,7 +1003,27 @@ fn kill_and_rerun(
         .spawn()
         .unwrap();
     let started = Instant::now();
-    while std::fs::read_to_string(&log).unwrap().lines().count() < design_runs + kill_after {
+    let checkpoint = |out: &Path| {
+        std::fs::read_dir(out.join("model-posterior")).is_ok_and(|entries| {
+            entries
+                .flatten()
+                .any(|e| e.file_name().to_string_lossy().starts_with("tempering-"))
+        })
+    };
+    let mut runs_at_checkpoint = None;
+    loop {
+        let runs = std::fs::read_to_string(&log).unwrap().lines().count();
+        if kill.after_checkpoint && runs_at_checkpoint.is_none() && checkpoint(&out) {
+            runs_at_checkpoint = Some(runs);
+        }
+        let from = if kill.after_checkpoint {
+            runs_at_checkpoint
+        } else {
+            Some(design_runs)
+        };
+        if from.is_some_and(|from| runs >= from + kill_after) {
+            break;
+        }
         assert!(started.elapsed() < Duration::from_secs(120), "no model run");
         assert!(child.try_wait().unwrap().is_none(), "finished too early");
         std::thread::sleep(Duration::from_millis(20));
@@ -1032,7 +1053,7 @@ fn kill_and_rerun(
     };
     assert!(
         finished_before.len() > design_runs
-            && finished_before.len() < design_runs + kill_after + 24,
+            && finished_before.len() < runs_at_checkpoint.unwrap_or(design_runs) + kill_after + 24,
         "killed after {} stored runs",
         finished_before.len()
     );
@@ -1048,7 +1069,9 @@ fn kill_and_rerun(
             .unwrap()
     };
     println!("designs at the kill: {designs_before:?}");
-    let v = pipeline(&path, &out, &[]);
+    let (v, rerun_log) = pipeline_logged(&path, &out, &[]);
+    // Done, the estimate leaves no tempering checkpoint behind.
+    assert!(!checkpoint(&out), "a tempering checkpoint was left");
     let store = iuq_campaign::CampaignStore::open_existing(&db).unwrap();
     assert_eq!(store.integrity_check().unwrap(), "ok");
     let per_run = succeeded(&store);
@@ -1096,14 +1119,36 @@ fn kill_and_rerun(
             "{key}"
         );
     }
-    (v, clean, designs_before)
+    (v, clean, designs_before, rerun_log)
+}
+
+/// When [`kill_and_rerun`] kills the pipeline: `runs` model runs after the surrogate's design's,
+/// or after the first tempering checkpoint appeared (`after_checkpoint`).
+struct Kill {
+    runs: usize,
+    after_checkpoint: bool,
+}
+
+impl Kill {
+    fn after(runs: usize) -> Self {
+        Self {
+            runs,
+            after_checkpoint: false,
+        }
+    }
 }
 
 #[test]
 fn a_killed_model_posterior_continues_without_losing_or_repeating_runs() {
     // Killed in the first batch of 30 (after the probe's 8 runs: 4 members and their nudges).
-    let (_, _, designs) =
-        kill_and_rerun("resume", 0.1, "", "samples = 30\nmax_stages = 1", 8, 8 + 6);
+    let (_, _, designs, _) = kill_and_rerun(
+        "resume",
+        0.1,
+        "",
+        "samples = 30\nmax_stages = 1",
+        8,
+        Kill::after(8 + 6),
+    );
     assert_eq!(
         designs.last().map(String::as_str),
         Some("model-posterior-1")
@@ -1116,13 +1161,13 @@ fn a_model_posterior_killed_in_a_bridge_continues_the_same() {
     // moves each, every confirmation a run of the program); the kill falls 10 runs into the
     // first bridge (`model-posterior-2`), whose proposals depend on the first batch's stored
     // results and the seeded moves: the rerun asks for the same points.
-    let (v, clean, designs) = kill_and_rerun(
+    let (v, clean, designs, _) = kill_and_rerun(
         "resume-bridge",
         0.05,
         "",
         "samples = 30\ncorrections = 0\nmax_stages = 3",
         8,
-        8 + 30 + 10,
+        Kill::after(8 + 30 + 10),
     );
     assert_eq!(
         designs.last().map(String::as_str),
@@ -1137,6 +1182,37 @@ fn a_model_posterior_killed_in_a_bridge_continues_the_same() {
 }
 
 #[test]
+fn a_model_posterior_killed_after_a_bridge_goes_on_from_its_checkpoint() {
+    // As above, but the kill falls 6 runs after the first bridge's state was kept
+    // (`model-posterior/tempering-30.json`, written when a bridge ends): the rerun reads it and
+    // makes none of the bridges before it (the store answers the first batch's points again),
+    // and its result is the uninterrupted run's.
+    let (v, clean, designs, log) = kill_and_rerun(
+        "resume-checkpoint",
+        0.05,
+        "",
+        "samples = 30\ncorrections = 0\nmax_stages = 3",
+        8,
+        Kill {
+            runs: 6,
+            after_checkpoint: true,
+        },
+    );
+    assert!(
+        designs.len() >= 3 && designs.last().unwrap() != "model-posterior-1",
+        "{designs:?}"
+    );
+    assert!(
+        log.contains("went on from the tempering checkpoint after"),
+        "{log}"
+    );
+    assert_eq!(
+        v["model_posterior"]["stages"],
+        clean["model_posterior"]["stages"]
+    );
+}
+
+#[test]
 fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
     // A chaotic program (one offset of ±0.3 °C per run, redrawn by any change of the
     // parameters; a GP of the 6 runs of a 10-run design that succeed): the probe finds it (its 8
@@ -1144,13 +1220,13 @@ fn a_noisy_model_posterior_killed_in_its_second_batch_continues_the_same() {
     // whose k̂ does not hold, so the surrogate is corrected, and the kill falls 8 runs into the
     // corrected surrogate's batch, whose members depend on the first batch's stored results,
     // the seeded test and BASIS run: the rerun asks for the same points.
-    let (v, clean, designs) = kill_and_rerun(
+    let (v, clean, designs, _) = kill_and_rerun(
         "resume-noisy",
         0.05,
         ", COOLING_CHAOS = \"0.3\"",
         "samples = 40",
         10,
-        8 + 36 + 8,
+        Kill::after(8 + 36 + 8),
     );
     assert_eq!(
         designs.last().map(String::as_str),

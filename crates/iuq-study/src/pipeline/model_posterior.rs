@@ -21,9 +21,9 @@ use serde_json::{Value, json};
 
 use iuq_basis::model_posterior::SurrogateCorrection;
 use iuq_basis::{
-    BasisState, ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorEvent,
-    ModelPosteriorSettings, ModelPosteriorStage, SurrogatePopulation, model_posterior,
-    selected_members,
+    BasisError, BasisState, ErrorModel, LogLikelihood, ModelPosterior, ModelPosteriorEvent,
+    ModelPosteriorSettings, ModelPosteriorStage, SurrogatePopulation, Tempering, model_posterior,
+    resume_model_posterior, selected_members,
 };
 use iuq_core::{Control, Model, Outcome};
 use iuq_study_file::StudySection;
@@ -468,6 +468,7 @@ pub fn model_posterior_from_surrogate(
             surrogate,
             model_runs,
             (&options, first),
+            &out.join("model-posterior"),
             message,
         )?;
         let (mcse, population_mcse) = outcome.largest_mcse_split();
@@ -496,13 +497,15 @@ pub fn model_posterior_from_surrogate(
 }
 
 /// One estimate of the model's posterior from `options.method.samples` members, the probe at
-/// the members of the first estimate (`first`: the same runs for every estimate).
+/// the members of the first estimate (`first`: the same runs for every estimate); its tempering
+/// checkpointed under `dir` ([`tempering_checkpoint`]).
 fn estimate(
     study: &Study,
     gp_posterior: &SampledPosterior,
     surrogate: &Surrogate,
     model_runs: &ModelRuns,
     (options, first): (&ModelPosteriorOptions, &ModelPosteriorSettings),
+    dir: &Path,
     message: &mut dyn FnMut(String),
 ) -> Result<ModelPosteriorOutcome> {
     let started = std::time::Instant::now();
@@ -577,33 +580,68 @@ fn estimate(
         log_evidence: state.log_evidence,
     };
     let groups = model_runs.groups();
-    let posterior = model_posterior(
-        &surrogate_posterior.space,
-        population,
-        surrogate_posterior.likelihood.as_ref(),
-        model_likelihood,
-        settings,
-        // Progress lines only: a Ctrl-C stops the method through its model runs (the
-        // campaign's interrupt).
-        &mut |event: &ModelPosteriorEvent<'_>| {
-            match event {
-                ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
-                ModelPosteriorEvent::Correction(correction) => message(correction_line(
-                    correction,
-                    groups,
-                    replicated_likelihood.is_some(),
-                )),
-                ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
-                    "model posterior: no correction of the surrogate: {reason}"
-                )),
-                // A rerun goes on through the store, which answers the same model points in
-                // the same order from its runs; the state between stages is not kept.
-                ModelPosteriorEvent::Bridged(_) => {}
+    let checkpoint = tempering_checkpoint(dir, options.method.samples.min(state.samples.len()));
+    let resume = read_tempering(&checkpoint, message);
+    let resumed_from = resume.as_ref().map(|t| t.stages().len());
+    let mut unwritten = None;
+    let mut observer = |event: &ModelPosteriorEvent<'_>| {
+        match event {
+            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
+            ModelPosteriorEvent::Correction(correction) => message(correction_line(
+                correction,
+                groups,
+                replicated_likelihood.is_some(),
+            )),
+            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
+                "model posterior: no correction of the surrogate: {reason}"
+            )),
+            // A Ctrl-C stops the method through its model runs (the campaign's interrupt); the
+            // state after each bridge is kept, so a rerun makes none of the bridges before it.
+            ModelPosteriorEvent::Bridged(tempering) => {
+                if let Err(e) = write_tempering(&checkpoint, tempering) {
+                    unwritten = Some(e.to_string());
+                }
             }
-            Control::Continue
+        }
+        Control::Continue
+    };
+    let space = &surrogate_posterior.space;
+    let surrogate_likelihood = surrogate_posterior.likelihood.as_ref();
+    let mut refused = None;
+    let posterior = match resume {
+        Some(tempering) => match resume_model_posterior(
+            space,
+            population,
+            surrogate_likelihood,
+            model_likelihood,
+            settings,
+            tempering,
+            &mut observer,
+        ) {
+            Err(BasisError::CheckpointMismatch(reason)) => {
+                refused = Some(reason);
+                model_posterior(
+                    space,
+                    population,
+                    surrogate_likelihood,
+                    model_likelihood,
+                    settings,
+                    &mut observer,
+                )
+            }
+            resumed => resumed,
         },
-    )
+        None => model_posterior(
+            space,
+            population,
+            surrogate_likelihood,
+            model_likelihood,
+            settings,
+            &mut observer,
+        ),
+    }
     .map_err(method_error)?;
+    report_checkpoint(&checkpoint, resumed_from, refused, unwritten, message);
     let replicate_runs = replicated_likelihood
         .as_ref()
         .map_or(0, |r| r.replicate_runs.load(Ordering::Relaxed));
@@ -986,6 +1024,67 @@ fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
         })
         .collect();
     write_numeric_csv(&dir.join("stages.csv"), &columns, &rows)
+}
+
+/// Where [`estimate`] keeps its tempering's state after each bridge ([`Tempering`], JSON):
+/// one file per member count, so that a resized estimate never reads another's.
+fn tempering_checkpoint(dir: &Path, members: usize) -> std::path::PathBuf {
+    dir.join(format!("tempering-{members}.json"))
+}
+
+/// The checkpoint at `path`, if one is there and reads; one that does not read is reported and
+/// left for the run to overwrite (the store still answers every run it recorded).
+fn read_tempering(path: &Path, message: &mut dyn FnMut(String)) -> Option<Tempering> {
+    let text = std::fs::read_to_string(path).ok()?;
+    match serde_json::from_str(&text) {
+        Ok(tempering) => Some(tempering),
+        Err(e) => {
+            message(format!(
+                "model posterior: {}: not a tempering checkpoint ({e}); tempering from the start",
+                path.display()
+            ));
+            None
+        }
+    }
+}
+
+/// `tempering` written to `path` atomically (its folder made where missing).
+fn write_tempering(path: &Path, tempering: &Tempering) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).context(format!("{}", dir.display()))?;
+    }
+    let text = serde_json::to_string(tempering)
+        .map_err(|e| StudyError::failure(format!("{}: {e}", path.display())).with_source(e))?;
+    write_atomically(path, text.as_bytes())
+}
+
+/// The checkpoint's part in a finished estimate, told in `message`: resumed from (after its
+/// `resumed_from` stages), refused (another run's state), or not written; the file is removed,
+/// its estimate being done.
+fn report_checkpoint(
+    path: &Path,
+    resumed_from: Option<usize>,
+    refused: Option<String>,
+    unwritten: Option<String>,
+    message: &mut dyn FnMut(String),
+) {
+    match (resumed_from, refused) {
+        (Some(_), Some(reason)) => message(format!(
+            "model posterior: {} is another run's tempering ({reason}); tempered from the start",
+            path.display()
+        )),
+        (Some(stages), None) => message(format!(
+            "model posterior: went on from the tempering checkpoint after {stages} stages ({})",
+            path.display()
+        )),
+        (None, _) => {}
+    }
+    if let Some(e) = unwritten {
+        message(format!(
+            "model posterior: the tempering checkpoint could not be written: {e}"
+        ));
+    }
+    let _ = std::fs::remove_file(path);
 }
 
 #[cfg(test)]
