@@ -580,68 +580,18 @@ fn estimate(
         log_evidence: state.log_evidence,
     };
     let groups = model_runs.groups();
-    let checkpoint = tempering_checkpoint(dir, options.method.samples.min(state.samples.len()));
-    let resume = read_tempering(&checkpoint, message);
-    let resumed_from = resume.as_ref().map(|t| t.stages().len());
-    let mut unwritten = None;
-    let mut observer = |event: &ModelPosteriorEvent<'_>| {
-        match event {
-            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
-            ModelPosteriorEvent::Correction(correction) => message(correction_line(
-                correction,
-                groups,
-                replicated_likelihood.is_some(),
-            )),
-            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
-                "model posterior: no correction of the surrogate: {reason}"
-            )),
-            // A Ctrl-C stops the method through its model runs (the campaign's interrupt); the
-            // state after each bridge is kept, so a rerun makes none of the bridges before it.
-            ModelPosteriorEvent::Bridged(tempering) => {
-                if let Err(e) = write_tempering(&checkpoint, tempering) {
-                    unwritten = Some(e.to_string());
-                }
-            }
-        }
-        Control::Continue
-    };
-    let space = &surrogate_posterior.space;
-    let surrogate_likelihood = surrogate_posterior.likelihood.as_ref();
-    let mut refused = None;
-    let posterior = match resume {
-        Some(tempering) => match resume_model_posterior(
-            space,
+    let posterior = temper(
+        MethodInputs {
+            space: &surrogate_posterior.space,
             population,
-            surrogate_likelihood,
-            model_likelihood,
+            surrogate: surrogate_posterior.likelihood.as_ref(),
+            model: model_likelihood,
             settings,
-            tempering,
-            &mut observer,
-        ) {
-            Err(BasisError::CheckpointMismatch(reason)) => {
-                refused = Some(reason);
-                model_posterior(
-                    space,
-                    population,
-                    surrogate_likelihood,
-                    model_likelihood,
-                    settings,
-                    &mut observer,
-                )
-            }
-            resumed => resumed,
         },
-        None => model_posterior(
-            space,
-            population,
-            surrogate_likelihood,
-            model_likelihood,
-            settings,
-            &mut observer,
-        ),
-    }
-    .map_err(method_error)?;
-    report_checkpoint(&checkpoint, resumed_from, refused, unwritten, message);
+        &tempering_checkpoint(dir, options.method.samples.min(state.samples.len())),
+        (groups, replicated_likelihood.is_some()),
+        message,
+    )?;
     let replicate_runs = replicated_likelihood
         .as_ref()
         .map_or(0, |r| r.replicate_runs.load(Ordering::Relaxed));
@@ -1024,6 +974,80 @@ fn write_results(outcome: &ModelPosteriorOutcome, dir: &Path) -> Result<()> {
         })
         .collect();
     write_numeric_csv(&dir.join("stages.csv"), &columns, &rows)
+}
+
+/// What [`model_posterior`] weighs: the parameters, the surrogate's population and the two
+/// log-likelihoods, with the method's settings.
+#[derive(Clone, Copy)]
+struct MethodInputs<'a> {
+    space: &'a iuq_core::ParameterSpace,
+    population: SurrogatePopulation<'a>,
+    surrogate: &'a dyn LogLikelihood,
+    model: &'a dyn LogLikelihood,
+    settings: &'a ModelPosteriorSettings,
+}
+
+/// The model posterior of `inputs`, going on from the state kept at `checkpoint` where one is
+/// there and is this run's ([`resume_model_posterior`]), keeping the state there after every
+/// bridge; a line per stage and correction in `message` (`groups` run groups, `replicated`:
+/// the likelihood of replicated runs).
+fn temper(
+    inputs: MethodInputs<'_>,
+    checkpoint: &Path,
+    (groups, replicated): (usize, bool),
+    message: &mut dyn FnMut(String),
+) -> Result<ModelPosterior> {
+    let MethodInputs {
+        space,
+        population,
+        surrogate,
+        model,
+        settings,
+    } = inputs;
+    let resume = read_tempering(checkpoint, message);
+    let resumed_from = resume.as_ref().map(|t| t.stages().len());
+    let mut unwritten = None;
+    let mut observer = |event: &ModelPosteriorEvent<'_>| {
+        match event {
+            ModelPosteriorEvent::Stage(stage) => message(stage_line(stage, groups)),
+            ModelPosteriorEvent::Correction(correction) => {
+                message(correction_line(correction, groups, replicated))
+            }
+            ModelPosteriorEvent::CorrectionNotMade(reason) => message(format!(
+                "model posterior: no correction of the surrogate: {reason}"
+            )),
+            // A Ctrl-C stops the method through its model runs (the campaign's interrupt); the
+            // state after each bridge is kept, so a rerun makes none of the bridges before it.
+            ModelPosteriorEvent::Bridged(tempering) => {
+                if let Err(e) = write_tempering(checkpoint, tempering) {
+                    unwritten = Some(e.to_string());
+                }
+            }
+        }
+        Control::Continue
+    };
+    let mut refused = None;
+    let posterior = match resume {
+        Some(tempering) => match resume_model_posterior(
+            space,
+            population,
+            surrogate,
+            model,
+            settings,
+            tempering,
+            &mut observer,
+        ) {
+            Err(BasisError::CheckpointMismatch(reason)) => {
+                refused = Some(reason);
+                model_posterior(space, population, surrogate, model, settings, &mut observer)
+            }
+            resumed => resumed,
+        },
+        None => model_posterior(space, population, surrogate, model, settings, &mut observer),
+    }
+    .map_err(method_error)?;
+    report_checkpoint(checkpoint, resumed_from, refused, unwritten, message);
+    Ok(posterior)
 }
 
 /// Where [`estimate`] keeps its tempering's state after each bridge ([`Tempering`], JSON):
