@@ -123,6 +123,16 @@ pub struct RoundSampling {
     pub mixing_level: u32,
 }
 
+impl RoundSampling {
+    /// The most burn-in steps a stage of a replicate mixing `harder` levels above the round's
+    /// own may take: [`EXPLORING_MAX_BURN_IN`], doubled per level of mixing, where the round
+    /// samples a smaller population than `full_samples` (an exploring round); `None` (the
+    /// sampler's own) where it samples in full.
+    pub fn burn_in_cap(&self, full_samples: usize, harder: u32) -> Option<usize> {
+        (self.samples < full_samples).then(|| EXPLORING_MAX_BURN_IN << (self.mixing_level + harder))
+    }
+}
+
 /// The settings that decide the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct EngineSettings {
@@ -496,6 +506,24 @@ impl AdaptiveEngine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn only_an_exploring_round_caps_its_burn_in_doubled_per_level_of_mixing() {
+        let exploring = RoundSampling {
+            samples: 500,
+            candidates: 1000,
+            mixing_level: 1,
+        };
+        assert_eq!(
+            exploring.burn_in_cap(2000, 0),
+            Some(2 * EXPLORING_MAX_BURN_IN)
+        );
+        assert_eq!(
+            exploring.burn_in_cap(2000, 1),
+            Some(4 * EXPLORING_MAX_BURN_IN)
+        );
+        assert_eq!(exploring.burn_in_cap(500, 0), None);
+    }
 
     fn moments(mean: f64, error: f64) -> PosteriorMoments {
         PosteriorMoments {

@@ -46,8 +46,8 @@ use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use iuq_adaptive::engine::{
-    AdaptiveEngine, EXPLORING_MAX_BURN_IN, EngineSettings, EngineState, Judgement, RoundEvent,
-    RoundReading, RoundSampling, StoppingRule,
+    AdaptiveEngine, EngineSettings, EngineState, Judgement, RoundEvent, RoundReading,
+    RoundSampling, StoppingRule,
 };
 use iuq_adaptive::{
     ComponentErrors, ConvergenceCriterion, LikelihoodTerm, MomentTerm, PosteriorMoments,
@@ -918,10 +918,9 @@ fn sample_replicate(
         },
     )?
     .with_stronger_mixing(ctx.sampling.mixing_level + harder);
-    let sampler = if ctx.sampling.samples < ctx.settings.samples {
-        sampler.with_burn_in_cap(EXPLORING_MAX_BURN_IN << (ctx.sampling.mixing_level + harder))
-    } else {
-        sampler
+    let sampler = match ctx.sampling.burn_in_cap(ctx.settings.samples, harder) {
+        Some(cap) => sampler.with_burn_in_cap(cap),
+        None => sampler,
     };
     let failure = |e: iuq_basis::BasisError| {
         StudyError::failure(format!("adaptive round {}: {e}", ctx.round)).with_source(e)
