@@ -317,12 +317,12 @@ def write_study(problem, workdir, name, surrogate, sampler):
     return study
 
 
-def run_cli(problem, binary, workdir, seed=1, model_posterior=False):
+def run_cli(problem, binary, workdir, seed=1, model_posterior=False, adaptive="{}"):
     if problem["formula"] is None:
         return None
     # The CLI's adaptive defaults are iuq.calibrate's (max(6, d + 2) initial runs, batch 2,
     # max_runs 300).
-    study = write_study(problem, workdir, "bench", ["adaptive = {}"], [f"seed = {seed}"])
+    study = write_study(problem, workdir, "bench", [f"adaptive = {adaptive}"], [f"seed = {seed}"])
     if model_posterior:
         with open(study, "a") as f:
             f.write(f"[model_posterior]\nseed = {seed}\n")
@@ -439,6 +439,8 @@ def main():
     parser.add_argument("--json", default=None, help="also write the table as JSON here (after every row)")
     parser.add_argument("--max-seconds", type=int, default=900, help="a method's time limit per problem")
     parser.add_argument("--seed", type=int, default=1, help="the seed of every method (default 1)")
+    parser.add_argument("--adaptive", default="{}",
+                        help="the CLI study's `adaptive` table (default `{}`: the defaults)")
     parser.add_argument("--model-posterior", action="store_true",
                         help="the CLI also certifies the model's own posterior (a `cli+model` row)")
     args = parser.parse_args()
@@ -458,7 +460,7 @@ def main():
                 if method == "iuq":
                     r = run_iuq(problem, args.seed)
                 elif method == "cli":
-                    r = run_cli(problem, args.iuq_bin, os.path.join(work, name), args.seed, args.model_posterior)
+                    r = run_cli(problem, args.iuq_bin, os.path.join(work, name), args.seed, args.model_posterior, args.adaptive)
                 elif method == "pyvbmc":
                     r = run_pyvbmc(problem, args.seed)
                 else:

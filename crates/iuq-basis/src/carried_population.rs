@@ -178,6 +178,40 @@ pub fn carry<L: LogLikelihood + ?Sized>(
     Ok(Carried::Ready(Box::new(state)))
 }
 
+/// One population of the finished runs `states` of the same posterior (independent replicates,
+/// as the adaptive engine's rounds sample): their members, likelihoods and priors in order, the
+/// mean of their log-evidences, their evaluations summed; settings and diagnostics (the moves'
+/// adapted scale, which [`carry`] starts from) of the first. [`carry`]ing it to a sampler of N
+/// members draws those N from all replicates at once.
+pub fn pool(states: &[BasisState]) -> Result<BasisState> {
+    let Some(first) = states.first() else {
+        return Err(BasisError::Checkpoint("no population to pool".into()));
+    };
+    let mut pooled = first.clone();
+    for state in &states[1..] {
+        if state.parameter_names != first.parameter_names {
+            return Err(BasisError::Checkpoint(format!(
+                "populations of different parameters cannot be pooled ({} against {})",
+                state.parameter_names.join(", "),
+                first.parameter_names.join(", ")
+            )));
+        }
+        if state.exponent < 1.0 {
+            return Err(BasisError::Checkpoint(format!(
+                "only finished populations at p = 1 can be pooled (one is at p = {})",
+                state.exponent
+            )));
+        }
+        pooled.samples.extend(state.samples.iter().cloned());
+        pooled.log_likelihood.extend(&state.log_likelihood);
+        pooled.log_prior.extend(&state.log_prior);
+        pooled.evaluations += state.evaluations;
+    }
+    pooled.log_evidence =
+        states.iter().map(|s| s.log_evidence).sum::<f64>() / states.len() as f64;
+    Ok(pooled)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -304,5 +338,46 @@ mod tests {
         let (one, two) = (moved(1), moved(2));
         assert_eq!(one.samples, two.samples);
         assert_eq!(one.log_evidence.to_bits(), two.log_evidence.to_bits());
+    }
+
+    /// Two replicates pooled hold both populations in order and the mean log-evidence; pooling
+    /// populations of different parameters or an unfinished one is refused.
+    #[test]
+    fn replicates_pool_into_one_population() {
+        let space = space(2);
+        let likelihood = FnLikelihood::new(2, gaussian(0.0, 1.0));
+        let runs: Vec<BasisState> = [1, 2]
+            .iter()
+            .map(|&seed| {
+                Basis::new(&space, &likelihood, settings(300, seed))
+                    .unwrap()
+                    .run(&mut Silent)
+                    .unwrap()
+                    .state
+            })
+            .collect();
+        let pooled = pool(&runs).unwrap();
+        assert_eq!(pooled.samples.len(), 600);
+        assert_eq!(&pooled.samples[..300], &runs[0].samples[..]);
+        assert_eq!(&pooled.samples[300..], &runs[1].samples[..]);
+        assert_eq!(&pooled.log_likelihood[300..], &runs[1].log_likelihood[..]);
+        let mean = 0.5 * (runs[0].log_evidence + runs[1].log_evidence);
+        assert_eq!(pooled.log_evidence.to_bits(), mean.to_bits());
+        assert_eq!(pooled.evaluations, runs[0].evaluations + runs[1].evaluations);
+        // Carried to a sampler of 1000, the pooled members fill it.
+        let basis = Basis::new(&space, &likelihood, settings(1000, 3)).unwrap();
+        let Carried::Ready(state) = carry(&basis, &pooled).unwrap() else {
+            panic!("the same likelihood cannot collapse the weights");
+        };
+        assert_eq!(state.samples.len(), 1000);
+        let mut renamed = runs[1].clone();
+        renamed.parameter_names[0] = "y".into();
+        assert!(pool(&[runs[0].clone(), renamed]).is_err());
+        let unfinished = Basis::new(&space, &likelihood, settings(300, 4))
+            .unwrap()
+            .initialise()
+            .unwrap();
+        assert!(pool(&[runs[0].clone(), unfinished]).is_err());
+        assert!(pool(&[]).is_err());
     }
 }

@@ -66,7 +66,7 @@ use super::low_fidelity::{Allocation, LowFidelity, allocation_key};
 use super::model_runs::ModelRuns;
 use super::posterior_check::{CheckVerdict, PosteriorCheck, retrained_check_label};
 use super::run_groups::{GroupRuns, RunOrigin};
-use super::settings::{Acquisition, AdaptiveSettings, PosteriorSampling};
+use super::settings::{Acquisition, AdaptiveSettings, FinalSample, PosteriorSampling};
 use super::surrogate::{Emulation, GpStarts, Surrogate};
 use crate::error::{BadInput, Result, StudyError};
 use crate::likelihood_section::DataLikelihood;
@@ -284,6 +284,10 @@ pub struct AdaptiveOutcome {
     /// polishes the optima the last round's surrogate had ([`GpStarts`]).
     #[serde(skip)]
     warm_starts: Option<Vec<Vec<f64>>>,
+    /// The last round's replicate populations, where the final sample starts from them
+    /// ([`FinalSample::Carried`], the populations kept in the store so that a replay has them).
+    #[serde(skip)]
+    final_populations: Option<Vec<BasisState>>,
 }
 
 /// A posterior check that failed its test: its runs joined the training runs and the rounds went
@@ -307,6 +311,20 @@ impl AdaptiveOutcome {
             seed,
             warm: self.warm_starts.as_deref(),
         }
+    }
+
+    /// The last round's replicates pooled into one population, where the final sample starts
+    /// from it ([`FinalSample::Carried`]; `None`: it anneals from the prior).
+    pub fn final_population(&self) -> Result<Option<BasisState>> {
+        self.final_populations
+            .as_deref()
+            .filter(|states| !states.is_empty())
+            .map(|states| {
+                iuq_basis::carried_population::pool(states).map_err(|e| {
+                    StudyError::failure(format!("the last round's populations: {e}")).with_source(e)
+                })
+            })
+            .transpose()
     }
 
     /// Judge the final posterior sample (`mean`, `std`, of the same surrogate as the last round)
@@ -1860,15 +1878,22 @@ pub(super) fn refine(
             return Err(StudyError::Interrupted);
         }
     }
-    Ok(AdaptiveOutcome::ended(
-        settings,
-        state,
-        rounds,
-        parameters,
-        retrained_checks,
-        new_rows,
-        carry.warm_starts,
-    ))
+    let final_populations = (settings.final_sample == FinalSample::Carried
+        && inputs.keeps_populations())
+    .then(|| carry.populations.iter().cloned().collect::<Option<Vec<_>>>())
+    .flatten();
+    Ok(AdaptiveOutcome {
+        final_populations,
+        ..AdaptiveOutcome::ended(
+            settings,
+            state,
+            rounds,
+            parameters,
+            retrained_checks,
+            new_rows,
+            carry.warm_starts,
+        )
+    })
 }
 
 impl AdaptiveOutcome {
@@ -1897,6 +1922,7 @@ impl AdaptiveOutcome {
             run_rows,
             populations: state.previous_populations,
             warm_starts,
+            final_populations: None,
         }
     }
 }

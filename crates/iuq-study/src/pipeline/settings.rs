@@ -10,7 +10,7 @@
 //!              samples = 2000, exploring_samples = 500, replicates = 4, max_samples = 32000,
 //!              max_rounds = 30,
 //!              candidates = 1000, sampling = "sequential", stopping_rule = "distribution",
-//!              more_samples = "when-resolving" }
+//!              more_samples = "when-resolving", final_sample = "carried" }
 //! # run the model at the surrogate posterior's MAP and at 20 of its samples (absent: no check)
 //! posterior_check = { samples = 20, seed = 5 }
 //! # a whole-curve model emulated on its leading principal components (absent: so from 50 data
@@ -262,6 +262,24 @@ pub struct AdaptiveSettings {
     /// What the stopping rule compares between rounds (`stopping_rule`, default
     /// `"distribution"`: the moments and the distance between the posteriors).
     pub stopping_rule: StoppingRule,
+    /// Where the final posterior sample starts (`final_sample`, default `"carried"`).
+    pub final_sample: FinalSample,
+}
+
+/// Where the final posterior sample (`[sampler]`'s population of the last surrogate) starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FinalSample {
+    /// `"carried"`: from the last round's replicates pooled, reweighted to the final surrogate,
+    /// resampled to `[sampler] samples` and moved (`iuq_basis::carried_population`), where the
+    /// rounds' populations are kept in the store (`sampling = "sequential"` or `stopping_rule =
+    /// "distribution"`) and the reweighting's ESS holds; else annealed from the prior. The last
+    /// round sampled the same posterior, so this spares the annealing, most of the final
+    /// sample's cost.
+    Carried,
+    /// `"from-prior"`: always annealed from the prior (the pipeline before 2026-12; the shipped
+    /// HemoCell studies name it, so that their final posteriors replay as published).
+    FromPrior,
 }
 
 /// How each round of the adaptive engine samples its surrogate posterior.
@@ -342,6 +360,10 @@ fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
         stopping_rule: match s.choice("stopping_rule", &["distribution", "moments"])? {
             Some("moments") => StoppingRule::Moments,
             _ => StoppingRule::Distribution,
+        },
+        final_sample: match s.choice("final_sample", &["carried", "from-prior"])? {
+            Some("from-prior") => FinalSample::FromPrior,
+            _ => FinalSample::Carried,
         },
     };
     s.finish()?;

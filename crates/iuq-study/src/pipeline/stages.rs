@@ -470,13 +470,18 @@ impl<'a> PipelineRun<'a> {
         // A sampler the adaptive engine found biased is not trusted with the final posterior
         // either: it is sampled at the rounds' last mixing level.
         let mixing = adaptive.as_ref().map_or(0, |a| a.mixing_level);
+        let sampler = self.sampler_settings.with_stronger_mixing(mixing);
+        let start = match adaptive.as_ref() {
+            Some(outcome) => self.carried_final_start(outcome, &posterior, sampler)?,
+            None => None,
+        };
         let gp_posterior = self.events.sample(
             "GP bank",
             self.study,
             &posterior,
-            self.sampler_settings.with_stronger_mixing(mixing),
+            sampler,
             &self.out.join("basis-gp"),
-            None,
+            start,
         )?;
         add_seconds(times, "BASIS on the GP bank", stage);
         // "Converged" holds only if the final sample carries the rounds' posterior.
@@ -493,6 +498,40 @@ impl<'a> PipelineRun<'a> {
             }
         }
         Ok((surrogate, gp_posterior))
+    }
+
+    /// The final sample's start where it is carried from the last round (`final_sample =
+    /// "carried"`): the round's replicates pooled, reweighted to the final surrogate and
+    /// resampled to the sampler's population, which the sampler's final pass then moves; `None`
+    /// (anneal from the prior) where the rounds' populations are not kept or the reweighting's
+    /// ESS collapses, which is said.
+    fn carried_final_start(
+        &self,
+        outcome: &AdaptiveOutcome,
+        posterior: &crate::posterior::StudyPosterior,
+        sampler: iuq_basis::CheckedSettings,
+    ) -> Result<Option<iuq_basis::BasisState>> {
+        let Some(population) = outcome.final_population()? else {
+            return Ok(None);
+        };
+        let failure = |e: iuq_basis::BasisError| {
+            crate::error::StudyError::failure(format!("the final posterior sample: {e}"))
+                .with_source(e)
+        };
+        let basis = iuq_basis::Basis::new(&posterior.space, posterior.likelihood.as_ref(), sampler)
+            .map_err(failure)?;
+        Ok(
+            match iuq_basis::carried_population::carry(&basis, &population).map_err(failure)? {
+                iuq_basis::carried_population::Carried::Ready(state) => Some(*state),
+                iuq_basis::carried_population::Carried::Collapsed { ess_fraction } => {
+                    self.events.message(format!(
+                        "final posterior: the last round's population keeps an ESS of {:.1} % under the final surrogate; annealing from the prior",
+                        100.0 * ess_fraction
+                    ));
+                    None
+                }
+            },
+        )
     }
 
     /// The model run at the posterior's MAP and samples, beside the surrogate; a check an
