@@ -207,8 +207,7 @@ pub fn pool(states: &[BasisState]) -> Result<BasisState> {
         pooled.log_prior.extend(&state.log_prior);
         pooled.evaluations += state.evaluations;
     }
-    pooled.log_evidence =
-        states.iter().map(|s| s.log_evidence).sum::<f64>() / states.len() as f64;
+    pooled.log_evidence = states.iter().map(|s| s.log_evidence).sum::<f64>() / states.len() as f64;
     Ok(pooled)
 }
 
@@ -363,7 +362,10 @@ mod tests {
         assert_eq!(&pooled.log_likelihood[300..], &runs[1].log_likelihood[..]);
         let mean = 0.5 * (runs[0].log_evidence + runs[1].log_evidence);
         assert_eq!(pooled.log_evidence.to_bits(), mean.to_bits());
-        assert_eq!(pooled.evaluations, runs[0].evaluations + runs[1].evaluations);
+        assert_eq!(
+            pooled.evaluations,
+            runs[0].evaluations + runs[1].evaluations
+        );
         // Carried to a sampler of 1000, the pooled members fill it.
         let basis = Basis::new(&space, &likelihood, settings(1000, 3)).unwrap();
         let Carried::Ready(state) = carry(&basis, &pooled).unwrap() else {

@@ -58,6 +58,7 @@ pub mod defensive_normal;
 pub mod defensive_tempering;
 pub mod diagnostics;
 pub mod error;
+pub mod gaussian_screen;
 mod json_numbers;
 pub mod likelihood;
 pub mod member_selection;

@@ -22,6 +22,7 @@ use serde::{Deserialize, Serialize};
 use iuq_core::{EvaluationFailure, Model, Outcome, Parameter, ParameterSpace, Prior};
 
 use crate::error::{BasisError, Result};
+use crate::gaussian_screen::GaussianScreen;
 use crate::likelihood::{LogLikelihood, PointLogLikelihood};
 
 /// The name of the modelling-error parameter appended to the model's parameters.
@@ -32,7 +33,7 @@ pub const MODELLING_ERROR_NAME: &str = "sigma_m";
 pub const DEFAULT_MODELLING_ERROR_PRIOR: Prior = Prior::Uniform(0.001, 0.1);
 
 /// ln(2π).
-const LN_2PI: f64 = 1.837_877_066_409_345_5;
+pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// How the model's computational standard deviation s_j (the spread of a simulator's measuring
 /// window, or a surrogate's predictive std — [`iuq_core::Evaluation::computational_std`]) enters
@@ -189,7 +190,7 @@ impl ErrorModel {
     /// Σ_jj of one datum (see [`ErrorModel::datum_log_likelihood`]); a non-positive or
     /// non-finite Σ is a failure naming datum `j`.
     #[inline]
-    fn datum_variance(
+    pub(crate) fn datum_variance(
         &self,
         j: usize,
         y: f64,
@@ -264,6 +265,9 @@ pub struct PredictionErrorLikelihood<M> {
     model: M,
     observations: Observations,
     errors: ErrorModel,
+    /// The screen's likelihood as a quadratic form, where the model's screen is affine
+    /// ([`crate::gaussian_screen`]); built at the first screened batch.
+    screen: std::sync::OnceLock<Option<GaussianScreen>>,
 }
 
 impl<M: Model> PredictionErrorLikelihood<M> {
@@ -314,6 +318,7 @@ impl<M: Model> PredictionErrorLikelihood<M> {
             model,
             observations,
             errors,
+            screen: std::sync::OnceLock::new(),
         })
     }
 
@@ -439,7 +444,9 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
         self.of_outcomes(points, outcomes)
     }
 
-    /// The same likelihood of the model's screen ([`iuq_core::Model::screening_batch`]).
+    /// The same likelihood of the model's screen ([`iuq_core::Model::screening_batch`]), as a
+    /// quadratic form in the screen's coefficients where the screen is affine and the variances
+    /// do not depend on θ ([`crate::gaussian_screen`]).
     fn screening_log_likelihood_batch(
         &self,
         points: &[Vec<f64>],
@@ -448,6 +455,14 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
             Ok(m) => m,
             Err(e) => return Some(Err(e)),
         };
+        if let Some(affine) = self.model.affine_screening() {
+            let screen = self.screen.get_or_init(|| {
+                GaussianScreen::new(&affine.affine_screen(), &self.observations, &self.errors)
+            });
+            if let Some(screen) = screen {
+                return Some(self.of_coefficients(screen, affine, points, &model_points));
+            }
+        }
         let outcomes = self.model.screening_batch(&model_points)?;
         Some(self.of_outcomes(points, outcomes))
     }
@@ -466,6 +481,38 @@ impl<M: Model> PredictionErrorLikelihood<M> {
             )));
         }
         Ok(points.iter().map(|p| p[..n_model].to_vec()).collect())
+    }
+
+    /// ln f of the affine screen at every point, from its coefficients there.
+    fn of_coefficients(
+        &self,
+        screen: &GaussianScreen,
+        affine: &dyn iuq_core::affine_screen::AffineScreening,
+        points: &[Vec<f64>],
+        model_points: &[Vec<f64>],
+    ) -> Result<Vec<PointLogLikelihood>> {
+        let coefficients = affine
+            .screening_coefficients(model_points)
+            .map_err(|e| match e {
+                iuq_core::CoreError::ModelInput(reason) => BasisError::ModelInput(reason),
+                e => BasisError::ModelBatch(e.to_string()),
+            })?;
+        if coefficients.len() != points.len() {
+            return Err(BasisError::ModelBatch(format!(
+                "the model's screen returned {} outcomes for {} points",
+                coefficients.len(),
+                points.len()
+            )));
+        }
+        Ok(coefficients
+            .par_iter()
+            .with_min_len(64)
+            .map(|c| {
+                c.as_ref()
+                    .map_err(Clone::clone)
+                    .and_then(|c| screen.log_likelihood(c))
+            })
+            .collect())
     }
 
     /// ln f at every point from the model's outcomes there.

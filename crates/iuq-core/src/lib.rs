@@ -25,6 +25,7 @@
     deny(clippy::unwrap_used, clippy::expect_used, clippy::panic)
 )]
 
+pub mod affine_screen;
 pub mod error;
 pub mod model;
 pub mod random;

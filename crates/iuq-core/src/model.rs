@@ -96,6 +96,13 @@ pub trait Model: Send + Sync {
         None
     }
 
+    /// The screen as an affine map of a few coefficients, where it is one
+    /// ([`crate::affine_screen`]): a likelihood can then evaluate the screen as a quadratic form
+    /// in the coefficients. `None` (the default): the screen, if any, gives its outputs only.
+    fn affine_screening(&self) -> Option<&dyn crate::affine_screen::AffineScreening> {
+        None
+    }
+
     /// Number of inputs.
     fn input_dimension(&self) -> usize {
         self.input_names().len()

@@ -460,6 +460,68 @@ impl Model for ReducedBasis {
                 .collect::<Result<_>>()
         }))
     }
+
+    fn affine_screening(&self) -> Option<&dyn iuq_core::affine_screen::AffineScreening> {
+        Some(self)
+    }
+}
+
+/// The screen of [`Model::screening_batch`] as an affine map: mean_j = μ_j + Σ_k a_jk c_k with
+/// c_k the components' GP means, and the std of the truncation and the components' noise.
+impl iuq_core::affine_screen::AffineScreening for ReducedBasis {
+    fn affine_screen(&self) -> iuq_core::affine_screen::AffineScreen {
+        let (m, q) = (self.output_names.len(), self.gps.len());
+        let loadings: Vec<f64> = (0..q)
+            .flat_map(|k| (0..m).map(move |j| self.loading(j, k)))
+            .collect();
+        let stds = (0..m)
+            .map(|j| {
+                let noise = self.gps.iter().enumerate().fold(0.0, |acc, (k, gp)| {
+                    let a = loadings[k * m + j];
+                    let s = gp.output_scaling.std;
+                    acc + a * a * (s * s * gp.hyperparameters.noise_variance)
+                });
+                let variance = 0.0 + self.truncation_variance[j];
+                (variance + self.predictive_std.added_noise_variance(noise)).sqrt()
+            })
+            .collect();
+        iuq_core::affine_screen::AffineScreen {
+            offset: self.centre.clone(),
+            loadings,
+            stds,
+        }
+    }
+
+    fn screening_coefficients(
+        &self,
+        points: &[Vec<f64>],
+    ) -> iuq_core::Result<Vec<iuq_core::affine_screen::CoefficientOutcome>> {
+        let d = self.input_names.len();
+        let valid: Vec<usize> = (0..points.len())
+            .filter(|&i| points[i].len() == d && points[i].iter().all(|v| v.is_finite()))
+            .collect();
+        let probe: Vec<Vec<f64>> = valid.iter().map(|&i| points[i].clone()).collect();
+        let means = self
+            .gps
+            .iter()
+            .map(|gp| gp.predict_mean(&probe))
+            .collect::<Result<Vec<_>>>()
+            .map_err(|e| iuq_core::CoreError::ModelUnavailable(e.to_string()))?;
+        let mut outcomes: Vec<iuq_core::affine_screen::CoefficientOutcome> = points
+            .iter()
+            .map(|p| {
+                Err(EvaluationFailure::new(if p.len() != d {
+                    format!("expected {d} inputs, got {}", p.len())
+                } else {
+                    "non-finite input".to_string()
+                }))
+            })
+            .collect();
+        for (slot, &i) in valid.iter().enumerate() {
+            outcomes[i] = Ok(means.iter().map(|m| m[slot]).collect());
+        }
+        Ok(outcomes)
+    }
 }
 
 impl ReducedBasis {
@@ -582,6 +644,51 @@ mod tests {
 
     fn names(prefix: &str, count: usize) -> Vec<String> {
         (0..count).map(|j| format!("{prefix}{j}")).collect()
+    }
+
+    /// The affine screen is the screen: μ + A·c(θ) gives `screening_batch`'s outputs and its
+    /// stds are the screen's, at valid points (to rounding, 1e-12 of the curve's scale), and its
+    /// coefficients fail where the screen does.
+    #[test]
+    fn the_affine_screen_reproduces_the_screen() {
+        let (inputs, outputs) = runs(30);
+        let rb = ReducedBasis::fit(
+            names("t", 2),
+            names("y", 60),
+            &inputs,
+            &outputs,
+            &ReducedBasisOptions::default(),
+        )
+        .unwrap();
+        let points = vec![
+            vec![1.2, 0.3],
+            vec![1.9, 0.75],
+            vec![f64::NAN, 0.5],
+            vec![1.5],
+        ];
+        let screened = rb.screening_batch(&points).unwrap().unwrap();
+        let affine = rb.affine_screening().unwrap();
+        let screen = affine.affine_screen();
+        assert_eq!(screen.coefficients(), rb.components());
+        let coefficients = affine.screening_coefficients(&points).unwrap();
+        for (i, (outcome, c)) in screened.iter().zip(&coefficients).enumerate() {
+            match (outcome, c) {
+                (Ok(e), Ok(c)) => {
+                    let q = screen.outputs_of(c);
+                    let std = e.computational_std.as_ref().unwrap();
+                    for j in 0..60 {
+                        assert!((q[j] - e.outputs[j]).abs() < 1e-12, "point {i}, output {j}");
+                        assert!(
+                            (screen.stds[j] - std[j]).abs() < 1e-12,
+                            "point {i}, std {j}"
+                        );
+                    }
+                }
+                (Err(a), Err(b)) => assert_eq!(a, b, "point {i}"),
+                _ => panic!("point {i}: the screen and its coefficients disagree on failing"),
+            }
+        }
+        assert!(coefficients[0].is_ok() && coefficients[2].is_err() && coefficients[3].is_err());
     }
 
     #[test]

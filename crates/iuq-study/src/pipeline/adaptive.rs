@@ -1880,7 +1880,13 @@ pub(super) fn refine(
     }
     let final_populations = (settings.final_sample == FinalSample::Carried
         && inputs.keeps_populations())
-    .then(|| carry.populations.iter().cloned().collect::<Option<Vec<_>>>())
+    .then(|| {
+        carry
+            .populations
+            .iter()
+            .cloned()
+            .collect::<Option<Vec<_>>>()
+    })
     .flatten();
     Ok(AdaptiveOutcome {
         final_populations,

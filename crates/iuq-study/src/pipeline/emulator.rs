@@ -263,4 +263,11 @@ impl Model for Emulator {
             Emulator::TwoFidelity(_) => None,
         }
     }
+
+    fn affine_screening(&self) -> Option<&dyn iuq_core::affine_screen::AffineScreening> {
+        match self {
+            Emulator::ReducedBasis(rb) => rb.affine_screening(),
+            Emulator::PerOutput(_) | Emulator::TwoFidelity(_) => None,
+        }
+    }
 }

@@ -316,6 +316,15 @@ impl Model for Surrogate {
         let outcomes = self.emulator.screening_batch(points)?;
         Some(outcomes.and_then(|o| self.classify(points, o)))
     }
+
+    /// The emulator's affine screen (a reduced basis), where no failure classifier could
+    /// make the screen fail where its coefficients do not.
+    fn affine_screening(&self) -> Option<&dyn iuq_core::affine_screen::AffineScreening> {
+        if self.classifiers.iter().any(Option::is_some) {
+            return None;
+        }
+        self.emulator.affine_screening()
+    }
 }
 
 impl Surrogate {
