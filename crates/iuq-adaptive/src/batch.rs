@@ -130,13 +130,30 @@ pub fn select_batch(
     let mut denominators: Vec<Vec<f64>> = vec![Vec::new(); terms.len()];
     greedy_selection(initial_scores, batch, min_score, |pick, chosen, scores| {
         let s = std::slice::from_ref(&candidates[pick]);
+        // The covariance columns of the components that outputs share (a reduced basis), each
+        // computed once per pick rather than once per output.
+        let mut shared: Option<(&iuq_gp::ReducedBasis, Vec<Vec<Vec<f64>>>)> = None;
         for (t, term) in terms.iter().enumerate() {
-            let prior: Vec<f64> = term
-                .gp
-                .posterior_covariance(candidates, s)?
-                .into_iter()
-                .map(|row| row[0])
-                .collect();
+            let covariance = match term.gp.shared_components() {
+                Some(components) => {
+                    let known = shared
+                        .as_ref()
+                        .is_some_and(|(basis, _)| std::ptr::eq(*basis, components.basis));
+                    if !known {
+                        let columns = components
+                            .basis
+                            .component_gps()
+                            .iter()
+                            .map(|gp| gp.posterior_covariance(candidates, s))
+                            .collect::<iuq_gp::Result<Vec<_>>>()?;
+                        shared = Some((components.basis, columns));
+                    }
+                    let columns = shared.as_ref().map_or(&[][..], |(_, c)| c.as_slice());
+                    components.combine(columns)
+                }
+                None => term.gp.posterior_covariance(candidates, s)?,
+            };
+            let prior: Vec<f64> = covariance.into_iter().map(|row| row[0]).collect();
             // Condition on the earlier picks: c_k(x, s) = c(x, s) − Σ_j c_j(x)·c_j(s)/d_j.
             let mut column = prior;
             for (previous, d) in columns[t].iter().zip(&denominators[t]) {
@@ -393,5 +410,105 @@ mod clustered {
                 assert!(dk.hypot(dt) > 0.2, "{picks:?}");
             }
         }
+    }
+
+    /// An output of a reduced basis hidden behind a predictor that does not say it shares the
+    /// components: the batch computes its covariances output by output.
+    struct Unshared<'a>(iuq_gp::ReducedBasisOutput<'a>);
+    impl OutputPredictor for Unshared<'_> {
+        fn predict(&self, points: &[Vec<f64>]) -> iuq_gp::Result<iuq_gp::Prediction> {
+            self.0.predict(points)
+        }
+        fn posterior_covariance(
+            &self,
+            a: &[Vec<f64>],
+            b: &[Vec<f64>],
+        ) -> iuq_gp::Result<Vec<Vec<f64>>> {
+            self.0.posterior_covariance(a, b)
+        }
+        fn run_noise_variance(&self, prediction: &iuq_gp::Prediction) -> f64 {
+            self.0.run_noise_variance(prediction)
+        }
+    }
+
+    /// The outputs of a reduced basis share their components' covariance columns: the batch
+    /// picks the same candidates with the same scores, bit for bit, as computing every output's
+    /// covariance on its own.
+    #[test]
+    fn shared_component_columns_pick_as_per_output_columns() {
+        let xs: Vec<f64> = (0..30).map(|i| 0.2 * i as f64).collect();
+        let runs: Vec<Vec<f64>> = (0..12)
+            .map(|i| {
+                let u = (i as f64 + 0.5) / 12.0;
+                vec![1.0 + u, 0.2 + 0.6 * ((i * 5) % 12) as f64 / 12.0]
+            })
+            .collect();
+        let curves: Vec<Vec<f64>> = runs
+            .iter()
+            .map(|t| xs.iter().map(|x| t[0] * (-t[1] * x).exp()).collect())
+            .collect();
+        let names = |p: &str, n: usize| (0..n).map(|j| format!("{p}{j}")).collect::<Vec<_>>();
+        let basis = iuq_gp::ReducedBasis::fit(
+            names("t", 2),
+            names("y", 30),
+            &runs,
+            &curves,
+            &iuq_gp::ReducedBasisOptions::default(),
+        )
+        .unwrap();
+        let candidates: Vec<Vec<f64>> = (0..40)
+            .map(|i| vec![1.0 + (i % 8) as f64 / 8.0, 0.2 + 0.6 * (i / 8) as f64 / 5.0])
+            .collect();
+        let outputs: Vec<iuq_gp::ReducedBasisOutput<'_>> = (0..30)
+            .map(|output| iuq_gp::ReducedBasisOutput {
+                basis: &basis,
+                output,
+            })
+            .collect();
+        let hidden: Vec<Unshared<'_>> = outputs.iter().map(|o| Unshared(*o)).collect();
+        let data: Vec<f64> = xs.iter().map(|x| 1.5 * (-0.5 * x).exp()).collect();
+        fn terms<'a>(
+            gps: Vec<&'a dyn OutputPredictor>,
+            data: &[f64],
+            m: usize,
+        ) -> Vec<LikelihoodTerm<'a>> {
+            gps.into_iter()
+                .zip(data)
+                .map(|(gp, &datum)| LikelihoodTerm {
+                    gp,
+                    datum,
+                    total_variance: vec![1e-4; m],
+                })
+                .collect()
+        }
+        let weights = vec![1.0; candidates.len()];
+        let shared = select_batch(
+            &terms(
+                outputs.iter().map(|o| o as &dyn OutputPredictor).collect(),
+                &data,
+                candidates.len(),
+            ),
+            &candidates,
+            &weights,
+            4,
+            0.0,
+        )
+        .unwrap();
+        let alone = select_batch(
+            &terms(
+                hidden.iter().map(|o| o as &dyn OutputPredictor).collect(),
+                &data,
+                candidates.len(),
+            ),
+            &candidates,
+            &weights,
+            4,
+            0.0,
+        )
+        .unwrap();
+        assert_eq!(shared.indices.len(), 4);
+        assert_eq!(shared.indices, alone.indices);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&shared.scores), bits(&alone.scores));
     }
 }

@@ -88,7 +88,7 @@ pub use multi_fidelity_bank::MultiFidelityBank;
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };
-pub use output_predictor::{OutputPredictor, ReducedBasisOutput};
+pub use output_predictor::{OutputPredictor, ReducedBasisOutput, SharedComponents};
 pub use prediction::Prediction;
 pub use reduced_basis::{ReducedBasis, ReducedBasisOptions};
 pub use scaling::{InputScaling, OutputScaling};

@@ -25,6 +25,46 @@ pub trait OutputPredictor: Sync {
     /// The variance a new run adds to what it tells of the latent output: its fitted noise and
     /// the jitter, in output units (`prediction` from [`OutputPredictor::predict`]).
     fn run_noise_variance(&self, prediction: &Prediction) -> f64;
+
+    /// Where the output is a fixed combination of latent components it shares with other
+    /// outputs (an output of a [`ReducedBasis`]), those components and the weights of their
+    /// covariances, so that a caller treating many outputs computes each component's
+    /// covariance once: [`OutputPredictor::posterior_covariance`] is then
+    /// Σ_k weights_k · cov_k, summed in k's order. `None` (the default): the output's own.
+    fn shared_components(&self) -> Option<SharedComponents<'_>> {
+        None
+    }
+}
+
+/// The components an output shares with others and the weights of their covariances
+/// ([`OutputPredictor::shared_components`]).
+#[derive(Debug, Clone)]
+pub struct SharedComponents<'a> {
+    /// The emulator whose component GPs ([`ReducedBasis::component_gps`]) they are.
+    pub basis: &'a ReducedBasis,
+    /// a_jk² per component k.
+    pub weights: Vec<f64>,
+}
+
+impl SharedComponents<'_> {
+    /// Σ_k weights_k · `component_covariances[k]` (each a × b), summed in k's order as
+    /// [`ReducedBasisOutput::posterior_covariance`] does.
+    pub fn combine(&self, component_covariances: &[Vec<Vec<f64>>]) -> Vec<Vec<f64>> {
+        let rows = component_covariances.first().map_or(0, Vec::len);
+        let columns = component_covariances
+            .first()
+            .and_then(|c| c.first())
+            .map_or(0, Vec::len);
+        let mut total = vec![vec![0.0; columns]; rows];
+        for (w, c) in self.weights.iter().zip(component_covariances) {
+            for (row, component) in total.iter_mut().zip(c) {
+                for (v, x) in row.iter_mut().zip(component) {
+                    *v += w * x;
+                }
+            }
+        }
+        total
+    }
 }
 
 impl OutputPredictor for GaussianProcess {
@@ -70,6 +110,15 @@ impl OutputPredictor for ReducedBasisOutput<'_> {
             }
         }
         Ok(total)
+    }
+
+    fn shared_components(&self) -> Option<SharedComponents<'_>> {
+        Some(SharedComponents {
+            basis: self.basis,
+            weights: (0..self.basis.component_gps().len())
+                .map(|k| self.basis.loading(self.output, k).powi(2))
+                .collect(),
+        })
     }
 
     fn run_noise_variance(&self, prediction: &Prediction) -> f64 {

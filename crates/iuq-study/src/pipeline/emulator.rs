@@ -86,6 +86,13 @@ impl OutputPredictor for OutputView<'_> {
             OutputView::TwoFidelity(gp) => gp.run_noise_variance(prediction),
         }
     }
+
+    fn shared_components(&self) -> Option<iuq_gp::output_predictor::SharedComponents<'_>> {
+        match self {
+            OutputView::Basis(v) => v.shared_components(),
+            OutputView::Gp(_) | OutputView::TwoFidelity(_) => None,
+        }
+    }
 }
 
 impl Emulator {
