@@ -88,7 +88,7 @@ class CalibrationResult:
     ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
     ...                        sensitivity=0, seed=1, progress=False)
     >>> result
-    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3008 ± 0.00846)
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00862)
     >>> result.samples.shape, result.converged
     ((1000, 1), True)
     """
@@ -516,7 +516,7 @@ def calibrate(
     ...                        np.exp(-0.3 * t), np.full(5, 0.02), x=t, samples=1000,
     ...                        sensitivity=0, seed=1, progress=False)
     >>> result
-    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3008 ± 0.00846)
+    CalibrationResult(8 runs, 2 rounds, converged: k = 0.3007 ± 0.00862)
     >>> bool(abs(result.mean[0] - 0.3) < 3 * result.std[0])
     True
     """
