@@ -21,7 +21,9 @@ use iuq_core::EvaluationFailure;
 use iuq_core::affine_screen::AffineScreen;
 
 use crate::likelihood::PointLogLikelihood;
-use crate::prediction_error::{ComputationalError, ErrorModel, LN_2PI, Observations};
+
+/// ln(2π).
+const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// The quadratic form of one affine screen against one data set (module documentation).
 #[derive(Debug, Clone, PartialEq)]
@@ -35,42 +37,23 @@ pub struct GaussianScreen {
 }
 
 impl GaussianScreen {
-    /// The form of `screen` against `observations` under `errors`; `None` where the variances
-    /// depend on θ (an estimated modelling error, the relative computational error), where a
-    /// variance is not positive and finite (the term-by-term likelihood then names the datum),
-    /// or where M is singular.
-    pub fn new(
-        screen: &AffineScreen,
-        observations: &Observations,
-        errors: &ErrorModel,
-    ) -> Option<Self> {
-        if errors.modelling_error.is_some()
-            || errors.computational_error == ComputationalError::Relative
+    /// The form of `screen` against the data `values` with the θ-independent variances
+    /// Σ_jj `variances` (the prediction-error likelihood decides when they are:
+    /// `iuq_basis::prediction_error`); `None` where the sizes disagree, a variance is not
+    /// positive and finite, or M is singular.
+    pub fn new(screen: &AffineScreen, values: &[f64], variances: &[f64]) -> Option<Self> {
+        let (m, k) = (screen.outputs(), screen.coefficients());
+        let y = values;
+        if y.len() != m
+            || variances.len() != m
+            || screen.loadings.len() != m * k
+            || k == 0
+            || !variances.iter().all(|v| *v > 0.0 && v.is_finite())
         {
             return None;
         }
-        let (m, k) = (screen.outputs(), screen.coefficients());
-        let y = &observations.values;
-        if y.len() != m || screen.stds.len() != m || screen.loadings.len() != m * k || k == 0 {
-            return None;
-        }
-        let measurement = observations.measurement_std.as_deref();
-        let mut weight = Vec::with_capacity(m);
-        let mut floor = 0.0;
-        for j in 0..m {
-            let variance = errors
-                .datum_variance(
-                    j,
-                    y[j],
-                    measurement.map(|s| s[j]),
-                    screen.offset[j],
-                    screen.stds[j],
-                    0.0,
-                )
-                .ok()?;
-            weight.push(1.0 / variance);
-            floor += LN_2PI + variance.ln();
-        }
+        let weight: Vec<f64> = variances.iter().map(|v| 1.0 / v).collect();
+        let floor: f64 = variances.iter().map(|v| LN_2PI + v.ln()).sum();
         let column = |l: usize| &screen.loadings[l * m..(l + 1) * m];
         let residual: Vec<f64> = (0..m).map(|j| y[j] - screen.offset[j]).collect();
         let mut gram = vec![0.0; k * k];
@@ -127,7 +110,7 @@ impl GaussianScreen {
 }
 
 /// The lower Cholesky factor of the symmetric k × k `matrix` (row-major), `None` unless it is
-/// positive definite.
+/// positive definite beyond rounding.
 fn cholesky(matrix: &[f64], k: usize) -> Option<Vec<f64>> {
     let mut l = vec![0.0; k * k];
     for i in 0..k {
@@ -135,7 +118,8 @@ fn cholesky(matrix: &[f64], k: usize) -> Option<Vec<f64>> {
             let s: f64 =
                 matrix[i * k + j] - (0..j).map(|p| l[i * k + p] * l[j * k + p]).sum::<f64>();
             if i == j {
-                if !(s > 0.0 && s.is_finite()) {
+                // Positive beyond rounding: a pivot of 10⁻¹² of its diagonal is a singular M.
+                if !(s > 1e-12 * matrix[i * k + i] && s.is_finite()) {
                     return None;
                 }
                 l[i * k + i] = s.sqrt();
@@ -164,104 +148,53 @@ fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
 mod tests {
     use super::*;
 
-    /// Three data, two coefficients, measurement stds and an absolute computational std.
-    fn problem() -> (AffineScreen, Observations) {
+    /// Three data, two coefficients.
+    fn problem() -> (AffineScreen, Vec<f64>, Vec<f64>) {
         let screen = AffineScreen {
             offset: vec![1.0, 2.0, 0.5],
             loadings: vec![1.0, 0.5, -0.3, 0.2, 1.5, 0.7],
             stds: vec![0.05, 0.1, 0.02],
         };
-        let observations = Observations {
-            values: vec![1.3, 2.9, 0.4],
-            measurement_std: Some(vec![0.1, 0.2, 0.15]),
-        };
-        (screen, observations)
+        (screen, vec![1.3, 2.9, 0.4], vec![0.0125, 0.05, 0.0229])
     }
 
-    fn errors(computational_error: ComputationalError) -> ErrorModel {
-        ErrorModel {
-            measurement_error: true,
-            computational_error,
-            modelling_error: None,
-        }
-    }
-
-    /// The term-by-term sum of the prediction-error likelihood at the screen's outputs.
-    fn term_by_term(
-        screen: &AffineScreen,
-        observations: &Observations,
-        e: &ErrorModel,
-        c: &[f64],
-    ) -> f64 {
+    /// −½ Σ_j [(y_j − q_j)²/v_j + ln(2π v_j)] at the screen's outputs, term by term.
+    fn term_by_term(screen: &AffineScreen, y: &[f64], v: &[f64], c: &[f64]) -> f64 {
         let q = screen.outputs_of(c);
-        let sd = observations.measurement_std.as_ref().unwrap();
-        (0..q.len())
-            .map(|j| {
-                e.datum_log_likelihood(
-                    j,
-                    observations.values[j],
-                    Some(sd[j]),
-                    q[j],
-                    screen.stds[j],
-                    0.0,
-                )
-                .unwrap()
-            })
-            .sum()
+        -0.5 * (0..q.len())
+            .map(|j| (y[j] - q[j]).powi(2) / v[j] + LN_2PI + v[j].ln())
+            .sum::<f64>()
     }
 
     /// The quadratic form equals the term-by-term likelihood to rounding (relative 1e-12) at
-    /// points near and far from c*, for each θ-independent computational error.
+    /// points near and far from c*.
     #[test]
     fn the_form_equals_the_term_by_term_likelihood() {
-        let (screen, observations) = problem();
-        for convention in [
-            ComputationalError::Absolute,
-            ComputationalError::AbsoluteTimesData,
-            ComputationalError::None,
-        ] {
-            let e = errors(convention);
-            let form = GaussianScreen::new(&screen, &observations, &e).unwrap();
-            for c in [[0.0, 0.0], [0.3, -0.2], [5.0, 7.0], [-40.0, 12.0]] {
-                let exact = term_by_term(&screen, &observations, &e, &c);
-                let quick = form.log_likelihood(&c).unwrap();
-                assert!(
-                    (quick - exact).abs() <= 1e-12 * exact.abs().max(1.0),
-                    "{convention:?} at {c:?}: {quick} vs {exact}"
-                );
-            }
+        let (screen, y, v) = problem();
+        let form = GaussianScreen::new(&screen, &y, &v).unwrap();
+        for c in [[0.0, 0.0], [0.3, -0.2], [5.0, 7.0], [-40.0, 12.0]] {
+            let exact = term_by_term(&screen, &y, &v, &c);
+            let quick = form.log_likelihood(&c).unwrap();
+            assert!(
+                (quick - exact).abs() <= 1e-12 * exact.abs().max(1.0),
+                "at {c:?}: {quick} vs {exact}"
+            );
         }
     }
 
-    /// Variances that depend on θ leave the form out; bad coefficients are failures.
+    /// A variance that is not positive, sizes that disagree or collinear loadings give no form;
+    /// bad coefficients are failures.
     #[test]
-    fn theta_dependent_variances_have_no_form_and_bad_coefficients_fail() {
-        let (screen, observations) = problem();
-        assert!(
-            GaussianScreen::new(
-                &screen,
-                &observations,
-                &errors(ComputationalError::Relative)
-            )
-            .is_none()
-        );
-        let with_sigma_m = ErrorModel {
-            modelling_error: Some(iuq_core::Prior::Uniform(0.001, 0.1)),
-            ..errors(ComputationalError::Absolute)
+    fn bad_inputs_give_no_form_and_bad_coefficients_fail() {
+        let (screen, y, v) = problem();
+        assert!(GaussianScreen::new(&screen, &y, &[0.0125, 0.0, 0.0229]).is_none());
+        assert!(GaussianScreen::new(&screen, &y[..2], &v).is_none());
+        let collinear = AffineScreen {
+            loadings: vec![1.0, 0.5, -0.3, 2.0, 1.0, -0.6],
+            ..screen.clone()
         };
-        assert!(GaussianScreen::new(&screen, &observations, &with_sigma_m).is_none());
-        // No variance at all (no measurement std, no computational std): no form.
-        let bare = Observations {
-            values: observations.values.clone(),
-            measurement_std: None,
-        };
-        assert!(GaussianScreen::new(&screen, &bare, &errors(ComputationalError::None)).is_none());
-        let form = GaussianScreen::new(
-            &screen,
-            &observations,
-            &errors(ComputationalError::Absolute),
-        )
-        .unwrap();
+        assert!(GaussianScreen::new(&collinear, &y, &v).is_none());
+        let form = GaussianScreen::new(&screen, &y, &v).unwrap();
         assert!(form.log_likelihood(&[f64::NAN, 0.0]).is_err());
         assert!(form.log_likelihood(&[0.0]).is_err());
     }

@@ -33,7 +33,7 @@ pub const MODELLING_ERROR_NAME: &str = "sigma_m";
 pub const DEFAULT_MODELLING_ERROR_PRIOR: Prior = Prior::Uniform(0.001, 0.1);
 
 /// ln(2π).
-pub(crate) const LN_2PI: f64 = 1.837_877_066_409_345_5;
+const LN_2PI: f64 = 1.837_877_066_409_345_5;
 
 /// How the model's computational standard deviation s_j (the spread of a simulator's measuring
 /// window, or a surrogate's predictive std — [`iuq_core::Evaluation::computational_std`]) enters
@@ -190,7 +190,7 @@ impl ErrorModel {
     /// Σ_jj of one datum (see [`ErrorModel::datum_log_likelihood`]); a non-positive or
     /// non-finite Σ is a failure naming datum `j`.
     #[inline]
-    pub(crate) fn datum_variance(
+    fn datum_variance(
         &self,
         j: usize,
         y: f64,
@@ -457,7 +457,9 @@ impl<M: Model> LogLikelihood for PredictionErrorLikelihood<M> {
         };
         if let Some(affine) = self.model.affine_screening() {
             let screen = self.screen.get_or_init(|| {
-                GaussianScreen::new(&affine.affine_screen(), &self.observations, &self.errors)
+                let affine = affine.affine_screen();
+                let variances = self.screen_variances(&affine)?;
+                GaussianScreen::new(&affine, &self.observations.values, &variances)
             });
             if let Some(screen) = screen {
                 return Some(self.of_coefficients(screen, affine, points, &model_points));
@@ -481,6 +483,37 @@ impl<M: Model> PredictionErrorLikelihood<M> {
             )));
         }
         Ok(points.iter().map(|p| p[..n_model].to_vec()).collect())
+    }
+
+    /// Σ_jj of the affine screen `screen`'s outputs where they do not depend on θ: no estimated
+    /// modelling error and a computational error that does not scale with q (`None` otherwise,
+    /// or where a datum's variance is not positive).
+    fn screen_variances(&self, screen: &iuq_core::affine_screen::AffineScreen) -> Option<Vec<f64>> {
+        if self.errors.modelling_error.is_some()
+            || self.errors.computational_error == ComputationalError::Relative
+            || screen.outputs() != self.observations.values.len()
+            || screen.stds.len() != screen.outputs()
+        {
+            return None;
+        }
+        let measurement = self.observations.measurement_std.as_deref();
+        self.observations
+            .values
+            .iter()
+            .enumerate()
+            .map(|(j, &y)| {
+                self.errors
+                    .datum_variance(
+                        j,
+                        y,
+                        measurement.map(|s| s[j]),
+                        screen.offset[j],
+                        screen.stds[j],
+                        0.0,
+                    )
+                    .ok()
+            })
+            .collect()
     }
 
     /// ln f of the affine screen at every point, from its coefficients there.
@@ -812,5 +845,113 @@ mod tests {
             measurement_std: Some(vec![-1.0]),
         };
         assert!(bad.validate().is_err());
+    }
+
+    /// A model whose screen is affine: coefficients (a, b²) through fixed loadings, three
+    /// outputs with fixed stds.
+    struct Affine(
+        Vec<String>,
+        Vec<String>,
+        iuq_core::affine_screen::AffineScreen,
+    );
+    impl Model for Affine {
+        fn input_names(&self) -> &[String] {
+            &self.0
+        }
+        fn output_names(&self) -> &[String] {
+            &self.1
+        }
+        fn evaluate_batch(&self, points: &[Vec<f64>]) -> iuq_core::Result<Vec<Outcome>> {
+            self.screening_batch(points).unwrap()
+        }
+        fn screening_batch(&self, points: &[Vec<f64>]) -> Option<iuq_core::Result<Vec<Outcome>>> {
+            Some(Ok(points
+                .iter()
+                .map(|p| {
+                    Ok(Evaluation::with_std(
+                        self.2.outputs_of(&[p[0], p[1] * p[1]]),
+                        self.2.stds.clone(),
+                    ))
+                })
+                .collect()))
+        }
+        fn affine_screening(&self) -> Option<&dyn iuq_core::affine_screen::AffineScreening> {
+            Some(self)
+        }
+    }
+    impl iuq_core::affine_screen::AffineScreening for Affine {
+        fn affine_screen(&self) -> iuq_core::affine_screen::AffineScreen {
+            self.2.clone()
+        }
+        fn screening_coefficients(
+            &self,
+            points: &[Vec<f64>],
+        ) -> iuq_core::Result<Vec<iuq_core::affine_screen::CoefficientOutcome>> {
+            Ok(points.iter().map(|p| Ok(vec![p[0], p[1] * p[1]])).collect())
+        }
+    }
+
+    /// The screen's likelihood through the quadratic form equals the term-by-term likelihood of
+    /// the screen's outcomes (to 1e-12 relative) where the variances do not depend on θ, and is
+    /// the term-by-term one itself where they do (the relative computational error).
+    #[test]
+    fn an_affine_screen_gives_the_screens_likelihood() {
+        let model = || {
+            Affine(
+                names(&["a", "b"]),
+                names(&["y0", "y1", "y2"]),
+                iuq_core::affine_screen::AffineScreen {
+                    offset: vec![1.0, 2.0, 0.5],
+                    loadings: vec![1.0, 0.5, -0.3, 0.2, 1.5, 0.7],
+                    stds: vec![0.05, 0.1, 0.02],
+                },
+            )
+        };
+        let observations = Observations {
+            values: vec![1.3, 2.9, 0.4],
+            measurement_std: Some(vec![0.1, 0.2, 0.15]),
+        };
+        let points: Vec<Vec<f64>> = (0..50)
+            .map(|i| vec![-1.0 + 0.04 * i as f64, 0.5 + 0.02 * i as f64])
+            .collect();
+        for (convention, form) in [
+            (ComputationalError::Absolute, true),
+            (ComputationalError::None, true),
+            (ComputationalError::Relative, false),
+        ] {
+            let errors = ErrorModel {
+                measurement_error: true,
+                computational_error: convention,
+                modelling_error: None,
+            };
+            let likelihood =
+                PredictionErrorLikelihood::new(model(), observations.clone(), errors).unwrap();
+            let screened = likelihood
+                .screening_log_likelihood_batch(&points)
+                .unwrap()
+                .unwrap();
+            let terms = likelihood
+                .of_outcomes(
+                    &points,
+                    likelihood.model().screening_batch(&points).unwrap(),
+                )
+                .unwrap();
+            for (p, (a, b)) in points.iter().zip(screened.iter().zip(&terms)) {
+                let (a, b) = (*a.as_ref().unwrap(), *b.as_ref().unwrap());
+                if form {
+                    assert!(
+                        (a - b).abs() <= 1e-12 * b.abs().max(1.0),
+                        "{convention:?} at {p:?}: {a} vs {b}"
+                    );
+                } else {
+                    assert_eq!(a.to_bits(), b.to_bits(), "{convention:?} at {p:?}");
+                }
+            }
+            assert_eq!(
+                likelihood.screen.get().is_some_and(Option::is_some),
+                form,
+                "{convention:?}"
+            );
+        }
     }
 }

@@ -7,7 +7,7 @@
 //! acceptance step's cost.
 
 use crate::error::Result;
-use crate::model::EvaluationFailure;
+use crate::evaluation_failure::EvaluationFailure;
 
 /// The affine map of a screen: q = `offset` + `loadings`·c, with `stds` the same at every θ.
 #[derive(Debug, Clone, PartialEq)]

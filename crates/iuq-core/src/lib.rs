@@ -27,6 +27,7 @@
 
 pub mod affine_screen;
 pub mod error;
+pub mod evaluation_failure;
 pub mod model;
 pub mod random;
 

@@ -6,6 +6,7 @@
 //! sensitivity estimators report them, surrogates skip them.
 
 use crate::error::Result;
+pub use crate::evaluation_failure::EvaluationFailure;
 
 /// A successful model evaluation at one parameter vector.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,28 +42,6 @@ impl Evaluation {
                 .computational_std
                 .as_ref()
                 .is_none_or(|s| s.iter().all(|v| v.is_finite()))
-    }
-}
-
-/// Why a model produced no result at one parameter vector.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub struct EvaluationFailure {
-    /// A human-readable reason, e.g. "mesh broke: edge strain beyond the force singularity".
-    pub reason: String,
-}
-
-impl EvaluationFailure {
-    /// A failure with the given reason.
-    pub fn new(reason: impl Into<String>) -> Self {
-        Self {
-            reason: reason.into(),
-        }
-    }
-}
-
-impl std::fmt::Display for EvaluationFailure {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(&self.reason)
     }
 }
 

@@ -481,8 +481,8 @@ impl iuq_core::affine_screen::AffineScreening for ReducedBasis {
                     let s = gp.output_scaling.std;
                     acc + a * a * (s * s * gp.hyperparameters.noise_variance)
                 });
-                let variance = 0.0 + self.truncation_variance[j];
-                (variance + self.predictive_std.added_noise_variance(noise)).sqrt()
+                (self.truncation_variance[j] + self.predictive_std.added_noise_variance(noise))
+                    .sqrt()
             })
             .collect();
         iuq_core::affine_screen::AffineScreen {

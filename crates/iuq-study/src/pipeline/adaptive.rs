@@ -1878,43 +1878,37 @@ pub(super) fn refine(
             return Err(StudyError::Interrupted);
         }
     }
-    let final_populations = (settings.final_sample == FinalSample::Carried
-        && inputs.keeps_populations())
-    .then(|| {
-        carry
-            .populations
-            .iter()
-            .cloned()
-            .collect::<Option<Vec<_>>>()
-    })
-    .flatten();
-    Ok(AdaptiveOutcome {
-        final_populations,
-        ..AdaptiveOutcome::ended(
-            settings,
-            state,
-            rounds,
-            parameters,
-            retrained_checks,
-            new_rows,
-            carry.warm_starts,
-        )
-    })
+    Ok(AdaptiveOutcome::ended(
+        inputs,
+        state,
+        rounds,
+        parameters,
+        retrained_checks,
+        new_rows,
+        carry,
+    ))
 }
 
 impl AdaptiveOutcome {
-    /// The outcome of a loop that ended in `state` under `settings`, with its rounds (the
-    /// earlier loop's included), parameters, retrained checks, rows of `runs.csv` and the last
-    /// round's GP optima.
+    /// The outcome of a loop over `inputs` that ended in `state`, with its rounds (the earlier
+    /// loop's included), parameters, retrained checks, rows of `runs.csv` and what the last
+    /// round handed on: its GP optima and, where the final sample starts from them
+    /// ([`FinalSample::Carried`], the populations kept in the store), its populations.
     fn ended(
-        settings: &AdaptiveSettings,
+        inputs: &RoundInputs<'_>,
         state: EngineState,
         rounds: Vec<AdaptiveRound>,
         parameters: Vec<String>,
         retrained_checks: Vec<RetrainedCheck>,
         run_rows: Vec<Vec<f64>>,
-        warm_starts: Option<Vec<Vec<f64>>>,
+        carry: RoundCarry,
     ) -> Self {
+        let settings = inputs.settings;
+        let final_populations = (settings.final_sample == FinalSample::Carried
+            && inputs.keeps_populations())
+        .then(|| carry.populations.into_iter().collect::<Option<Vec<_>>>())
+        .flatten();
+        let warm_starts = carry.warm_starts;
         Self {
             rounds,
             converged: state.converged,
@@ -1928,7 +1922,7 @@ impl AdaptiveOutcome {
             run_rows,
             populations: state.previous_populations,
             warm_starts,
-            final_populations: None,
+            final_populations,
         }
     }
 }
