@@ -482,30 +482,18 @@ mod clustered {
                 .collect()
         }
         let weights = vec![1.0; candidates.len()];
-        let shared = select_batch(
-            &terms(
-                outputs.iter().map(|o| o as &dyn OutputPredictor).collect(),
-                &data,
-                candidates.len(),
-            ),
-            &candidates,
-            &weights,
-            4,
-            0.0,
-        )
-        .unwrap();
-        let alone = select_batch(
-            &terms(
-                hidden.iter().map(|o| o as &dyn OutputPredictor).collect(),
-                &data,
-                candidates.len(),
-            ),
-            &candidates,
-            &weights,
-            4,
-            0.0,
-        )
-        .unwrap();
+        let select = |gps: Vec<&dyn OutputPredictor>| {
+            select_batch(
+                &terms(gps, &data, candidates.len()),
+                &candidates,
+                &weights,
+                4,
+                0.0,
+            )
+            .unwrap()
+        };
+        let shared = select(outputs.iter().map(|o| o as &dyn OutputPredictor).collect());
+        let alone = select(hidden.iter().map(|o| o as &dyn OutputPredictor).collect());
         assert_eq!(shared.indices.len(), 4);
         assert_eq!(shared.indices, alone.indices);
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

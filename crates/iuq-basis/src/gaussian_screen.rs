@@ -21,6 +21,7 @@ use iuq_core::EvaluationFailure;
 use iuq_core::affine_screen::AffineScreen;
 
 use crate::likelihood::PointLogLikelihood;
+use crate::proposal::cholesky_lower;
 
 /// ln(2π).
 const LN_2PI: f64 = 1.837_877_066_409_345_5;
@@ -30,8 +31,8 @@ const LN_2PI: f64 = 1.837_877_066_409_345_5;
 pub struct GaussianScreen {
     /// c*, the weighted least-squares coefficients of the data.
     centre: Vec<f64>,
-    /// L, M = L·Lᵀ, k × k row-major (lower triangle).
-    factor: Vec<f64>,
+    /// L, M = L·Lᵀ (lower triangle).
+    factor: Vec<Vec<f64>>,
     /// R + Σ_j ln(2π Σ_jj): −2 ln f at c*.
     floor: f64,
 }
@@ -56,20 +57,24 @@ impl GaussianScreen {
         let floor: f64 = variances.iter().map(|v| LN_2PI + v.ln()).sum();
         let column = |l: usize| &screen.loadings[l * m..(l + 1) * m];
         let residual: Vec<f64> = (0..m).map(|j| y[j] - screen.offset[j]).collect();
-        let mut gram = vec![0.0; k * k];
+        let mut gram = vec![vec![0.0; k]; k];
         let mut projection = vec![0.0; k];
         for a in 0..k {
             for b in 0..=a {
                 let v: f64 = (0..m)
                     .map(|j| column(a)[j] * weight[j] * column(b)[j])
                     .sum();
-                gram[a * k + b] = v;
-                gram[b * k + a] = v;
+                gram[a][b] = v;
+                gram[b][a] = v;
             }
             projection[a] = (0..m).map(|j| column(a)[j] * weight[j] * residual[j]).sum();
         }
-        let factor = cholesky(&gram, k)?;
-        let centre = cholesky_solve(&factor, k, &projection);
+        let factor = cholesky_lower(&gram)?;
+        // Positive beyond rounding: a pivot² below 10⁻¹² of its diagonal is a singular M.
+        if (0..k).any(|i| factor[i][i] * factor[i][i] <= 1e-12 * gram[i][i]) {
+            return None;
+        }
+        let centre = cholesky_solve(&factor, &projection);
         let fitted_residual: f64 = (0..m)
             .map(|j| {
                 let fitted: f64 = (0..k).map(|l| column(l)[j] * centre[l]).sum();
@@ -101,7 +106,7 @@ impl GaussianScreen {
         for i in 0..k {
             // (Lᵀδ)_i = Σ_{l ≥ i} L_li δ_l
             let v: f64 = (i..k)
-                .map(|l| self.factor[l * k + i] * (c[l] - self.centre[l]))
+                .map(|l| self.factor[l][i] * (c[l] - self.centre[l]))
                 .sum();
             form += v * v;
         }
@@ -109,37 +114,16 @@ impl GaussianScreen {
     }
 }
 
-/// The lower Cholesky factor of the symmetric k × k `matrix` (row-major), `None` unless it is
-/// positive definite beyond rounding.
-fn cholesky(matrix: &[f64], k: usize) -> Option<Vec<f64>> {
-    let mut l = vec![0.0; k * k];
-    for i in 0..k {
-        for j in 0..=i {
-            let s: f64 =
-                matrix[i * k + j] - (0..j).map(|p| l[i * k + p] * l[j * k + p]).sum::<f64>();
-            if i == j {
-                // Positive beyond rounding: a pivot of 10⁻¹² of its diagonal is a singular M.
-                if !(s > 1e-12 * matrix[i * k + i] && s.is_finite()) {
-                    return None;
-                }
-                l[i * k + i] = s.sqrt();
-            } else {
-                l[i * k + j] = s / l[j * k + j];
-            }
-        }
-    }
-    Some(l)
-}
-
 /// x with L·Lᵀ·x = b.
-fn cholesky_solve(l: &[f64], k: usize, b: &[f64]) -> Vec<f64> {
+fn cholesky_solve(l: &[Vec<f64>], b: &[f64]) -> Vec<f64> {
+    let k = b.len();
     let mut z = vec![0.0; k];
     for i in 0..k {
-        z[i] = (b[i] - (0..i).map(|p| l[i * k + p] * z[p]).sum::<f64>()) / l[i * k + i];
+        z[i] = (b[i] - (0..i).map(|p| l[i][p] * z[p]).sum::<f64>()) / l[i][i];
     }
     let mut x = vec![0.0; k];
     for i in (0..k).rev() {
-        x[i] = (z[i] - (i + 1..k).map(|p| l[p * k + i] * x[p]).sum::<f64>()) / l[i * k + i];
+        x[i] = (z[i] - (i + 1..k).map(|p| l[p][i] * x[p]).sum::<f64>()) / l[i][i];
     }
     x
 }
