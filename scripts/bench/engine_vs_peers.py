@@ -128,7 +128,15 @@ def _linear8():
     X = rng.normal(size=(12, 8))
 
     def f(th):
-        return th @ X.T
+        # Summed left to right, as the CLI's formula below is evaluated: both see the same model
+        # outputs to the last bit (`th @ X.T` differs there, and the adaptive path with it).
+        out = np.empty((len(th), 12))
+        for j in range(12):
+            total = X[j, 0] * th[:, 0]
+            for k in range(1, 8):
+                total = total + X[j, k] * th[:, k]
+            out[:, j] = total
+        return out
 
     y, s = _data(f, list(rng.normal(0.0, 1.0, 8)), 0.5, 17)
     names = [f"c{k}" for k in range(8)]
