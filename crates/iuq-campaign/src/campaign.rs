@@ -12,6 +12,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use iuq_core::{Control, Observer};
 use serde::Serialize;
 
 use crate::error::{CampaignError, Result};
@@ -434,10 +435,14 @@ impl Campaign {
 
     /// Run every pending run until all runs of the store are final, calling `observer` with the
     /// progress at most every `report_every`. Returns the final counts.
+    ///
+    /// An observer that answers [`Control::Stop`] stops the campaign as a raised [`Interrupt`]
+    /// does: no more runs are submitted, the runs under way are filed as they end, and the call
+    /// returns [`CampaignError::Interrupted`].
     pub fn run(
         &mut self,
         report_every: Duration,
-        observer: &mut dyn FnMut(&Progress),
+        observer: &mut dyn Observer<Progress>,
     ) -> Result<StatusCounts> {
         self.run_among(None, report_every, observer)
     }
@@ -450,7 +455,7 @@ impl Campaign {
         &mut self,
         run_ids: &[i64],
         report_every: Duration,
-        observer: &mut dyn FnMut(&Progress),
+        observer: &mut dyn Observer<Progress>,
     ) -> Result<StatusCounts> {
         let among: std::collections::HashSet<i64> = run_ids.iter().copied().collect();
         self.run_among(Some(&among), report_every, observer)
@@ -460,7 +465,7 @@ impl Campaign {
         &mut self,
         among: Option<&std::collections::HashSet<i64>>,
         report_every: Duration,
-        observer: &mut dyn FnMut(&Progress),
+        observer: &mut dyn Observer<Progress>,
     ) -> Result<StatusCounts> {
         let start = *self.session_start.get_or_insert_with(Instant::now);
         let counted: Option<Vec<i64>> = among.map(|ids| {
@@ -480,8 +485,10 @@ impl Campaign {
         let mut external: Vec<(i64, String)> = Vec::new();
         let mut last_report: Option<Instant> = None;
         let mut cannot_start: Option<String> = None;
+        let mut stop_asked = false;
         loop {
-            let interrupted = self.interrupt.as_ref().is_some_and(Interrupt::is_raised);
+            let interrupted =
+                stop_asked || self.interrupt.as_ref().is_some_and(Interrupt::is_raised);
             let stopping = interrupted || cannot_start.is_some();
             if stopping {
                 self.executor.stop_starting();
@@ -550,10 +557,10 @@ impl Campaign {
             let due = last_report.is_none_or(|t| t.elapsed() >= report_every);
             if due {
                 last_report = Some(Instant::now());
-                observer(&self.progress_of(start, counted)?);
+                stop_asked |= observer.observe(&self.progress_of(start, counted)?) == Control::Stop;
             }
             if interrupted && self.executor.in_flight() == 0 {
-                observer(&self.progress_of(start, counted)?);
+                observer.observe(&self.progress_of(start, counted)?);
                 return Err(CampaignError::Interrupted);
             }
             if cannot_start.is_none() {
@@ -561,7 +568,7 @@ impl Campaign {
             }
             if let Some(reason) = cannot_start.take_if(|_| self.executor.in_flight() == 0) {
                 self.store.restart_unstarted()?;
-                observer(&self.progress_of(start, counted)?);
+                observer.observe(&self.progress_of(start, counted)?);
                 return Err(CampaignError::BadInput(format!(
                     "{}: {reason}",
                     self.study.path.display()
@@ -601,7 +608,7 @@ impl Campaign {
                     })))?;
         }
         let progress = self.progress_of(start, counted)?;
-        observer(&progress);
+        observer.observe(&progress);
         Ok(progress.counts)
     }
 

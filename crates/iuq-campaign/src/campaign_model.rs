@@ -8,13 +8,14 @@
 use std::sync::Mutex;
 use std::time::Duration;
 
-use iuq_core::{CoreError, Evaluation, EvaluationFailure, Model, Outcome};
+use iuq_core::{Control, CoreError, Evaluation, EvaluationFailure, Model, Observer, Outcome};
 
 use crate::campaign::{Campaign, Progress};
 use crate::{CampaignError, StatusCounts};
 
-/// Observer of a campaign model's progress.
-pub type ProgressObserver = Box<dyn FnMut(&Progress) + Send>;
+/// Observer of a campaign model's progress; [`Control::Stop`] stops the batch's campaign (the
+/// batch then fails with the campaign's [`CampaignError::Interrupted`]).
+pub type ProgressObserver = Box<dyn Observer<Progress> + Send>;
 
 /// A campaign evaluated as a batch model.
 pub struct CampaignModel {
@@ -161,8 +162,8 @@ impl CampaignModel {
         *batches += 1;
         let label = label.map_or_else(|| format!("batch-{batches}"), str::to_string);
         let run_ids = campaign.add_points(&label, points).map_err(unavailable)?;
-        let mut noop = |_: &Progress| {};
-        let observer: &mut dyn FnMut(&Progress) = match observer {
+        let mut noop = |_: &Progress| Control::Continue;
+        let observer: &mut dyn Observer<Progress> = match observer {
             Some(o) => o.as_mut(),
             None => &mut noop,
         };

@@ -5,8 +5,10 @@
 
 use std::path::{Path, PathBuf};
 
-use iuq_campaign::{Campaign, CampaignModel, CampaignOptions, CampaignStudy};
-use iuq_core::Model;
+use iuq_campaign::{
+    Campaign, CampaignError, CampaignModel, CampaignOptions, CampaignStudy, Progress,
+};
+use iuq_core::{Control, Model};
 
 /// The fake simulator (modes 0–9, see the script).
 const FAKE_SIMULATOR: &str = include_str!("fixtures/fake-simulator.sh");
@@ -201,7 +203,9 @@ fn a_run_whose_stored_parameters_do_not_parse_is_an_error_not_a_run_without_para
         .execute("UPDATE runs SET parameters = 'four'", [])
         .unwrap();
     let error = campaign
-        .run(std::time::Duration::from_secs(60), &mut |_| {})
+        .run(std::time::Duration::from_secs(60), &mut |_: &Progress| {
+            Control::Continue
+        })
         .unwrap_err()
         .to_string();
     assert!(
@@ -245,8 +249,9 @@ fn a_batch_runs_only_its_own_runs_and_leaves_an_abandoned_design_pending() {
         .unwrap();
     let mut seen = Vec::new();
     campaign
-        .run_only(&ids, std::time::Duration::ZERO, &mut |p| {
-            seen.push(p.clone())
+        .run_only(&ids, std::time::Duration::ZERO, &mut |p: &Progress| {
+            seen.push(p.clone());
+            Control::Continue
         })
         .unwrap();
     assert!(!seen.is_empty());
@@ -372,5 +377,52 @@ fn only_one_coordinator_runs_a_campaign_at_a_time() {
     drop(first);
     let study = CampaignStudy::load(&path).unwrap();
     assert!(Campaign::open(study, &CampaignOptions::default()).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn an_observer_that_answers_stop_stops_the_campaign_and_files_the_runs_under_way() {
+    let dir = scratch("observer-stop");
+    let path = write_study(&dir, "");
+    let text = std::fs::read_to_string(&path)
+        .unwrap()
+        .replace("max_parallel = 4", "max_parallel = 2");
+    std::fs::write(&path, text).unwrap();
+    let mut campaign = open(&path);
+    // Mode 8 sleeps 0.4 s: the first report comes while the first two runs are under way.
+    let points: Vec<Vec<f64>> = (0..6).map(|i| vec![8.0, i as f64]).collect();
+    campaign.add_points("slow", &points).unwrap();
+    let mut calls = 0;
+    let error = campaign
+        .run(std::time::Duration::ZERO, &mut |_: &Progress| {
+            calls += 1;
+            Control::Stop
+        })
+        .unwrap_err();
+    assert!(matches!(error, CampaignError::Interrupted), "{error}");
+    let counts = campaign.store().counts(None).unwrap();
+    // The runs started before the first report (at most `max_parallel`, 2) were waited for and
+    // stored; the others never started.
+    assert!((1..=2).contains(&counts.succeeded), "{counts:?}");
+    assert_eq!(
+        (
+            counts.succeeded + counts.pending,
+            counts.running,
+            counts.queued
+        ),
+        (6, 0, 0),
+        "{counts:?}"
+    );
+    assert!(calls >= 2, "{calls}");
+    // Opened again (as a rerun of the command does) with an observer that goes on, the
+    // campaign runs the rest.
+    drop(campaign);
+    let mut campaign = open(&path);
+    let done = campaign
+        .run(std::time::Duration::ZERO, &mut |_: &Progress| {
+            Control::Continue
+        })
+        .unwrap();
+    assert_eq!((done.succeeded, done.pending), (6, 0), "{done:?}");
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -151,14 +151,21 @@ impl Events {
         sampled
     }
 
-    /// The campaign's progress observer, forwarding to the pipeline's observer.
+    /// The campaign's progress observer, forwarding to the pipeline's observer; it stops the
+    /// campaign once the pipeline's observer has asked the pipeline to stop.
     pub(super) fn campaign_progress(&self, label: &'static str) -> ProgressObserver {
         let sender = self.sender.clone();
+        let interrupt = self.interrupt.clone();
         Box::new(move |progress: &Progress| {
             let _ = sender.send(OwnedEvent::CampaignProgress {
                 label,
                 progress: progress.clone(),
             });
+            if interrupt.is_raised() {
+                Control::Stop
+            } else {
+                Control::Continue
+            }
         })
     }
 }

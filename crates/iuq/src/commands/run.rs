@@ -11,6 +11,7 @@ use serde_json::{Value, json};
 
 use iuq_campaign::study_design::design_points;
 use iuq_campaign::{Campaign, Progress, ResumeSummary, StatusCounts};
+use iuq_core::Control;
 use iuq_study::campaign_runs::{campaign_error, open_campaign, progress_line};
 use iuq_study::campaign_study::load_study;
 
@@ -71,6 +72,7 @@ pub fn drive(campaign: &mut Campaign, json: bool, log_interval: f64) -> Result<S
                     p.counts.failed + p.counts.cancelled,
                     p.counts.running
                 ));
+                Control::Continue
             })
             .map_err(campaign_error)?;
         bar.finish();
@@ -79,7 +81,8 @@ pub fn drive(campaign: &mut Campaign, json: bool, log_interval: f64) -> Result<S
         let interval = Duration::from_secs_f64(log_interval);
         let counts = campaign
             .run(interval, &mut |p: &Progress| {
-                eprintln!("{}", progress_line(&name, p))
+                eprintln!("{}", progress_line(&name, p));
+                Control::Continue
             })
             .map_err(campaign_error)?;
         Ok(counts)
