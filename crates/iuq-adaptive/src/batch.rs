@@ -62,6 +62,12 @@ fn score(
     weights[i] * total
 }
 
+/// The covariance columns of the components several outputs share, computed for one pick.
+struct ComponentColumns<'a> {
+    components: &'a [iuq_gp::ComponentGp],
+    columns: Vec<Vec<Vec<f64>>>,
+}
+
 /// Pick up to `batch` of `candidates` (original parameter units), greedily by score, stopping
 /// early when the best remaining score is below `min_score` (the surrogate is already sure
 /// enough everywhere else). `weights[i]` ≥ 0 multiplies candidate i's score: the probability
@@ -132,23 +138,25 @@ pub fn select_batch(
         let s = std::slice::from_ref(&candidates[pick]);
         // The covariance columns of the components that outputs share (a reduced basis), each
         // computed once per pick rather than once per output.
-        let mut shared: Option<(&iuq_gp::ReducedBasis, Vec<Vec<Vec<f64>>>)> = None;
+        let mut shared: Option<ComponentColumns<'_>> = None;
         for (t, term) in terms.iter().enumerate() {
             let covariance = match term.gp.shared_components() {
                 Some(components) => {
                     let known = shared
                         .as_ref()
-                        .is_some_and(|(basis, _)| std::ptr::eq(*basis, components.basis));
+                        .is_some_and(|c| std::ptr::eq(c.components, components.components));
                     if !known {
                         let columns = components
-                            .basis
-                            .component_gps()
+                            .components
                             .iter()
                             .map(|gp| gp.posterior_covariance(candidates, s))
                             .collect::<iuq_gp::Result<Vec<_>>>()?;
-                        shared = Some((components.basis, columns));
+                        shared = Some(ComponentColumns {
+                            components: components.components,
+                            columns,
+                        });
                     }
-                    let columns = shared.as_ref().map_or(&[][..], |(_, c)| c.as_slice());
+                    let columns = shared.as_ref().map_or(&[][..], |c| c.columns.as_slice());
                     components.combine(columns)
                 }
                 None => term.gp.posterior_covariance(candidates, s)?,

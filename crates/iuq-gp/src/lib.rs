@@ -49,6 +49,7 @@
 pub mod bank;
 pub mod bounds;
 pub mod classification;
+pub mod component_gp;
 mod data;
 pub mod diagnostics;
 pub mod error;
@@ -67,6 +68,7 @@ pub mod persistence;
 mod posterior_covariance;
 pub mod prediction;
 pub mod reduced_basis;
+pub mod reduced_basis_output;
 pub mod scaling;
 pub mod screening;
 #[cfg(test)]
@@ -77,6 +79,7 @@ mod vector_math;
 pub use bank::{BANK_FORMAT, BANK_FORMAT_VERSION, GpBank, PredictiveStd};
 pub use bounds::Bounds;
 pub use classification::{CheckedClassifierOptions, ClassifierOptions, FailureClassifier};
+pub use component_gp::ComponentGp;
 pub use diagnostics::{FitDiagnostics, FitWarning, RunReport, StartReport};
 pub use error::{GpError, Result};
 pub use fit::{CheckedFitOptions, FitOptions, MAX_RESTARTS, fit, fit_warm};
@@ -88,8 +91,9 @@ pub use multi_fidelity_bank::MultiFidelityBank;
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
 };
-pub use output_predictor::{OutputPredictor, ReducedBasisOutput, SharedComponents};
+pub use output_predictor::{OutputPredictor, SharedComponents};
 pub use prediction::Prediction;
 pub use reduced_basis::{ReducedBasis, ReducedBasisOptions};
+pub use reduced_basis_output::ReducedBasisOutput;
 pub use scaling::{InputScaling, OutputScaling};
 pub use validation::{LeaveOneOut, q2};

@@ -253,6 +253,25 @@ impl MultiFidelityGp {
 }
 
 impl MultiFidelityGp {
+    /// The predictive mean alone at `points`: ρ·μ_L + μ_δ where the two fidelities are used,
+    /// else the single-fidelity GP's (as [`MultiFidelityGp::predict`]'s mean, without the
+    /// variances).
+    ///
+    /// # Errors
+    /// A point of the wrong dimension or with a non-finite coordinate.
+    pub fn predict_mean(&self, points: &[Vec<f64>]) -> Result<Vec<f64>> {
+        if !self.uses_low_fidelity() {
+            return self.single.predict_mean(points);
+        }
+        let low = self.low.predict_mean(points)?;
+        let delta = self.discrepancy.predict_mean(points)?;
+        Ok(low
+            .iter()
+            .zip(&delta)
+            .map(|(l, e)| self.rho * l + e)
+            .collect())
+    }
+
     /// The two parts of the latent variance at `points`: (ρ²·σ²_L, what a low-fidelity run
     /// there would remove; σ²_δ, what only a high-fidelity run removes). Where the emulator
     /// uses the high-fidelity runs alone, the first part is 0 and the second their GP's
@@ -282,13 +301,13 @@ impl MultiFidelityGp {
     }
 }
 
-impl crate::output_predictor::OutputPredictor for MultiFidelityGp {
-    fn predict(&self, points: &[Vec<f64>]) -> Result<Prediction> {
-        MultiFidelityGp::predict(self, points)
-    }
-
-    /// ρ²·cov_L(a, b) + cov_δ(a, b) (f_L and δ independent), or the single-fidelity GP's.
-    fn posterior_covariance(&self, a: &[Vec<f64>], b: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
+impl MultiFidelityGp {
+    /// ρ²·cov_L(a, b) + c·cov_δ(a, b) (f_L and δ independent), or the single-fidelity GP's:
+    /// the latent posterior covariance between the points `a` and `b`.
+    ///
+    /// # Errors
+    /// A point of the wrong dimension or with a non-finite coordinate.
+    pub fn posterior_covariance(&self, a: &[Vec<f64>], b: &[Vec<f64>]) -> Result<Vec<Vec<f64>>> {
         if !self.uses_low_fidelity() {
             return self.single.posterior_covariance(a, b);
         }
@@ -306,14 +325,15 @@ impl crate::output_predictor::OutputPredictor for MultiFidelityGp {
         Ok(covariance)
     }
 
-    /// A new high-fidelity run's noise: δ's (or the single-fidelity GP's).
-    fn run_noise_variance(&self, prediction: &Prediction) -> f64 {
-        let gp = if self.uses_low_fidelity() {
+    /// The GP fitted to the high-fidelity runs that is in charge of their noise: δ where both
+    /// fidelities are used, else the single-fidelity GP. A new high-fidelity run carries its
+    /// noise.
+    pub fn in_charge(&self) -> &GaussianProcess {
+        if self.uses_low_fidelity() {
             &self.discrepancy
         } else {
             &self.single
-        };
-        crate::output_predictor::OutputPredictor::run_noise_variance(gp, prediction)
+        }
     }
 }
 

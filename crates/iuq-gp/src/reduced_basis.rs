@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use iuq_core::model::{Evaluation, EvaluationFailure, Model, Outcome};
 
 use crate::bank::PredictiveStd;
+use crate::component_gp::ComponentGp;
 use crate::error::{GpError, Result};
 use crate::fit::{CheckedFitOptions, FitOptions};
 use crate::gaussian_process::GaussianProcess;
@@ -81,7 +82,7 @@ pub struct ReducedBasis {
     explained: Vec<f64>,
     /// τ_j² in output units.
     truncation_variance: Vec<f64>,
-    gps: Vec<GaussianProcess>,
+    gps: Vec<ComponentGp>,
     predictive_std: PredictiveStd,
 }
 
@@ -148,7 +149,9 @@ impl ReducedBasis {
                 ..options.fit
             }
             .check()?;
-            gps.push(GaussianProcess::fit(inputs, y, &fit)?);
+            gps.push(ComponentGp::Single(Box::new(GaussianProcess::fit(
+                inputs, y, &fit,
+            )?)));
         }
         Ok(Self {
             input_names,
@@ -161,6 +164,181 @@ impl ReducedBasis {
             gps,
             predictive_std: PredictiveStd::default(),
         })
+    }
+
+    /// Fit the basis on two fidelities' runs and emulate each component by a two-fidelity GP:
+    /// the expensive runs (`high`: inputs n_H × d, outputs n_H × m) and the cheap model's
+    /// (`low`, the same outputs), nested or not.
+    ///
+    /// The centre, scale and components are those of both sets of runs stacked (the cheap runs,
+    /// many, show the shapes the curves take over the prior; the expensive ones add theirs);
+    /// each run's coefficients are its scaled outputs' projections c_ik = Σ_j Z_ij V_jk, and
+    /// component k is a [`crate::MultiFidelityGp`] of the expensive runs' c_·k on the cheap
+    /// runs' (seed `seed + k`), which uses the cheap runs only where they help
+    /// ([`crate::MultiFidelityGp::uses_low_fidelity`]). The truncation error τ_j² is the
+    /// expensive runs' own: what the basis leaves out of the model being emulated.
+    ///
+    /// # Errors
+    /// As [`ReducedBasis::fit`], for either set of runs, or a two-fidelity fit that fails.
+    pub fn fit_two_fidelity(
+        input_names: Vec<String>,
+        output_names: Vec<String>,
+        high: (&[Vec<f64>], &[Vec<f64>]),
+        low: (&[Vec<f64>], &[Vec<f64>]),
+        options: &ReducedBasisOptions,
+    ) -> Result<Self> {
+        let m = output_names.len();
+        check_runs(high.0, high.1, m, options)?;
+        check_runs(low.0, low.1, m, options)?;
+        let stacked: Vec<Vec<f64>> = high.1.iter().chain(low.1).cloned().collect();
+        let n = stacked.len();
+        let centre: Vec<f64> = (0..m)
+            .map(|j| stacked.iter().map(|r| r[j]).sum::<f64>() / n as f64)
+            .collect();
+        let scale = output_scale(options.output_scale.as_deref(), &stacked, &centre)?;
+        let z = Mat::<f64>::from_fn(n, m, |i, j| (stacked[i][j] - centre[j]) / scale[j]);
+        let components = PrincipalComponents::of(&z)?;
+        let limit = options
+            .max_components
+            .min(n - 1)
+            .min(components.singular.len())
+            .max(1);
+        // The fewest components that explain `explained_variance` of both the stacked runs and
+        // the expensive runs alone (a cheap model whose curves take other shapes must not leave
+        // the expensive ones to the truncation error), at most `limit`.
+        let n_high = high.1.len();
+        let high_total: f64 = (0..n_high)
+            .flat_map(|i| (0..m).map(move |j| (i, j)))
+            .map(|(i, j)| z[(i, j)] * z[(i, j)])
+            .sum();
+        let mut q_high = if high_total > 0.0 { limit } else { 1 };
+        let mut high_cumulative = 0.0;
+        for (k, &c) in components.order[..limit].iter().enumerate() {
+            if high_total <= 0.0 {
+                break;
+            }
+            high_cumulative += (0..n_high)
+                .map(|i| {
+                    let c_ik: f64 = (0..m).map(|j| z[(i, j)] * components.v[(j, c)]).sum();
+                    c_ik * c_ik
+                })
+                .sum::<f64>();
+            if high_cumulative >= options.explained_variance * high_total {
+                q_high = k + 1;
+                break;
+            }
+        }
+        let q = components
+            .leading_shares(limit, options.explained_variance)
+            .len()
+            .max(q_high);
+        let total: f64 = components.singular.iter().map(|v| v * v).sum();
+        let explained: Vec<f64> = components.order[..q]
+            .iter()
+            .map(|&k| {
+                if total > 0.0 {
+                    components.singular[k].powi(2) / total
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let basis: Vec<Vec<f64>> = (0..m)
+            .map(|j| {
+                components.order[..q]
+                    .iter()
+                    .map(|&k| components.v[(j, k)])
+                    .collect()
+            })
+            .collect();
+        // c_ik of rows `rows` of Z, one vector per component.
+        let project = |rows: std::ops::Range<usize>| -> Vec<Vec<f64>> {
+            (0..q)
+                .map(|k| {
+                    rows.clone()
+                        .map(|i| (0..m).map(|j| z[(i, j)] * basis[j][k]).sum())
+                        .collect()
+                })
+                .collect()
+        };
+        let high_coefficients = project(0..n_high);
+        let low_coefficients = project(n_high..n);
+        let truncation_variance: Vec<f64> = (0..m)
+            .map(|j| {
+                let sum: f64 = (0..n_high)
+                    .map(|i| {
+                        let fitted: f64 =
+                            (0..q).map(|k| high_coefficients[k][i] * basis[j][k]).sum();
+                        (z[(i, j)] - fitted).powi(2)
+                    })
+                    .sum();
+                scale[j] * scale[j] * sum / n_high as f64
+            })
+            .collect();
+        let gps = (0..q)
+            .into_par_iter()
+            .map(|k| {
+                let fit = FitOptions {
+                    seed: options.fit.seed.wrapping_add(k as u64),
+                    ..options.fit
+                }
+                .check()?;
+                crate::MultiFidelityGp::fit(
+                    low.0,
+                    &low_coefficients[k],
+                    high.0,
+                    &high_coefficients[k],
+                    &fit,
+                )
+                .map(|gp| ComponentGp::TwoFidelity(Box::new(gp)))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Self {
+            input_names,
+            output_names,
+            centre,
+            scale,
+            basis,
+            explained,
+            truncation_variance,
+            gps,
+            predictive_std: PredictiveStd::default(),
+        })
+    }
+
+    /// Output j's latent variance at `points` split by fidelity: (what cheap runs there would
+    /// remove, Σ_k a_jk²·ρ_k²σ²_L,k; what only expensive runs remove, Σ_k a_jk²·c_k σ²_δ,k),
+    /// from each component's [`ComponentGp::fidelity_variances`] (a single-fidelity component's
+    /// variance is all in the second).
+    ///
+    /// # Errors
+    /// An output index out of range, or points of the wrong dimension or not finite.
+    pub fn fidelity_variances(
+        &self,
+        j: usize,
+        points: &[Vec<f64>],
+    ) -> Result<(Vec<f64>, Vec<f64>)> {
+        if j >= self.output_names.len() {
+            return Err(GpError::InvalidParameter {
+                what: "output index",
+                reason: format!("{j} of {} outputs", self.output_names.len()),
+            });
+        }
+        let (mut low, mut expensive) = (vec![0.0; points.len()], vec![0.0; points.len()]);
+        for (k, gp) in self.gps.iter().enumerate() {
+            let w = self.loading(j, k).powi(2);
+            let (l, e) = gp.fidelity_variances(points)?;
+            for i in 0..points.len() {
+                low[i] += w * l[i];
+                expensive[i] += w * e[i];
+            }
+        }
+        Ok((low, expensive))
+    }
+
+    /// Whether some component is a two-fidelity GP ([`ReducedBasis::fit_two_fidelity`]).
+    pub fn is_two_fidelity(&self) -> bool {
+        self.gps.iter().any(|gp| gp.two_fidelity().is_some())
     }
 
     /// Report the latent std instead of the std with noise, or back.
@@ -184,8 +362,8 @@ impl ReducedBasis {
         &self.truncation_variance
     }
 
-    /// The components' GPs, in order.
-    pub fn component_gps(&self) -> &[GaussianProcess] {
+    /// The components' emulators, in order.
+    pub fn component_gps(&self) -> &[ComponentGp] {
         &self.gps
     }
 
@@ -450,11 +628,10 @@ impl Model for ReducedBasis {
                 .iter()
                 .map(|gp| {
                     let mean = gp.predict_mean(probe)?;
-                    let s = gp.output_scaling.std;
                     Ok(Prediction {
                         variance: vec![0.0; mean.len()],
                         mean,
-                        noise_variance: s * s * gp.hyperparameters.noise_variance,
+                        noise_variance: gp.noise_variance(),
                     })
                 })
                 .collect::<Result<_>>()
@@ -478,8 +655,7 @@ impl iuq_core::affine_screen::AffineScreening for ReducedBasis {
             .map(|j| {
                 let noise = self.gps.iter().enumerate().fold(0.0, |acc, (k, gp)| {
                     let a = loadings[k * m + j];
-                    let s = gp.output_scaling.std;
-                    acc + a * a * (s * s * gp.hyperparameters.noise_variance)
+                    acc + a * a * gp.noise_variance()
                 });
                 (self.truncation_variance[j] + self.predictive_std.added_noise_variance(noise))
                     .sqrt()
@@ -644,6 +820,108 @@ mod tests {
 
     fn names(prefix: &str, count: usize) -> Vec<String> {
         (0..count).map(|j| format!("{prefix}{j}")).collect()
+    }
+
+    /// A·e^(−γt)·cos(scale·ω·t) at 60 times for each θ = (A, γ, ω), and n space-filling θ of
+    /// the box A ∈ [0.5, 3], γ ∈ [0.05, 0.8], ω ∈ [1, 3] (a lattice with coprime steps).
+    fn oscillations(n: usize, scale: f64, offset: usize) -> (Vec<Vec<f64>>, Vec<Vec<f64>>) {
+        let inputs: Vec<Vec<f64>> = (0..n)
+            .map(|i| {
+                let u =
+                    |step: usize| (((i + offset) * step) % n) as f64 / n as f64 + 0.5 / n as f64;
+                vec![0.5 + 2.5 * u(1), 0.05 + 0.75 * u(7), 1.0 + 2.0 * u(11)]
+            })
+            .collect();
+        let outputs = inputs
+            .iter()
+            .map(|t| {
+                (0..60)
+                    .map(|i| {
+                        let x = 0.1 + 0.1 * i as f64;
+                        t[0] * (-t[1] * x).exp() * (scale * t[2] * x).cos()
+                    })
+                    .collect()
+            })
+            .collect();
+        (inputs, outputs)
+    }
+
+    /// Root mean square error of `rb` against the expensive curve at `test` points.
+    fn rms_error(rb: &ReducedBasis, test: &(Vec<Vec<f64>>, Vec<Vec<f64>>)) -> f64 {
+        let predictions = rb.predict(&test.0).unwrap();
+        let mut sum = 0.0;
+        for (j, p) in predictions.iter().enumerate() {
+            for (i, mean) in p.mean.iter().enumerate() {
+                sum += (mean - test.1[i][j]).powi(2);
+            }
+        }
+        (sum / (60 * test.0.len()) as f64).sqrt()
+    }
+
+    /// With 16 expensive runs of a 3-parameter oscillation (too few for the expensive curves'
+    /// shapes) and 150 runs of a cheap model whose frequency is 2 % off, the two-fidelity basis
+    /// predicts the expensive curve several times better than the basis of the expensive runs
+    /// alone; a cheap model of another family (a pure decay, no oscillation) leaves it no worse
+    /// than about the single-fidelity basis (its components fall back to the expensive runs'
+    /// GPs and the basis keeps what explains the expensive runs).
+    #[test]
+    fn a_cheap_model_of_the_same_shapes_makes_the_basis_better_and_an_unrelated_one_no_worse() {
+        let high = oscillations(16, 1.0, 0);
+        let low = oscillations(150, 1.02, 3);
+        let test = oscillations(97, 1.0, 5);
+        let options = ReducedBasisOptions::default();
+        let single =
+            ReducedBasis::fit(names("t", 3), names("y", 60), &high.0, &high.1, &options).unwrap();
+        let two = ReducedBasis::fit_two_fidelity(
+            names("t", 3),
+            names("y", 60),
+            (&high.0, &high.1),
+            (&low.0, &low.1),
+            &options,
+        )
+        .unwrap();
+        assert!(two.is_two_fidelity() && !single.is_two_fidelity());
+        let (e_single, e_two) = (rms_error(&single, &test), rms_error(&two, &test));
+        println!("rms error: expensive runs alone {e_single:.4}, with the cheap runs {e_two:.4}");
+        assert!(e_two < 0.5 * e_single, "{e_two} against {e_single}");
+        // The variance a cheap run removes is part of the latent variance, and outputs sum their
+        // components' parts.
+        let at = vec![test.0[0].clone(), test.0[1].clone()];
+        let latent = two.predict_output(7, &at).unwrap().variance;
+        let (v_low, v_high) = two.fidelity_variances(7, &at).unwrap();
+        for i in 0..2 {
+            assert!(v_low[i] >= 0.0 && v_high[i] >= 0.0);
+            assert!((v_low[i] + v_high[i] - latent[i]).abs() <= 1e-9 * latent[i].max(1e-300));
+        }
+        assert!(single.fidelity_variances(7, &at).unwrap().0 == vec![0.0, 0.0]);
+        assert!(two.fidelity_variances(60, &at).is_err());
+
+        let decay: (Vec<Vec<f64>>, Vec<Vec<f64>>) = {
+            let (inputs, _) = oscillations(150, 1.0, 3);
+            let outputs = inputs
+                .iter()
+                .map(|t| {
+                    (0..60)
+                        .map(|i| t[0] * (-t[1] * (0.1 + 0.1 * i as f64)).exp())
+                        .collect()
+                })
+                .collect();
+            (inputs, outputs)
+        };
+        let unrelated = ReducedBasis::fit_two_fidelity(
+            names("t", 3),
+            names("y", 60),
+            (&high.0, &high.1),
+            (&decay.0, &decay.1),
+            &options,
+        )
+        .unwrap();
+        let e_unrelated = rms_error(&unrelated, &test);
+        println!("with an unrelated cheap model {e_unrelated:.4}");
+        assert!(
+            e_unrelated < 1.25 * e_single,
+            "{e_unrelated} against {e_single}"
+        );
     }
 
     /// The affine screen is the screen: μ + A·c(θ) gives `screening_batch`'s outputs and its

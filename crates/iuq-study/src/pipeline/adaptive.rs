@@ -1695,7 +1695,8 @@ fn allocate(
     round: usize,
     wanted: Vec<(usize, Vec<f64>)>,
 ) -> Result<Allocation> {
-    let (Some(low), Some(bank)) = (inputs.low_fidelity, surrogate.emulator.two_fidelity()) else {
+    let emulator = &surrogate.emulator;
+    let Some(low) = inputs.low_fidelity.filter(|_| emulator.is_two_fidelity()) else {
         return Ok(Allocation {
             high: wanted,
             low: Vec::new(),
@@ -1703,7 +1704,8 @@ fn allocate(
     };
     let ratio = low.cost_ratio(inputs.runs)?;
     let variance = |j: usize| total_variance(inputs.data, j, None).max(f64::MIN_POSITIVE);
-    let allocation = low.allocate(bank, inputs.runs, &variance, wanted, ratio)?;
+    let split = |j: usize, theta: &[f64]| emulator.fidelity_variances(j, theta);
+    let allocation = low.allocate(&split, inputs.runs, &variance, wanted, ratio)?;
     let text = serde_json::to_string(&allocation).map_err(|e| {
         StudyError::failure(format!("cannot record the allocation: {e}")).with_source(e)
     })?;

@@ -175,7 +175,11 @@ impl Emulator {
     pub fn fitted_gps(&self) -> Vec<&GaussianProcess> {
         match self {
             Emulator::PerOutput(bank) => bank.gps().iter().collect(),
-            Emulator::ReducedBasis(rb) => rb.component_gps().iter().collect(),
+            Emulator::ReducedBasis(rb) => rb
+                .component_gps()
+                .iter()
+                .map(iuq_gp::ComponentGp::in_charge)
+                .collect(),
             Emulator::TwoFidelity(bank) => bank
                 .gps()
                 .iter()
@@ -223,6 +227,31 @@ impl Emulator {
             Emulator::TwoFidelity(bank) => Some(bank),
             _ => None,
         }
+    }
+
+    /// Whether the emulator uses a second fidelity's runs: a two-fidelity GP per data point, or
+    /// a reduced basis of two fidelities.
+    pub fn is_two_fidelity(&self) -> bool {
+        match self {
+            Emulator::TwoFidelity(_) => true,
+            Emulator::ReducedBasis(rb) => rb.is_two_fidelity(),
+            Emulator::PerOutput(_) => false,
+        }
+    }
+
+    /// Output j's latent variance at `theta` split by fidelity: (what a cheap run there would
+    /// remove, what only an expensive run removes); of a single-fidelity emulator (0, all).
+    ///
+    /// # Errors
+    /// A point of the wrong dimension or not finite.
+    pub fn fidelity_variances(&self, j: usize, theta: &[f64]) -> Result<(f64, f64)> {
+        let at = vec![theta.to_vec()];
+        let (low, expensive) = match self {
+            Emulator::TwoFidelity(bank) => bank.gps()[j].fidelity_variances(&at)?,
+            Emulator::ReducedBasis(rb) => rb.fidelity_variances(j, &at)?,
+            Emulator::PerOutput(bank) => (vec![0.0], bank.gps()[j].predict(&at)?.variance),
+        };
+        Ok((low[0], expensive[0]))
     }
 
     /// The GP of each output, where each has its own.

@@ -40,12 +40,12 @@ use serde_json::json;
 use toml::{Table, Value};
 
 use iuq_doe::{LhsMethod, latin_hypercube};
-use iuq_gp::MultiFidelityBank;
+use iuq_gp::{MultiFidelityBank, MultiFidelityGp, ReducedBasis};
 use iuq_study_file::StudySection;
 
 use super::events::Events;
 use super::model_runs::{ModelRuns, RunRequests};
-use super::run_groups::{GroupRuns, OutputRuns, RunOrigin};
+use super::run_groups::{Curves, GroupRuns, OutputRuns, RunOrigin};
 use crate::error::{Result, StudyError, input_error};
 use crate::likelihood_section::DataLikelihood;
 use crate::study::Study;
@@ -153,6 +153,10 @@ pub fn low_fidelity_study(
     })?;
     Ok(Some((low, settings)))
 }
+
+/// Data point j's latent variance at θ split by fidelity: (what a cheap run there would
+/// remove, what only an expensive run removes); `super::emulator::Emulator::fidelity_variances`.
+pub(super) type FidelitySplit<'a> = &'a dyn Fn(usize, &[f64]) -> Result<(f64, f64)>;
 
 /// The cheap model's runs, their campaign and its settings.
 pub struct LowFidelity {
@@ -286,6 +290,17 @@ impl LowFidelity {
         Ok(())
     }
 
+    /// The successful runs of a whole-curve cheap model (one run group): θ and every output.
+    pub(super) fn training_curves(&self) -> Result<Curves> {
+        match self.groups()?.as_slice() {
+            [group] => Ok(group.training_curves()),
+            groups => Err(StudyError::failure(format!(
+                "a reduced basis of two fidelities needs a whole-curve cheap model (one run group), not {} run groups",
+                groups.len()
+            ))),
+        }
+    }
+
     /// The successful runs of data point `j`.
     pub(super) fn training(&self, j: usize) -> Result<OutputRuns> {
         let (g, k) = self.locate(j);
@@ -330,7 +345,7 @@ impl LowFidelity {
     /// expensive run with a cheap one at the same θ; within `low_budget` cheap runs.
     pub(super) fn allocate(
         &self,
-        bank: &MultiFidelityBank,
+        fidelity_variances: FidelitySplit<'_>,
         high: &ModelRuns,
         data_variance: &dyn Fn(usize) -> f64,
         requests: RunRequests,
@@ -343,11 +358,10 @@ impl LowFidelity {
         for (g, theta) in requests {
             let (mut v_low, mut v_delta) = (0.0, 0.0);
             for j in high.group_outputs(g) {
-                let (low, delta) =
-                    bank.gps()[j].fidelity_variances(std::slice::from_ref(&theta))?;
+                let (low, delta) = fidelity_variances(j, &theta)?;
                 let tau = data_variance(j);
-                v_low += low[0] / tau;
-                v_delta += delta[0] / tau;
+                v_low += low / tau;
+                v_delta += delta / tau;
             }
             let cheap: RunRequests = self
                 .requests_for(high, g, &theta)
@@ -389,37 +403,62 @@ pub(super) fn allocation_key(round: usize) -> String {
 /// Per data point, ρ, whether both fidelities are used and the two leave-one-out densities
 /// (`two-fidelity.json`).
 pub(super) fn two_fidelity_summary(bank: &MultiFidelityBank) -> serde_json::Value {
-    let outputs: Vec<serde_json::Value> = bank
-        .output_names()
+    json!({ "outputs": two_fidelity_entries("output", bank.output_names().iter().cloned().zip(bank.gps())) })
+}
+
+/// Per component of a reduced basis of two fidelities, as [`two_fidelity_summary`] per data
+/// point (`two-fidelity.json`); components of one fidelity are left out.
+pub(super) fn two_fidelity_basis_summary(basis: &ReducedBasis) -> serde_json::Value {
+    let components = basis
+        .component_gps()
         .iter()
-        .zip(bank.gps())
-        .map(|(name, gp)| {
-            let (two, one) = gp.loo_log_densities();
-            json!({
-                "output": name,
-                "rho": gp.rho(),
-                "uses_low_fidelity": gp.uses_low_fidelity(),
-                "explained_share": gp.explained_share(),
-                "loo_log_density_two_fidelities": two,
-                "loo_log_density_high_fidelity_alone": one,
-                "discrepancy_std": gp.discrepancy().output_scaling().std,
-            })
+        .enumerate()
+        .filter_map(|(k, c)| c.two_fidelity().map(|gp| (format!("{}", k + 1), gp)));
+    json!({ "components": two_fidelity_entries("component", components) })
+}
+
+/// One entry per named two-fidelity GP: its name under `key`, ρ, its use of the cheap model,
+/// the share it explains, both leave-one-out densities and the discrepancy's std.
+fn two_fidelity_entries<'a>(
+    key: &str,
+    gps: impl Iterator<Item = (String, &'a MultiFidelityGp)>,
+) -> Vec<serde_json::Value> {
+    gps.map(|(name, gp)| {
+        let (two, one) = gp.loo_log_densities();
+        json!({
+            key: name,
+            "rho": gp.rho(),
+            "uses_low_fidelity": gp.uses_low_fidelity(),
+            "explained_share": gp.explained_share(),
+            "loo_log_density_two_fidelities": two,
+            "loo_log_density_high_fidelity_alone": one,
+            "discrepancy_std": gp.discrepancy().output_scaling().std,
         })
-        .collect();
-    json!({ "outputs": outputs })
+    })
+    .collect()
 }
 
 /// One line on how much the cheap model helps.
 pub(super) fn two_fidelity_message(bank: &MultiFidelityBank) -> String {
-    let used = bank.gps().iter().filter(|g| g.uses_low_fidelity()).count();
-    let rhos: Vec<String> = bank
-        .gps()
+    helped_line(bank.gps().iter(), "data points")
+}
+
+/// One line on how much the cheap model helps a reduced basis of two fidelities.
+pub(super) fn two_fidelity_basis_message(basis: &ReducedBasis) -> String {
+    let gps = basis
+        .component_gps()
         .iter()
-        .map(|g| format!("{:.3}", g.rho()))
-        .collect();
+        .filter_map(|c| c.two_fidelity());
+    helped_line(gps, "principal components")
+}
+
+/// "two fidelities: the cheap model helps u of n `what` (ρ …)".
+fn helped_line<'a>(gps: impl Iterator<Item = &'a MultiFidelityGp> + Clone, what: &str) -> String {
+    let used = gps.clone().filter(|g| g.uses_low_fidelity()).count();
+    let rhos: Vec<String> = gps.clone().map(|g| format!("{:.3}", g.rho())).collect();
     format!(
-        "two fidelities: the cheap model helps {used} of {} data points (ρ {})",
-        bank.gps().len(),
+        "two fidelities: the cheap model helps {used} of {} {what} (ρ {})",
+        rhos.len(),
         rhos.join(", ")
     )
 }

@@ -38,6 +38,15 @@ pub struct OutputRuns {
     pub std: Vec<f64>,
 }
 
+/// Whole runs of a whole-curve model: each run's θ and all its outputs, in order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Curves {
+    /// Parameter vectors.
+    pub inputs: Vec<Vec<f64>>,
+    /// Every output of the run at each.
+    pub outputs: Vec<Vec<f64>>,
+}
+
 /// The runs of one group, in the order they were requested.
 #[derive(Debug, Clone, Default)]
 pub struct GroupRuns {
@@ -88,6 +97,19 @@ impl GroupRuns {
             }
         }
         runs
+    }
+
+    /// The successful training runs' θ and whole output vectors (every output of a run, in
+    /// order): the runs of a whole-curve model as a reduced basis takes them.
+    pub fn training_curves(&self) -> Curves {
+        let mut curves = Curves::default();
+        for ((p, o), origin) in self.points.iter().zip(&self.outcomes).zip(&self.origins) {
+            if let (Ok(e), false) = (o, *origin == RunOrigin::Test) {
+                curves.inputs.push(p.clone());
+                curves.outputs.push(e.outputs.clone());
+            }
+        }
+        curves
     }
 
     /// The successful training runs (initial, adaptive and those of failed checks) of the

@@ -75,7 +75,8 @@ pub const AUTOMATIC_REDUCED_BASIS_ROWS: usize = 50;
 #[serde(rename_all = "kebab-case")]
 pub enum ReducedBasisChoice {
     /// Absent: a reduced basis with the default settings for a whole-curve model of at least
-    /// [`AUTOMATIC_REDUCED_BASIS_ROWS`] data rows without a second fidelity, else a GP per row.
+    /// [`AUTOMATIC_REDUCED_BASIS_ROWS`] data rows (of two fidelities where `[low_fidelity]` is
+    /// given), else a GP per row.
     Automatic,
     /// `false`: a GP per data row.
     Off,
@@ -85,21 +86,13 @@ pub enum ReducedBasisChoice {
 
 impl ReducedBasisChoice {
     /// The reduced basis to emulate with (`None`: a GP per data row), for a model that returns
-    /// the whole curve (`whole_curve`) or runs once per row, `rows` data rows, and whether a
-    /// second fidelity is given (emulated with a GP per row).
-    pub fn resolve(
-        self,
-        whole_curve: bool,
-        rows: usize,
-        low_fidelity: bool,
-    ) -> Option<ReducedBasisSettings> {
+    /// the whole curve (`whole_curve`) or runs once per row, and `rows` data rows.
+    pub fn resolve(self, whole_curve: bool, rows: usize) -> Option<ReducedBasisSettings> {
         match self {
             ReducedBasisChoice::On(settings) => Some(settings),
             ReducedBasisChoice::Off => None,
-            ReducedBasisChoice::Automatic => {
-                (whole_curve && !low_fidelity && rows >= AUTOMATIC_REDUCED_BASIS_ROWS)
-                    .then(ReducedBasisSettings::default)
-            }
+            ReducedBasisChoice::Automatic => (whole_curve && rows >= AUTOMATIC_REDUCED_BASIS_ROWS)
+                .then(ReducedBasisSettings::default),
         }
     }
 }

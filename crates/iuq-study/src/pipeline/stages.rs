@@ -224,14 +224,6 @@ impl<'a> PipelineRun<'a> {
             settings.adaptive.as_ref().map_or(0, |a| a.max_runs),
             settings.training_seed,
         )?;
-        if low_fidelity_section.is_some()
-            && matches!(settings.reduced_basis, ReducedBasisChoice::On(_))
-        {
-            return Err(input_error(format!(
-                "{}: key `low_fidelity`: a second fidelity is emulated with a GP per data point; remove `[surrogate] reduced_basis`",
-                study.path.display()
-            )));
-        }
         let model_runs = ModelRuns::open(
             study,
             &data,
@@ -251,12 +243,23 @@ impl<'a> PipelineRun<'a> {
             )?),
             None => None,
         };
+        // A reduced basis of two fidelities takes whole curves of both.
         let whole_curve = study.abscissa.is_none()
-            && !matches!(study.model, crate::study::ModelSection::RbcShear { .. });
+            && !matches!(study.model, crate::study::ModelSection::RbcShear { .. })
+            && low_fidelity
+                .as_ref()
+                .is_none_or(|low| low.runs.groups() == 1);
+        if !whole_curve
+            && low_fidelity.is_some()
+            && matches!(settings.reduced_basis, ReducedBasisChoice::On(_))
+        {
+            return Err(input_error(format!(
+                "{}: key `surrogate.reduced_basis`: a reduced basis of two fidelities needs both models to return the whole curve in one run (no `abscissa` in `[model]` or `[low_fidelity]`); remove it for a two-fidelity GP per data point",
+                study.path.display()
+            )));
+        }
         let emulation = Emulation::of(
-            settings
-                .reduced_basis
-                .resolve(whole_curve, data.x.len(), low_fidelity.is_some()),
+            settings.reduced_basis.resolve(whole_curve, data.x.len()),
             &data,
         );
         Ok(Self {
@@ -674,6 +677,15 @@ impl<'a> PipelineRun<'a> {
                     &self.out.join("reduced-basis.json"),
                     serde_json::to_string_pretty(&summary)?.as_bytes(),
                 )?;
+                if basis.is_two_fidelity() {
+                    let summary = super::low_fidelity::two_fidelity_basis_summary(basis);
+                    write_atomically(
+                        &self.out.join("two-fidelity.json"),
+                        serde_json::to_string_pretty(&summary)?.as_bytes(),
+                    )?;
+                    self.events
+                        .message(super::low_fidelity::two_fidelity_basis_message(basis));
+                }
                 self.events.message(format!(
                     "reduced basis: {} principal components explain {:.6} of the runs' variance (in measurement stds); largest truncation std {:.3e}",
                     basis.components(),

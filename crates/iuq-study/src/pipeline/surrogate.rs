@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::emulator::{Emulator, ReducedBasisSettings};
 use super::low_fidelity::LowFidelity;
 use super::model_runs::ModelRuns;
-use super::run_groups::GroupRuns;
+use super::run_groups::{Curves, GroupRuns};
 use crate::error::{Context, Result, StudyError};
 
 /// The probability of failure above which the surrogate gives no answer.
@@ -109,6 +109,14 @@ impl GpStarts<'_> {
     }
 }
 
+/// The runs a reduced basis is fitted to: the study model's run groups and, with a second
+/// fidelity, the cheap model's.
+struct BasisRuns<'a> {
+    groups: &'a [GroupRuns],
+    runs: &'a ModelRuns,
+    low: Option<&'a LowFidelity>,
+}
+
 impl Surrogate {
     /// Fit the emulator (GP j with seed `starts.seed + j`, warm-started from `starts.warm[j]`
     /// where given; component k of a reduced basis with seed `starts.seed + k`) and the
@@ -130,7 +138,8 @@ impl Surrogate {
     ) -> Result<Self> {
         let seed = starts.seed;
         if let Emulation::ReducedBasis { settings, scale } = emulation {
-            return Self::fit_reduced_basis(groups, runs, space, seed, settings, scale, describe);
+            let basis = BasisRuns { groups, runs, low };
+            return Self::fit_reduced_basis(basis, space, seed, settings, scale, describe);
         }
         // Every data point's training runs, checked in order; then the fits, in parallel (each
         // is deterministic, so the surrogate does not depend on the number of threads).
@@ -224,8 +233,7 @@ impl Surrogate {
 
     /// The reduced basis of a whole-curve model's one run group, and its classifier.
     fn fit_reduced_basis(
-        groups: &[GroupRuns],
-        runs: &ModelRuns,
+        BasisRuns { groups, runs, low }: BasisRuns<'_>,
         space: &ParameterSpace,
         seed: u64,
         settings: &ReducedBasisSettings,
@@ -238,9 +246,7 @@ impl Surrogate {
                 groups.len()
             )));
         };
-        let m = runs.output_names().len();
-        let inputs = group.training(0).x;
-        let columns: Vec<Vec<f64>> = (0..m).map(|k| group.training(k).y).collect();
+        let Curves { inputs, outputs } = group.training_curves();
         if inputs.len() < 3 {
             return Err(StudyError::failure(format!(
                 "{}: only {} training runs succeeded; a reduced basis needs at least 3 (failures: {})",
@@ -252,9 +258,6 @@ impl Surrogate {
                     .map_or("none", String::as_str)
             )));
         }
-        let outputs: Vec<Vec<f64>> = (0..inputs.len())
-            .map(|i| columns.iter().map(|c| c[i]).collect())
-            .collect();
         let options = ReducedBasisOptions {
             explained_variance: settings.explained_variance,
             max_components: settings.max_components,
@@ -264,13 +267,25 @@ impl Surrogate {
                 ..Default::default()
             },
         };
-        let basis = ReducedBasis::fit(
-            runs.parameters().to_vec(),
-            runs.output_names().to_vec(),
-            &inputs,
-            &outputs,
-            &options,
-        )
+        let basis = match low {
+            None => ReducedBasis::fit(
+                runs.parameters().to_vec(),
+                runs.output_names().to_vec(),
+                &inputs,
+                &outputs,
+                &options,
+            ),
+            Some(low) => {
+                let cheap = low.training_curves()?;
+                ReducedBasis::fit_two_fidelity(
+                    runs.parameters().to_vec(),
+                    runs.output_names().to_vec(),
+                    (&inputs, &outputs),
+                    (&cheap.inputs, &cheap.outputs),
+                    &options,
+                )
+            }
+        }
         .with_context(|| "the reduced basis of the curve".to_string())?;
         let (points, failed) = group.failure_labels();
         let bounds = classifier_bounds(space, &points);
