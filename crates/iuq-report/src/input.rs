@@ -53,6 +53,32 @@ pub struct StudyReport {
     /// (one fidelity) omits the section.
     #[serde(default)]
     pub two_fidelity: Vec<TwoFidelityPoint>,
+    /// Per principal component of a reduced basis of two fidelities, how the cheap model helps
+    /// it; empty (one fidelity, or a GP per data point) omits the table.
+    #[serde(default)]
+    pub two_fidelity_components: Vec<TwoFidelityComponent>,
+}
+
+/// One principal component's two-fidelity emulator in a reduced basis of two fidelities:
+/// c_k = ρ_k·c_L,k + δ_k.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct TwoFidelityComponent {
+    /// The component's rank (1: the one explaining most of the runs' variance).
+    pub component: usize,
+    /// The share of the runs' variance the component explains.
+    pub explained_variance: f64,
+    /// ρ_k, the scale of the cheap model's coefficient in the expensive one's.
+    pub rho: f64,
+    /// Whether the emulator uses the cheap model for this component.
+    pub uses_low_fidelity: bool,
+    /// The share of the expensive runs' coefficient variance ρ_k·(cheap coefficient) explains.
+    pub explained_share: f64,
+    /// The discrepancy δ_k's output scale.
+    pub discrepancy_std: f64,
+    /// Successful expensive runs (whole curves) the basis was fitted to.
+    pub expensive_runs: usize,
+    /// Successful cheap runs.
+    pub cheap_runs: usize,
 }
 
 /// One data point's two-fidelity emulator: f_H = ρ·f_L + δ.

@@ -46,6 +46,7 @@
 //!     model_posterior: None,
 //!     cell_portraits: None,
 //!     two_fidelity: vec![],
+//!     two_fidelity_components: vec![],
 //! };
 //! let dir = std::env::temp_dir().join(format!("iuq-report-doc-{}", std::process::id()));
 //! let files = write_report(&report, &dir)?;
@@ -93,7 +94,8 @@ pub use input::{
     ConvergenceRound, DataSeries, ElongationTrace, FailureMapPanel, GpDiagnostic, MapRunsAtPoint,
     MismatchTest, ModelPosteriorReport, ModelPosteriorStageRow, ParameterSummary,
     PosteriorCheckReport, PosteriorResult, PropagatedOutput, RunStatistics, RunsAtPoint,
-    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport, TwoFidelityPoint,
+    SamplerStage, SensitivityIndex, SensitivityResult, StudyReport, TwoFidelityComponent,
+    TwoFidelityPoint,
 };
 pub use report::{REPORT_FORMAT, ReportDocument, ReportFiles, write_report};
 pub use tables::TableInfo;

@@ -563,6 +563,46 @@ pub(crate) fn two_fidelity(report: &StudyReport) -> Table {
     }
 }
 
+/// The reduced basis of two fidelities per principal component: the share of the runs it
+/// explains, ρ_k, whether the cheap model is used, the share of the expensive runs'
+/// coefficient it explains, the discrepancy's scale, and the runs of each fidelity.
+pub(crate) fn two_fidelity_components(report: &StudyReport) -> Table {
+    let columns = vec![
+        Column::plain("component"),
+        Column::plain("share of the runs' variance"),
+        Column::plain("ρ"),
+        Column::plain("cheap model used"),
+        Column::plain("explained share"),
+        Column::plain("discrepancy std"),
+        Column::plain("expensive runs"),
+        Column::plain("cheap runs"),
+    ];
+    let rows = report
+        .two_fidelity_components
+        .iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let at = |field: &str| format!("/report/two_fidelity_components/{i}/{field}");
+            vec![
+                Cell::count(c.component, at("component")),
+                Cell::number(c.explained_variance, at("explained_variance")),
+                Cell::number(c.rho, at("rho")),
+                Cell::text(if c.uses_low_fidelity { "yes" } else { "no" }),
+                Cell::number(c.explained_share, at("explained_share")),
+                Cell::number(c.discrepancy_std, at("discrepancy_std")),
+                Cell::count(c.expensive_runs, at("expensive_runs")),
+                Cell::count(c.cheap_runs, at("cheap_runs")),
+            ]
+        })
+        .collect();
+    Table {
+        name: "two_fidelity_components".into(),
+        title: "Two fidelities per principal component".into(),
+        columns,
+        rows,
+    }
+}
+
 /// The posterior check per data point: the model and the surrogate at the MAP, the RMSE and
 /// coverage over the checked runs, failures, and the model's diagnostic.
 pub(crate) fn posterior_check(report: &StudyReport, check: &PosteriorCheckReport) -> Table {

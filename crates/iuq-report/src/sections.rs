@@ -164,6 +164,15 @@ pub(crate) fn build_sections(
         section.tables.push(build::two_fidelity(report));
         sections.push(section);
     }
+    if !report.two_fidelity_components.is_empty() {
+        let mut section = Section::new(
+            "two-fidelity",
+            "Two fidelities",
+            "The surrogate of the expensive model's curve on the principal components of both models' curves, each component's coefficient as ρ_k·(a GP of the cheap model's) + a GP discrepancy δ_k, the cheap model used where it explains at least half of the expensive runs' coefficient variance and predicts them better (leave-one-out) than their own GP; and the runs of each model.",
+        );
+        section.tables.push(build::two_fidelity_components(report));
+        sections.push(section);
+    }
     // Shown with the failure map, or else with the run statistics.
     let mut runs_per_point =
         (!report.runs_per_point.is_empty()).then(|| build::runs_per_point(report));

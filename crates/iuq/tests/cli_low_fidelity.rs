@@ -494,6 +494,20 @@ fn a_whole_curve_of_two_fidelities_is_emulated_on_a_reduced_basis_with_fewer_exp
         "{summary}"
     );
     assert!(dir.join("out/reduced-basis.json").is_file());
+    // The report shows both fidelities per component, with the runs of each.
+    let html = std::fs::read_to_string(dir.join("out/report.html")).unwrap();
+    assert!(html.contains("Two fidelities per principal component"));
+    let table =
+        std::fs::read_to_string(dir.join("out/tables/two_fidelity_components.csv")).unwrap();
+    assert_eq!(table.lines().count(), 1 + components.len(), "{table}");
+    let cheap_runs = two["runs"].as_u64().unwrap();
+    assert!(
+        table
+            .lines()
+            .skip(1)
+            .all(|row| row.split(',').nth(6) == Some(&cheap_runs.to_string())),
+        "every component's expensive runs are the study's {cheap_runs}: {table}"
+    );
     let alone_dir = scratch("low-fidelity", "curve-alone");
     let (alone, _) = pipeline(
         &write_curve_study(&alone_dir, "alone", false),

@@ -275,6 +275,7 @@ pub fn synthetic_report(
     };
     StudyReport {
         two_fidelity: Vec::new(),
+        two_fidelity_components: Vec::new(),
         title: "RBC calibration — healthy cells (synthetic)".to_string(),
         study_name: "rbc-healthy-synthetic".to_string(),
         provenance: vec![

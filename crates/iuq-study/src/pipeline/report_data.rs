@@ -510,6 +510,7 @@ pub fn write_pipeline_report(
     }
     let report = StudyReport {
         two_fidelity: two_fidelity_points(results)?,
+        two_fidelity_components: two_fidelity_components(results)?,
         title: format!("Calibration study `{}`", study.name),
         study_name: study.name.clone(),
         provenance,
@@ -882,6 +883,42 @@ fn two_fidelity_points(results: &PipelineResults<'_>) -> Result<Vec<iuq_report::
         });
     }
     Ok(points)
+}
+
+/// Per principal component of a reduced basis of two fidelities, ρ_k, its use of the cheap
+/// model and the runs of each fidelity (empty otherwise).
+fn two_fidelity_components(
+    results: &PipelineResults<'_>,
+) -> Result<Vec<iuq_report::TwoFidelityComponent>> {
+    let (Some(basis), Some(low)) = (results.emulator.reduced_basis(), results.low_fidelity) else {
+        return Ok(Vec::new());
+    };
+    if !basis.is_two_fidelity() {
+        return Ok(Vec::new());
+    }
+    let expensive_runs = results
+        .groups
+        .first()
+        .map_or(0, |g| g.training_curves().inputs.len());
+    let cheap_runs = low.training_curves()?.inputs.len();
+    Ok(basis
+        .component_gps()
+        .iter()
+        .zip(basis.explained_variance())
+        .enumerate()
+        .filter_map(|(k, (c, &share))| {
+            c.two_fidelity().map(|gp| iuq_report::TwoFidelityComponent {
+                component: k + 1,
+                explained_variance: share,
+                rho: gp.rho(),
+                uses_low_fidelity: gp.uses_low_fidelity(),
+                explained_share: gp.explained_share(),
+                discrepancy_std: gp.discrepancy().output_scaling().std,
+                expensive_runs,
+                cheap_runs,
+            })
+        })
+        .collect())
 }
 
 #[cfg(test)]
