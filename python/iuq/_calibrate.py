@@ -478,7 +478,8 @@ def calibrate(
     low_fidelity : callable, optional
         A cheaper model of the same outputs, called as ``model`` is (the book's how-to on two
         fidelities): the surrogate of ``model`` becomes ρ·(a GP of ``low_fidelity``) + a GP
-        discrepancy, and each round runs ``low_fidelity`` instead of ``model`` where that
+        discrepancy, per data point (or, for a whole curve of 50 points or more, per principal
+        component of both models' curves), and each round runs ``low_fidelity`` instead of ``model`` where that
         removes more of the surrogate's variance per unit cost. ``model_runs`` and ``runs``
         count ``model``'s runs; ``low_fidelity``'s are stored beside them.
     cost_ratio : float, optional

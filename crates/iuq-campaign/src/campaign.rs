@@ -438,7 +438,8 @@ impl Campaign {
     ///
     /// An observer that answers [`Control::Stop`] stops the campaign as a raised [`Interrupt`]
     /// does: no more runs are submitted, the runs under way are filed as they end, and the call
-    /// returns [`CampaignError::Interrupted`].
+    /// returns [`CampaignError::Interrupted`]. A campaign stopped so starts no more runs: open
+    /// it again to go on (what is stored is kept).
     pub fn run(
         &mut self,
         report_every: Duration,

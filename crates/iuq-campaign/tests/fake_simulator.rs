@@ -389,20 +389,25 @@ fn an_observer_that_answers_stop_stops_the_campaign_and_files_the_runs_under_way
         .replace("max_parallel = 4", "max_parallel = 2");
     std::fs::write(&path, text).unwrap();
     let mut campaign = open(&path);
-    // Mode 8 sleeps 0.4 s: the first report comes while the first two runs are under way.
+    // Mode 8 sleeps 0.4 s. The observer answers Stop at the first report that shows a run under
+    // way (reports come at every pass of the loop: `report_every` is zero).
     let points: Vec<Vec<f64>> = (0..6).map(|i| vec![8.0, i as f64]).collect();
     campaign.add_points("slow", &points).unwrap();
     let mut calls = 0;
     let error = campaign
-        .run(std::time::Duration::ZERO, &mut |_: &Progress| {
+        .run(std::time::Duration::ZERO, &mut |p: &Progress| {
             calls += 1;
-            Control::Stop
+            if p.counts.running > 0 {
+                Control::Stop
+            } else {
+                Control::Continue
+            }
         })
         .unwrap_err();
     assert!(matches!(error, CampaignError::Interrupted), "{error}");
     let counts = campaign.store().counts(None).unwrap();
-    // The runs started before the first report (at most `max_parallel`, 2) were waited for and
-    // stored; the others never started.
+    // The runs under way (at least the one seen, at most `max_parallel` = 2) were waited for
+    // and stored; the others never started.
     assert!((1..=2).contains(&counts.succeeded), "{counts:?}");
     assert_eq!(
         (

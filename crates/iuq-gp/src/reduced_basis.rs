@@ -102,28 +102,17 @@ impl ReducedBasis {
         let n = outputs.len();
         let m = output_names.len();
         check_runs(inputs, outputs, m, options)?;
-        let centre: Vec<f64> = (0..m)
-            .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n as f64)
-            .collect();
-        let scale = output_scale(options.output_scale.as_deref(), outputs, &centre)?;
-        let z = Mat::<f64>::from_fn(n, m, |i, j| (outputs[i][j] - centre[j]) / scale[j]);
-        let components = PrincipalComponents::of(&z)?;
-        let limit = options
-            .max_components
-            .min(n - 1)
-            .min(components.singular.len())
-            .max(1);
-        let explained = components.leading_shares(limit, options.explained_variance);
+        let runs = ScaledRuns::of(outputs, m, options)?;
+        let explained = runs
+            .components
+            .leading_shares(runs.limit, options.explained_variance);
         let q = explained.len();
-        let (singular, order, u, v) = (
-            &components.singular,
-            &components.order,
-            &components.u,
-            &components.v,
+        let basis = runs.basis(q);
+        let (singular, order, u) = (
+            &runs.components.singular,
+            &runs.components.order,
+            &runs.components.u,
         );
-        let basis: Vec<Vec<f64>> = (0..m)
-            .map(|j| order[..q].iter().map(|&k| v[(j, k)]).collect())
-            .collect();
         let coefficients: Vec<Vec<f64>> = (0..q)
             .map(|c| {
                 (0..n)
@@ -131,17 +120,8 @@ impl ReducedBasis {
                     .collect()
             })
             .collect();
-        let truncation_variance: Vec<f64> = (0..m)
-            .map(|j| {
-                let sum: f64 = (0..n)
-                    .map(|i| {
-                        let fitted: f64 = (0..q).map(|c| coefficients[c][i] * basis[j][c]).sum();
-                        (z[(i, j)] - fitted).powi(2)
-                    })
-                    .sum();
-                scale[j] * scale[j] * sum / n as f64
-            })
-            .collect();
+        let truncation_variance = runs.truncation_variance(0..n, &coefficients, &basis);
+        let ScaledRuns { centre, scale, .. } = runs;
         let mut gps = Vec::with_capacity(q);
         for (c, y) in coefficients.iter().enumerate() {
             let fit: CheckedFitOptions = FitOptions {
@@ -192,17 +172,8 @@ impl ReducedBasis {
         check_runs(low.0, low.1, m, options)?;
         let stacked: Vec<Vec<f64>> = high.1.iter().chain(low.1).cloned().collect();
         let n = stacked.len();
-        let centre: Vec<f64> = (0..m)
-            .map(|j| stacked.iter().map(|r| r[j]).sum::<f64>() / n as f64)
-            .collect();
-        let scale = output_scale(options.output_scale.as_deref(), &stacked, &centre)?;
-        let z = Mat::<f64>::from_fn(n, m, |i, j| (stacked[i][j] - centre[j]) / scale[j]);
-        let components = PrincipalComponents::of(&z)?;
-        let limit = options
-            .max_components
-            .min(n - 1)
-            .min(components.singular.len())
-            .max(1);
+        let runs = ScaledRuns::of(&stacked, m, options)?;
+        let (z, components, limit) = (&runs.z, &runs.components, runs.limit);
         // The fewest components that explain `explained_variance` of both the stacked runs and
         // the expensive runs alone (a cheap model whose curves take other shapes must not leave
         // the expensive ones to the truncation error), at most `limit`.
@@ -243,14 +214,7 @@ impl ReducedBasis {
                 }
             })
             .collect();
-        let basis: Vec<Vec<f64>> = (0..m)
-            .map(|j| {
-                components.order[..q]
-                    .iter()
-                    .map(|&k| components.v[(j, k)])
-                    .collect()
-            })
-            .collect();
+        let basis = runs.basis(q);
         // c_ik of rows `rows` of Z, one vector per component.
         let project = |rows: std::ops::Range<usize>| -> Vec<Vec<f64>> {
             (0..q)
@@ -263,18 +227,8 @@ impl ReducedBasis {
         };
         let high_coefficients = project(0..n_high);
         let low_coefficients = project(n_high..n);
-        let truncation_variance: Vec<f64> = (0..m)
-            .map(|j| {
-                let sum: f64 = (0..n_high)
-                    .map(|i| {
-                        let fitted: f64 =
-                            (0..q).map(|k| high_coefficients[k][i] * basis[j][k]).sum();
-                        (z[(i, j)] - fitted).powi(2)
-                    })
-                    .sum();
-                scale[j] * scale[j] * sum / n_high as f64
-            })
-            .collect();
+        let truncation_variance = runs.truncation_variance(0..n_high, &high_coefficients, &basis);
+        let ScaledRuns { centre, scale, .. } = runs;
         let gps = (0..q)
             .into_par_iter()
             .map(|k| {
@@ -292,6 +246,9 @@ impl ReducedBasis {
                 )
                 .map(|gp| ComponentGp::TwoFidelity(Box::new(gp)))
             })
+            .collect::<Vec<_>>()
+            .into_iter()
+            // The first component's error, whichever thread failed first.
             .collect::<Result<Vec<_>>>()?;
         Ok(Self {
             input_names,
@@ -442,6 +399,82 @@ impl ReducedBasis {
             variance,
             noise_variance,
         }
+    }
+}
+
+/// Runs' outputs as a basis is drawn from them: centred by their means μ_j, divided by their
+/// scales s_j (Z), Z's principal components, and the most components a basis may keep.
+struct ScaledRuns {
+    centre: Vec<f64>,
+    scale: Vec<f64>,
+    z: Mat<f64>,
+    components: PrincipalComponents,
+    /// At most `max_components`, n − 1 and the decomposition's rank, at least 1.
+    limit: usize,
+}
+
+impl ScaledRuns {
+    /// `outputs` (n × m, checked) with the scales `options.output_scale` or their own.
+    fn of(outputs: &[Vec<f64>], m: usize, options: &ReducedBasisOptions) -> Result<Self> {
+        let n = outputs.len();
+        let centre: Vec<f64> = (0..m)
+            .map(|j| outputs.iter().map(|r| r[j]).sum::<f64>() / n as f64)
+            .collect();
+        let scale = output_scale(options.output_scale.as_deref(), outputs, &centre)?;
+        let z = Mat::<f64>::from_fn(n, m, |i, j| (outputs[i][j] - centre[j]) / scale[j]);
+        let components = PrincipalComponents::of(&z)?;
+        let limit = options
+            .max_components
+            .min(n - 1)
+            .min(components.singular.len())
+            .max(1);
+        Ok(Self {
+            centre,
+            scale,
+            z,
+            components,
+            limit,
+        })
+    }
+
+    /// V_jk of the first `q` components (m rows of q).
+    fn basis(&self, q: usize) -> Vec<Vec<f64>> {
+        (0..self.z.ncols())
+            .map(|j| {
+                self.components.order[..q]
+                    .iter()
+                    .map(|&k| self.components.v[(j, k)])
+                    .collect()
+            })
+            .collect()
+    }
+
+    /// τ_j² = s_j² · mean over `rows` of (Z_ij − Σ_k c_ik V_jk)², with `coefficients[k][i −
+    /// rows.start]` the rows' coefficients on `basis`: what the basis leaves out of them.
+    fn truncation_variance(
+        &self,
+        rows: std::ops::Range<usize>,
+        coefficients: &[Vec<f64>],
+        basis: &[Vec<f64>],
+    ) -> Vec<f64> {
+        let count = rows.len();
+        (0..self.z.ncols())
+            .map(|j| {
+                let sum: f64 = rows
+                    .clone()
+                    .enumerate()
+                    .map(|(r, i)| {
+                        let fitted: f64 = coefficients
+                            .iter()
+                            .zip(&basis[j])
+                            .map(|(c, v)| c[r] * v)
+                            .sum();
+                        (self.z[(i, j)] - fitted).powi(2)
+                    })
+                    .sum();
+                self.scale[j] * self.scale[j] * sum / count as f64
+            })
+            .collect()
     }
 }
 

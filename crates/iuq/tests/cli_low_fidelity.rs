@@ -221,16 +221,21 @@ fn bad_low_fidelity_keys_exit_2_naming_file_and_key() {
             "{section}: a run was made"
         );
     }
-    // A reduced basis asked for where the models run once per data point.
-    let cheap = "[low_fidelity]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { y = \"A * exp(-k * t)\" }\n";
-    let study = write_study(&dir, "bad", cheap);
-    let text = std::fs::read_to_string(&study).unwrap();
-    std::fs::write(
-        &study,
-        text.replace("[surrogate]\n", "[surrogate]\nreduced_basis = true\n"),
-    )
-    .unwrap();
-    let output = iuq(&["pipeline", study.to_str().unwrap(), "--out", "unused"]);
+    // A reduced basis asked for where the expensive model returns the whole curve but the
+    // cheap one runs once per data point.
+    let study = write_curve_study(&dir, "bad", false);
+    let text = std::fs::read_to_string(&study)
+        .unwrap()
+        .replace("[surrogate]\n", "[surrogate]\nreduced_basis = true\n")
+        + "[low_fidelity]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { y = \"A * exp(-gamma * t) * cos(omega * t)\" }\n";
+    std::fs::write(&study, text).unwrap();
+    let out = dir.join("out");
+    let output = iuq(&[
+        "pipeline",
+        study.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
     let stderr = stderr_of(&output);
     assert_eq!(output.status.code(), Some(2), "{stderr}");
     assert!(
@@ -500,13 +505,13 @@ fn a_whole_curve_of_two_fidelities_is_emulated_on_a_reduced_basis_with_fewer_exp
     let table =
         std::fs::read_to_string(dir.join("out/tables/two_fidelity_components.csv")).unwrap();
     assert_eq!(table.lines().count(), 1 + components.len(), "{table}");
-    let cheap_runs = two["runs"].as_u64().unwrap();
+    let expensive_runs = two["runs"].as_u64().unwrap().to_string();
     assert!(
         table
             .lines()
             .skip(1)
-            .all(|row| row.split(',').nth(6) == Some(&cheap_runs.to_string())),
-        "every component's expensive runs are the study's {cheap_runs}: {table}"
+            .all(|row| row.split(',').nth(6) == Some(expensive_runs.as_str())),
+        "every component's expensive runs are the study's {expensive_runs}: {table}"
     );
     let alone_dir = scratch("low-fidelity", "curve-alone");
     let (alone, _) = pipeline(

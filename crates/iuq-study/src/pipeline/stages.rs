@@ -224,6 +224,24 @@ impl<'a> PipelineRun<'a> {
             settings.adaptive.as_ref().map_or(0, |a| a.max_runs),
             settings.training_seed,
         )?;
+        // A reduced basis of two fidelities takes whole curves of both; checked before either
+        // campaign is opened.
+        let runs_whole_curve = |s: &Study| {
+            s.abscissa.is_none() && !matches!(s.model, crate::study::ModelSection::RbcShear { .. })
+        };
+        let whole_curve = runs_whole_curve(study)
+            && low_fidelity_section
+                .as_ref()
+                .is_none_or(|(low, _)| runs_whole_curve(low));
+        if !whole_curve
+            && low_fidelity_section.is_some()
+            && matches!(settings.reduced_basis, ReducedBasisChoice::On(_))
+        {
+            return Err(input_error(format!(
+                "{}: key `surrogate.reduced_basis`: a reduced basis of two fidelities needs both models to return the whole curve in one run (no `abscissa` in `[model]` or `[low_fidelity]`); remove it for a two-fidelity GP per data point",
+                study.path.display()
+            )));
+        }
         let model_runs = ModelRuns::open(
             study,
             &data,
@@ -243,21 +261,6 @@ impl<'a> PipelineRun<'a> {
             )?),
             None => None,
         };
-        // A reduced basis of two fidelities takes whole curves of both.
-        let whole_curve = study.abscissa.is_none()
-            && !matches!(study.model, crate::study::ModelSection::RbcShear { .. })
-            && low_fidelity
-                .as_ref()
-                .is_none_or(|low| low.runs.groups() == 1);
-        if !whole_curve
-            && low_fidelity.is_some()
-            && matches!(settings.reduced_basis, ReducedBasisChoice::On(_))
-        {
-            return Err(input_error(format!(
-                "{}: key `surrogate.reduced_basis`: a reduced basis of two fidelities needs both models to return the whole curve in one run (no `abscissa` in `[model]` or `[low_fidelity]`); remove it for a two-fidelity GP per data point",
-                study.path.display()
-            )));
-        }
         let emulation = Emulation::of(
             settings.reduced_basis.resolve(whole_curve, data.x.len()),
             &data,

@@ -126,7 +126,8 @@ impl Surrogate {
     /// A data point with fewer than 3 successful training runs, or a fit that fails.
     ///
     /// With a cheap model (`low`), every data point's emulator is a two-fidelity GP on its runs
-    /// and the study model's (`iuq_gp::MultiFidelityGp`).
+    /// and the study model's (`iuq_gp::MultiFidelityGp`), or with a reduced basis every
+    /// principal component's (`iuq_gp::ReducedBasis::fit_two_fidelity`).
     pub fn fit(
         groups: &[GroupRuns],
         runs: &ModelRuns,
