@@ -105,6 +105,13 @@ impl PartialEq for Interrupt {
 
 impl Eq for Interrupt {}
 
+/// The run ids of `ids` in increasing order.
+fn sorted_ids(ids: &std::collections::HashSet<i64>) -> Vec<i64> {
+    let mut sorted: Vec<i64> = ids.iter().copied().collect();
+    sorted.sort_unstable();
+    sorted
+}
+
 /// A campaign: a study, its store and an executor.
 pub struct Campaign {
     /// Held (with an exclusive `flock`) while this coordinator lives; released by the kernel
@@ -438,8 +445,7 @@ impl Campaign {
     ///
     /// An observer that answers [`Control::Stop`] stops the campaign as a raised [`Interrupt`]
     /// does: no more runs are submitted, the runs under way are filed as they end, and the call
-    /// returns [`CampaignError::Interrupted`]. A campaign stopped so starts no more runs: open
-    /// it again to go on (what is stored is kept).
+    /// returns [`CampaignError::Interrupted`]. Run again, it goes on with the runs left pending.
     pub fn run(
         &mut self,
         report_every: Duration,
@@ -469,11 +475,9 @@ impl Campaign {
         observer: &mut dyn Observer<Progress>,
     ) -> Result<StatusCounts> {
         let start = *self.session_start.get_or_insert_with(Instant::now);
-        let counted: Option<Vec<i64>> = among.map(|ids| {
-            let mut ids: Vec<i64> = ids.iter().copied().collect();
-            ids.sort_unstable();
-            ids
-        });
+        // A run after a stop starts runs again (unless the interrupt is still raised).
+        self.executor.resume_starting();
+        let counted: Option<Vec<i64>> = among.map(sorted_ids);
         let counted = counted.as_deref();
         let runs_per_task = match self.study.model.kind {
             CommandKind::Command => 1,

@@ -225,6 +225,10 @@ impl Executor for LocalExecutor {
         self.stop_starting.store(true, Ordering::SeqCst);
     }
 
+    fn resume_starting(&mut self) {
+        self.stop_starting.store(false, Ordering::SeqCst);
+    }
+
     fn submit(&mut self, tasks: Vec<SubmittedTask>) -> Result<Vec<(i64, String)>> {
         let sender = self.tasks.as_ref().ok_or_else(|| {
             crate::error::CampaignError::executor("local", "the executor is shut down")

@@ -90,6 +90,10 @@ pub trait Executor: Send {
     /// so that a later campaign runs them; tasks under way go on. An executor whose tasks
     /// start elsewhere (a scheduler's queue) has nothing to hold back.
     fn stop_starting(&mut self) {}
+
+    /// Start submitted tasks again after [`Executor::stop_starting`]: the campaign is run again
+    /// after it stopped (every task held back then has been reported, so none is waiting).
+    fn resume_starting(&mut self) {}
 }
 
 /// Events for every run of `task` from its worker report; runs missing from the report fail as
