@@ -203,16 +203,10 @@ impl ReducedBasis {
             .leading_shares(limit, options.explained_variance)
             .len()
             .max(q_high);
-        let total: f64 = components.singular.iter().map(|v| v * v).sum();
+        let total = components.total();
         let explained: Vec<f64> = components.order[..q]
             .iter()
-            .map(|&k| {
-                if total > 0.0 {
-                    components.singular[k].powi(2) / total
-                } else {
-                    0.0
-                }
-            })
+            .map(|&k| components.share(k, total))
             .collect();
         let basis = runs.basis(q);
         // c_ik of rows `rows` of Z, one vector per component.
@@ -609,19 +603,29 @@ impl PrincipalComponents {
         })
     }
 
+    /// Σ S², the scaled runs' whole variance.
+    fn total(&self) -> f64 {
+        self.singular.iter().map(|v| v * v).sum()
+    }
+
+    /// Component k's share S_k² / Σ S² of it (0 where the runs do not vary).
+    fn share(&self, k: usize, total: f64) -> f64 {
+        if total > 0.0 {
+            self.singular[k].powi(2) / total
+        } else {
+            0.0
+        }
+    }
+
     /// The share of Σ S² of each leading component kept: the fewest whose shares reach
     /// `explained_variance`, at most `limit`.
     fn leading_shares(&self, limit: usize, explained_variance: f64) -> Vec<f64> {
-        let total: f64 = self.singular.iter().map(|v| v * v).sum();
+        let total = self.total();
         let mut q = 0;
         let mut cumulative = 0.0;
         let mut explained = Vec::new();
         while q < limit {
-            let share = if total > 0.0 {
-                self.singular[self.order[q]].powi(2) / total
-            } else {
-                0.0
-            };
+            let share = self.share(self.order[q], total);
             explained.push(share);
             cumulative += share;
             q += 1;
