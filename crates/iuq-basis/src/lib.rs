@@ -59,6 +59,7 @@ pub mod defensive_tempering;
 pub mod diagnostics;
 pub mod error;
 pub mod gaussian_screen;
+pub mod heavy_tail_errors;
 mod json_numbers;
 pub mod likelihood;
 pub mod member_selection;

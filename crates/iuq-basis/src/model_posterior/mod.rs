@@ -105,6 +105,7 @@ use iuq_core::weighted_statistics::{effective_sample_size, weighted_quantiles};
 use crate::ancestral_variance::ancestral_errors;
 use crate::annealing::{log_evidence_increment, next_step};
 use crate::error::{BasisError, Result};
+use crate::heavy_tail_errors::{CLT_PARETO_K, pareto_convergence_rate, subsampling_errors};
 use crate::likelihood::LogLikelihood;
 use crate::moment_matching::ProposalMismatch;
 use crate::paired_estimate::paired_moments;
@@ -491,7 +492,23 @@ impl MethodState {
         let (weights, mut mean, mut std, quantiles) =
             weighted_moments(&theta, &smoothed, &settings.probabilities)?;
         let mut errors = ancestral_errors(&theta, &weights, &self.ancestor, &mean, &std);
-        let paired = first_batch_step
+        // Heavy-tailed weights: the larger of the delta method's error and the subsampling one,
+        // and no pairing (whose error is a delta method too).
+        let heavy_tail_errors = (pareto_k > CLT_PARETO_K)
+            .then(|| {
+                let rate = pareto_convergence_rate(pareto_k, theta.len());
+                subsampling_errors(&theta, &weights, &self.ancestor, rate)
+            })
+            .flatten();
+        if let Some(heavy) = &heavy_tail_errors {
+            for (e, h) in errors.mean.iter_mut().zip(&heavy.mean) {
+                *e = e.max(*h);
+            }
+            for (e, h) in errors.std.iter_mut().zip(&heavy.std) {
+                *e = e.max(*h);
+            }
+        }
+        let paired = (first_batch_step && pareto_k <= CLT_PARETO_K)
             .then(|| {
                 paired_moments(
                     population,
@@ -534,6 +551,7 @@ impl MethodState {
             mcse_mean: errors.mean,
             mcse_std: errors.std,
             ancestors: errors.ancestors,
+            heavy_tail_errors,
             probabilities: settings.probabilities.clone(),
             quantiles,
             map,

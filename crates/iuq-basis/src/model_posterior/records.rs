@@ -8,6 +8,7 @@ use iuq_core::weighted_statistics::effective_sample_size;
 use super::members::{Best, Members, recorded_spread_ratio};
 use super::settings::ModelPosteriorSettings;
 use crate::error::{BasisError, Result};
+use crate::heavy_tail_errors::HeavyTailErrors;
 use crate::moment_matching::ProposalMismatch;
 use crate::paired_estimate::PairedErrors;
 use crate::pareto_smoothing::{ParetoSmoothing, normalised_weights};
@@ -219,14 +220,22 @@ pub struct ModelPosterior {
     pub std: Vec<f64>,
     /// Monte Carlo standard error of each mean: self-normalised importance sampling's, its
     /// terms summed within each group of members that descend from one ancestor through a
-    /// bridge's resampling ([`crate::ancestral_variance`]; without a bridge, member by member).
+    /// bridge's resampling ([`crate::ancestral_variance`]; without a bridge, member by member);
+    /// where k̂ exceeds ½, the larger of that and the subsampling error
+    /// ([`Self::heavy_tail_errors`]).
     pub mcse_mean: Vec<f64>,
-    /// Monte Carlo standard error of each std (the delta method, grouped as `mcse_mean`).
+    /// Monte Carlo standard error of each std (the delta method, grouped as `mcse_mean`; where
+    /// k̂ exceeds ½, the larger of that and the subsampling error).
     pub mcse_std: Vec<f64>,
     /// Distinct ancestors of the weighted members (S without a bridge; a bridge's resampling
     /// leaves fewer, and with very few the standard errors are unreliable).
     #[serde(default)]
     pub ancestors: usize,
+    /// Where the final weights' k̂ exceeds ½ (infinite variance): the errors by subsampling at
+    /// the Pareto-smoothed estimate's convergence rate ([`crate::heavy_tail_errors`]), which
+    /// `mcse_mean` and `mcse_std` are at least. `None` at k̂ ≤ ½ or with too few ancestors.
+    #[serde(default)]
+    pub heavy_tail_errors: Option<HeavyTailErrors>,
     /// The quantiles' probabilities.
     pub probabilities: Vec<f64>,
     /// `quantiles[k][q]`: weighted quantile q of parameter k.

@@ -94,7 +94,9 @@ const SIZING_MARGIN: f64 = 1.2;
 /// n' (same seed), so their stored runs are reused and only the new members and the stages
 /// after the first batch cost runs. A paired estimate's error has a part more members do not
 /// reduce, the surrogate population's own (P): only the rest falls as 1/√n, so
-/// n' = ⌈1.2·n·(MCSE² − P²)/(target² − P²)⌉, and none where P alone reaches the target.
+/// n' = ⌈1.2·n·(MCSE² − P²)/(target² − P²)⌉, and none where P alone reaches the target. Where the
+/// weights are heavy-tailed (k̂ > ½) the variance falls as n^(−rate) instead
+/// ([`iuq_basis::heavy_tail_errors::pareto_convergence_rate`]), so the ratio is raised to 1/rate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct MemberSizing {
     /// Members of the surrogate posterior in the first batch.
@@ -108,6 +110,9 @@ pub struct MemberSizing {
     pub certified: bool,
     /// Model runs it asked for (stored runs included).
     pub model_runs: usize,
+    /// The exponent with which the error's variance falls in the members: 1, or below 1 where
+    /// the weights are heavy-tailed.
+    pub convergence_rate: f64,
 }
 
 impl MemberSizing {
@@ -121,6 +126,7 @@ impl MemberSizing {
             SIZING_MARGIN * self.samples as f64,
             (self.mcse, self.population_mcse),
             target,
+            self.convergence_rate,
         )?
         .ceil();
         let next = if wanted >= cap as f64 {
@@ -134,15 +140,20 @@ impl MemberSizing {
 
 /// The members that bring a Monte Carlo error `mcse` at `members` down to `target`, all in
 /// posterior stds, where `population_mcse` of it is the surrogate population's own (a paired
-/// estimate's; 0 otherwise), which more members do not reduce:
-/// members·(MCSE² − P²)/(target² − P²). `None` where P alone reaches the target.
+/// estimate's; 0 otherwise), which more members do not reduce, and the rest's variance falls as
+/// members^(−`convergence_rate`): members·((MCSE² − P²)/(target² − P²))^(1/rate). `None` where P
+/// alone reaches the target.
 pub fn members_for_target(
     members: f64,
     (mcse, population_mcse): (f64, f64),
     target: f64,
+    convergence_rate: f64,
 ) -> Option<f64> {
     let floor = population_mcse.powi(2);
-    (target * target > floor).then(|| members * (mcse.powi(2) - floor) / (target * target - floor))
+    (target * target > floor).then(|| {
+        let ratio = (mcse.powi(2) - floor) / (target * target - floor);
+        members * ratio.powf(1.0 / convergence_rate)
+    })
 }
 
 /// The former name of [`ModelPosteriorOptions`].
@@ -347,6 +358,16 @@ impl ModelPosteriorOutcome {
             .fold((0.0, 0.0), |a, b| if b.0 > a.0 { b } else { a })
     }
 
+    /// The exponent with which the estimate's variance falls in its members: the Pareto-smoothed
+    /// estimate's convergence rate where the weights are heavy-tailed
+    /// ([`iuq_basis::ModelPosterior::heavy_tail_errors`]), otherwise 1.
+    pub fn convergence_rate(&self) -> f64 {
+        self.posterior
+            .heavy_tail_errors
+            .as_ref()
+            .map_or(1.0, |h| h.convergence_rate)
+    }
+
     /// The effective sample size the members' correlation leaves: min over parameters of
     /// σ_k²/MCSE(μ_k)², the number of independent draws whose mean would have the grouped
     /// error (Kish's ESS of the weights counts resampled copies of one ancestor as independent
@@ -377,6 +398,7 @@ impl ModelPosteriorOutcome {
                     "population_mcse": m.population_mcse,
                     "certified": m.certified,
                     "model_runs": m.model_runs,
+                    "convergence_rate": m.convergence_rate,
                 })
             })
             .collect();
@@ -397,6 +419,12 @@ impl ModelPosteriorOutcome {
             "mcse_mean": by_name(&p.mcse_mean),
             "mcse_std": by_name(&p.mcse_std),
             "ancestors": p.ancestors,
+            "heavy_tail_errors": p.heavy_tail_errors.as_ref().map(|h| json!({
+                "convergence_rate": h.convergence_rate,
+                "batches": h.batches,
+                "mcse_mean": by_name(&h.mean),
+                "mcse_std": by_name(&h.std),
+            })),
             "paired": p.paired.is_some(),
             "mcse_mean_population": p.paired.as_ref().map(|e| by_name(&e.population)),
             "log_evidence": finite(self.log_evidence),
@@ -478,6 +506,7 @@ pub fn model_posterior_from_surrogate(
             population_mcse,
             certified: outcome.posterior.certified(),
             model_runs: outcome.model_runs,
+            convergence_rate: outcome.convergence_rate(),
         };
         let next = this.next_samples(options.target_mcse, cap);
         sizing.push(this);
@@ -1122,6 +1151,7 @@ mod tests {
             population_mcse: 0.0,
             certified,
             model_runs: 0,
+            convergence_rate: 1.0,
         }
     }
 
@@ -1156,5 +1186,15 @@ mod tests {
             ..sizing(300, 0.06, true)
         };
         assert_eq!(floor.next_samples(0.05, 1200), None);
+    }
+
+    #[test]
+    fn heavy_tailed_weights_ask_for_more_members_at_their_slower_rate() {
+        // Variance falling as n^(−0.7): 1.2 · 300 · ((0.058/0.05)²)^(1/0.7) = 550.1 (485 at rate 1).
+        let heavy = MemberSizing {
+            convergence_rate: 0.7,
+            ..sizing(300, 0.058, true)
+        };
+        assert_eq!(heavy.next_samples(0.05, 1200), Some(551));
     }
 }

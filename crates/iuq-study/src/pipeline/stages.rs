@@ -813,14 +813,26 @@ impl<'a> PipelineRun<'a> {
             outcome.posterior.names.get(k).map_or("-", String::as_str),
             shifts.get(k).map_or(0.0, |s| s.1),
         ));
+        if let Some(heavy) = &outcome.posterior.heavy_tail_errors {
+            events.message(format!(
+                "the model's posterior: its weights are heavy-tailed (k̂ {:.3} above 0.5, where their variance is infinite): its standard errors are at least those of {} batches of the members, at the smoothed estimate's convergence rate {:.2} (the central limit theorem's is 1)",
+                outcome.posterior.pareto_k, heavy.batches, heavy.convergence_rate
+            ));
+        }
         // Members for the target Monte Carlo error where `max_samples` (or the surrogate's
-        // population) stopped them short of it: the error falls as 1/√members.
+        // population) stopped them short of it: the error's variance falls as
+        // members^(−convergence rate).
         let (worst, floor) = outcome.largest_mcse_split();
         let target = settings.target_mcse;
         if worst > target && outcome.posterior.certified() {
             let members = outcome.member_sizing.last().map_or(0, |m| m.samples) as f64;
             events.message(
-                match model_posterior::members_for_target(members, (worst, floor), target) {
+                match model_posterior::members_for_target(
+                    members,
+                    (worst, floor),
+                    target,
+                    outcome.convergence_rate(),
+                ) {
                     None => format!(
                         "the model's posterior: its means carry a Monte Carlo error of up to {worst:.3} posterior stds, more than `target_mcse` = {target}, of which {floor:.3} is the surrogate posterior's own: more samples of it bring it there (`[sampler] samples`)"
                     ),
