@@ -425,7 +425,9 @@ def calibrate(
     per_point : bool, default False
         One run per (θ, x) instead of one per θ.
     initial_runs : int, optional
-        Runs of the initial design (default max(6, d + 2)).
+        Runs of the initial design (default max(6, d + 2); with ``per_point=True`` and a
+        ``low_fidelity``, per data point ⌈4(d + 2)/m⌉ for m data points, at least 3 and at most
+        that default: the data points share one discrepancy and pool their expensive runs).
     batch : int, default 2
         Runs per adaptive round at most.
     max_runs : int, default 300
@@ -545,7 +547,9 @@ def calibrate(
         raise ValueError(
             f"computational_error: `{computational_error}` is not one of relative, absolute-times-data, absolute, none"
         )
-    initial = max(6, d + 2) if initial_runs is None else count("initial_runs", initial_runs, 3)
+    # Without `initial_runs` the command line's default applies (max(6, d + 2) per run group;
+    # fewer per data point where a cheap model's discrepancy is shared across per-point runs).
+    initial = None if initial_runs is None else count("initial_runs", initial_runs, 3)
     batch = count("batch", batch, 1)
     max_runs = count("max_runs", max_runs, 1)
     tolerance = real("tolerance", tolerance)
@@ -611,7 +615,8 @@ def calibrate(
             f"surrogate_error_multiple = {_toml_number(surrogate_error_multiple)}, "
             'more_samples = "when-resolving"'
         )
-        study += ["[surrogate]", f'design = {{ kind = "lhs", n = {initial}, seed = {seed} }}', f"adaptive = {{ {adaptive} }}"]
+        design_n = "" if initial is None else f"n = {initial}, "
+        study += ["[surrogate]", f'design = {{ kind = "lhs", {design_n}seed = {seed} }}', f"adaptive = {{ {adaptive} }}"]
         if posterior_check > 0:
             study.append(f"posterior_check = {{ samples = {posterior_check}, seed = {seed} }}")
         if sensitivity > 0:

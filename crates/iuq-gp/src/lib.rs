@@ -20,6 +20,8 @@
 //! - [`MultiFidelityGp`]: an expensive model's output as ρ·(a cheap model's) + a GP discrepancy
 //!   (recursive co-kriging), used only where it predicts the expensive runs better.
 //! - [`MultiFidelityBank`]: one [`MultiFidelityGp`] per output, an [`iuq_core::Model`].
+//! - [`fit_shared_discrepancy`]: the data points of a model run once per data point, their
+//!   discrepancies one GP in (θ, abscissa) (`shared_discrepancy`).
 //! - [`FailureClassifier`]: GP classification (Laplace) of where the model fails.
 //!
 //! The crate does no I/O.
@@ -71,6 +73,7 @@ pub mod reduced_basis;
 pub mod reduced_basis_output;
 pub mod scaling;
 pub mod screening;
+pub mod shared_discrepancy;
 #[cfg(test)]
 mod test_data;
 pub mod validation;
@@ -86,7 +89,7 @@ pub use fit::{CheckedFitOptions, FitOptions, MAX_RESTARTS, fit, fit_warm};
 pub use gaussian_process::GaussianProcess;
 pub use kernel::{Hyperparameters, Kernel, LengthScales, Variance};
 pub use log_marginal_likelihood::{LogMarginalLikelihood, log_marginal_likelihood};
-pub use multi_fidelity::MultiFidelityGp;
+pub use multi_fidelity::{MultiFidelityGp, SharedPoint};
 pub use multi_fidelity_bank::MultiFidelityBank;
 pub use optimizer::{
     Minimum, Objective, OptimizerOptions, Termination, minimize_bounded, minimize_bounded_objective,
@@ -96,4 +99,5 @@ pub use prediction::Prediction;
 pub use reduced_basis::{ReducedBasis, ReducedBasisOptions};
 pub use reduced_basis_output::ReducedBasisOutput;
 pub use scaling::{InputScaling, OutputScaling};
+pub use shared_discrepancy::{PointRuns, fit_shared_discrepancy, fit_shared_discrepancy_with};
 pub use validation::{LeaveOneOut, q2};

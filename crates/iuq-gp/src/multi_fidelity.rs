@@ -83,20 +83,39 @@ pub fn min_high_fidelity_runs(dimension: usize) -> usize {
 /// A two-fidelity emulator of one output (module docs).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct MultiFidelityGp {
-    low: GaussianProcess,
-    discrepancy: GaussianProcess,
-    single: GaussianProcess,
-    rho: f64,
-    two_fidelity_loo_log_density: f64,
-    single_fidelity_loo_log_density: f64,
-    explained: f64,
+    pub(crate) low: GaussianProcess,
+    pub(crate) discrepancy: GaussianProcess,
+    pub(crate) single: GaussianProcess,
+    pub(crate) rho: f64,
+    pub(crate) two_fidelity_loo_log_density: f64,
+    pub(crate) single_fidelity_loo_log_density: f64,
+    pub(crate) explained: f64,
     #[serde(default = "one")]
-    discrepancy_variance_scale: f64,
+    pub(crate) discrepancy_variance_scale: f64,
     #[serde(default)]
-    enough_high_runs: bool,
+    pub(crate) enough_high_runs: bool,
+    /// Where δ is shared across data points ([`crate::shared_discrepancy`]): this point's
+    /// abscissa, appended to θ as δ's last input, and the scale s_j its outputs were divided by
+    /// for δ's fit.
+    #[serde(default)]
+    pub(crate) shared: Option<SharedPoint>,
 }
 
-fn one() -> f64 {
+/// A data point's place in a discrepancy shared across data points.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SharedPoint {
+    /// The point's abscissa t_j, δ's last input.
+    pub abscissa: f64,
+    /// s_j: δ models (y_H − ρ·f_L)/s_j at this point.
+    pub scale: f64,
+    /// m_j = Σ_k exp(−½((t_j − t_k)/l_t)²) over the data points sharing δ (≥ 1): δ's variance
+    /// at this point is taken m_j times, so that the data points' independent variances bound
+    /// their correlated ones ([`crate::shared_discrepancy`]).
+    #[serde(default = "one")]
+    pub correlated_points: f64,
+}
+
+pub(crate) fn one() -> f64 {
     1.0
 }
 
@@ -159,6 +178,7 @@ impl MultiFidelityGp {
         };
         let discrepancy_variance_scale = variance_scale(discrepancy.leave_one_out());
         Ok(Self {
+            shared: None,
             enough_high_runs: high_x.len() >= min_high_fidelity_runs(d.unwrap_or(0)),
             discrepancy_variance_scale,
             explained,
@@ -211,9 +231,58 @@ impl MultiFidelityGp {
         &self.low
     }
 
-    /// The GP δ of the discrepancy y_H − ρ·f_L.
+    /// The GP δ of the discrepancy y_H − ρ·f_L (where shared across data points, of
+    /// (y_H − ρ·f_L)/s_j on (θ, t_j): [`Self::shared_point`]).
     pub fn discrepancy(&self) -> &GaussianProcess {
         &self.discrepancy
+    }
+
+    /// Where δ is shared across data points, this point's abscissa and scale.
+    pub fn shared_point(&self) -> Option<SharedPoint> {
+        self.shared
+    }
+
+    /// The std of δ's training outputs in this output's units (its fit's output scaling,
+    /// times s_j where shared).
+    pub fn discrepancy_std(&self) -> f64 {
+        self.discrepancy.output_scaling().std * self.delta_scale()
+    }
+
+    /// s_j where δ is shared, else 1.
+    fn delta_scale(&self) -> f64 {
+        self.shared.map_or(1.0, |p| p.scale)
+    }
+
+    /// The factor on δ's latent variance: s_j²·m_j where δ is shared, else 1.
+    fn delta_variance_factor(&self) -> f64 {
+        self.shared
+            .map_or(1.0, |p| p.scale * p.scale * p.correlated_points)
+    }
+
+    /// δ's inputs for `points`: θ, with the abscissa appended where δ is shared.
+    fn delta_inputs<'a>(&self, points: &'a [Vec<f64>]) -> std::borrow::Cow<'a, [Vec<f64>]> {
+        match self.shared {
+            None => std::borrow::Cow::Borrowed(points),
+            Some(p) => std::borrow::Cow::Owned(
+                points
+                    .iter()
+                    .map(|x| x.iter().copied().chain([p.abscissa]).collect())
+                    .collect(),
+            ),
+        }
+    }
+
+    /// A new high-fidelity run's noise variance with `prediction` from [`Self::predict`] (whose
+    /// noise variance is already in output units): plus the jitter of the GP in charge.
+    pub fn run_noise_variance(&self, prediction: &Prediction) -> f64 {
+        let gp = self.in_charge();
+        let s = gp.output_scaling().std
+            * if self.uses_low_fidelity() {
+                self.delta_scale()
+            } else {
+                1.0
+            };
+        prediction.noise_variance + gp.jitter() * s * s
     }
 
     /// The GP of the high-fidelity runs alone.
@@ -231,7 +300,12 @@ impl MultiFidelityGp {
             return self.single.predict(points);
         }
         let low = self.low.predict(points)?;
-        let delta = self.discrepancy.predict(points)?;
+        let s = self.delta_scale();
+        let mut delta = self.discrepancy.predict(&self.delta_inputs(points))?;
+        let factor = self.delta_variance_factor();
+        delta.mean.iter_mut().for_each(|m| *m *= s);
+        delta.variance.iter_mut().for_each(|v| *v *= factor);
+        delta.noise_variance *= s * s;
         let rho2 = self.rho * self.rho;
         let c = self.discrepancy_variance_scale;
         Ok(Prediction {
@@ -264,11 +338,12 @@ impl MultiFidelityGp {
             return self.single.predict_mean(points);
         }
         let low = self.low.predict_mean(points)?;
-        let delta = self.discrepancy.predict_mean(points)?;
+        let delta = self.discrepancy.predict_mean(&self.delta_inputs(points))?;
+        let s = self.delta_scale();
         Ok(low
             .iter()
             .zip(&delta)
-            .map(|(l, e)| self.rho * l + e)
+            .map(|(l, e)| self.rho * l + s * e)
             .collect())
     }
 
@@ -288,11 +363,11 @@ impl MultiFidelityGp {
         }
         let rho2 = self.rho * self.rho;
         let low = self.low.predict(points)?.variance;
-        let c = self.discrepancy_variance_scale;
+        let c = self.discrepancy_variance_scale * self.delta_variance_factor();
         Ok((
             low.into_iter().map(|v| rho2 * v).collect(),
             self.discrepancy
-                .predict(points)?
+                .predict(&self.delta_inputs(points))?
                 .variance
                 .into_iter()
                 .map(|v| c * v)
@@ -312,8 +387,10 @@ impl MultiFidelityGp {
             return self.single.posterior_covariance(a, b);
         }
         let rho2 = self.rho * self.rho;
-        let scale = self.discrepancy_variance_scale;
-        let mut covariance = self.discrepancy.posterior_covariance(a, b)?;
+        let scale = self.discrepancy_variance_scale * self.delta_variance_factor();
+        let mut covariance = self
+            .discrepancy
+            .posterior_covariance(&self.delta_inputs(a), &self.delta_inputs(b))?;
         for (row, low) in covariance
             .iter_mut()
             .zip(self.low.posterior_covariance(a, b)?)
@@ -339,7 +416,7 @@ impl MultiFidelityGp {
 
 /// The value of `values` whose `score` (a density, and the GP that gave it) is highest; the
 /// first on ties.
-fn best_of(
+pub(crate) fn best_of(
     values: &[f64],
     score: &dyn Fn(f64) -> Result<(f64, GaussianProcess)>,
 ) -> Result<(f64, (f64, GaussianProcess))> {
@@ -357,14 +434,14 @@ fn best_of(
 }
 
 /// The sample variance (divisor n) of `values`.
-fn variance(values: &[f64]) -> f64 {
+pub(crate) fn variance(values: &[f64]) -> f64 {
     let n = values.len() as f64;
     let mean = values.iter().sum::<f64>() / n;
     values.iter().map(|v| (v - mean) * (v - mean)).sum::<f64>() / n
 }
 
 /// The least-squares slope of `y` on `x` with an intercept (0 when `x` is constant).
-fn least_squares_slope(x: &[f64], y: &[f64]) -> f64 {
+pub(crate) fn least_squares_slope(x: &[f64], y: &[f64]) -> f64 {
     let n = x.len() as f64;
     let (mx, my) = (x.iter().sum::<f64>() / n, y.iter().sum::<f64>() / n);
     let sxy: f64 = x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum();
@@ -378,7 +455,7 @@ fn least_squares_slope(x: &[f64], y: &[f64]) -> f64 {
 /// cross-validation estimate of the variance's scale (Bachoc 2013, "Cross validation and
 /// maximum likelihood estimations of hyper-parameters of Gaussian processes with model
 /// misspecification"). Never below 1: a GP that looks too cautious keeps its variance.
-fn variance_scale(loo: &LeaveOneOut) -> f64 {
+pub(crate) fn variance_scale(loo: &LeaveOneOut) -> f64 {
     let n = loo.residuals.len();
     if n == 0 {
         return 1.0;
@@ -394,7 +471,7 @@ fn variance_scale(loo: &LeaveOneOut) -> f64 {
 }
 
 /// Σ_i −½[ln 2πv_i + r_i²/v_i] over the leave-one-out residuals and variances.
-fn loo_log_density(loo: &LeaveOneOut) -> f64 {
+pub(crate) fn loo_log_density(loo: &LeaveOneOut) -> f64 {
     loo.residuals
         .iter()
         .zip(&loo.variances)

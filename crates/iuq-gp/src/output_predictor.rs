@@ -94,9 +94,9 @@ impl OutputPredictor for MultiFidelityGp {
     }
 
     /// A new high-fidelity run's noise: that of the GP in charge (δ's, or the single-fidelity
-    /// GP's).
+    /// GP's), in the output's units.
     fn run_noise_variance(&self, prediction: &Prediction) -> f64 {
-        OutputPredictor::run_noise_variance(self.in_charge(), prediction)
+        MultiFidelityGp::run_noise_variance(self, prediction)
     }
 }
 

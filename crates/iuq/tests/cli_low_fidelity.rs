@@ -33,6 +33,21 @@ fn data() -> Vec<(f64, f64)> {
 }
 
 fn write_study(dir: &Path, name: &str, low_fidelity: &str) -> std::path::PathBuf {
+    write_study_with(
+        dir,
+        name,
+        low_fidelity,
+        "design = { kind = \"lhs\", n = 8, seed = 1 }\n",
+    )
+}
+
+/// [`write_study`] with `design` for its `[surrogate] design` line (empty: the default).
+fn write_study_with(
+    dir: &Path,
+    name: &str,
+    low_fidelity: &str,
+    design: &str,
+) -> std::path::PathBuf {
     let mut csv = String::from("t,y,y_err\n");
     for (t, y) in data() {
         csv.push_str(&format!("{t},{y},0.05\n"));
@@ -50,8 +65,7 @@ kind = "expression"
 abscissa = "t"
 outputs = {{ y = "A * exp(-k * t) + 0.3 * sin(k * t)" }}
 [surrogate]
-design = {{ kind = "lhs", n = 8, seed = 1 }}
-adaptive = {{ batch = 2, max_runs = 200 }}
+{design}adaptive = {{ batch = 2, max_runs = 200 }}
 [sampler]
 seed = 1
 {low_fidelity}"#
@@ -165,6 +179,40 @@ fn a_correlated_cheap_model_reaches_the_exact_posterior_with_fewer_expensive_run
             "{output}"
         );
     }
+}
+
+/// With the default design, the ten data points' discrepancies are one GP in (θ, t)
+/// (`iuq_gp::shared_discrepancy`): 3 expensive runs per data point to start with (30 in all,
+/// where the expensive model alone starts from 6 per point) and the exact posterior from fewer
+/// expensive runs than the expensive model alone with its default design, ρ one for all points.
+#[test]
+fn the_data_points_share_one_discrepancy_and_start_from_fewer_expensive_runs() {
+    let dir = scratch("low-fidelity", "shared");
+    let cheap = "[low_fidelity]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { y = \"A * exp(-k * t) * (1 + 0.03 * t)\" }\ncost_ratio = 100\n";
+    let two = write_study_with(&dir, "shared", cheap, "");
+    let (mean, std, two_runs) = calibrate(&dir, &two);
+    assert_exact("one shared discrepancy", mean, std);
+    let log = std::fs::read_to_string(dir.join("out/pipeline.log")).unwrap_or_default();
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/two-fidelity.json")).unwrap()).unwrap();
+    let outputs = summary["outputs"].as_array().unwrap();
+    let rho = outputs[0]["rho"].as_f64().unwrap();
+    for output in outputs {
+        assert_eq!(output["shared_discrepancy"], true, "{output} {log}");
+        assert_eq!(output["uses_low_fidelity"], true, "{output}");
+        assert_eq!(output["rho"].as_f64().unwrap(), rho);
+    }
+    let alone_dir = scratch("low-fidelity", "shared-alone");
+    let alone = write_study_with(&alone_dir, "alone", "", "");
+    let (mean, std, alone_runs) = calibrate(&alone_dir, &alone);
+    assert_exact("the expensive model alone, default design", mean, std);
+    println!(
+        "expensive runs: shared discrepancy {two_runs}, the expensive model alone {alone_runs}"
+    );
+    assert!(
+        two_runs < alone_runs,
+        "one shared discrepancy took {two_runs} expensive runs, the expensive model alone {alone_runs}"
+    );
 }
 
 /// A cheap model unrelated to the expensive one (an oscillation): it is not used, and the

@@ -1241,16 +1241,7 @@ fn measure_round(
         other => other,
     })?;
     let posterior_theta: Vec<Vec<f64>> = state.samples.iter().map(|s| s[..d].to_vec()).collect();
-    let mut extrapolation: f64 = 0.0;
-    for gp in emulator.fitted_gps() {
-        let share = extrapolation_share(
-            &posterior_theta,
-            gp.training_inputs(),
-            &gp.length_scales_in_input_units(),
-            EXTRAPOLATION_THRESHOLD,
-        )?;
-        extrapolation = extrapolation.max(share);
-    }
+    let extrapolation = posterior_extrapolation(emulator, &posterior_theta)?;
     let (c, likelihood_variance) = if sampling.candidates > settings.candidates {
         let wide = candidates(state, d, modelling_error, data, sampling.candidates);
         let predictions = emulator.predict(&wide.theta)?;
@@ -2120,6 +2111,35 @@ fn write_rounds(dir: &Path, rounds: &[AdaptiveRound]) -> Result<()> {
     let text = serde_json::to_string_pretty(rounds)
         .map_err(|e| StudyError::failure(format!("cannot write the rounds: {e}")).with_source(e))?;
     write_atomically(&dir.join("rounds.json"), text.as_bytes())
+}
+
+/// The largest share of `posterior_theta` that any GP fitted to the runs sees farther than
+/// [`EXTRAPOLATION_THRESHOLD`] length scales from every run (a discrepancy shared across data
+/// points has the abscissa as its last input, left out).
+fn posterior_extrapolation(
+    emulator: &super::emulator::Emulator,
+    posterior_theta: &[Vec<f64>],
+) -> Result<f64> {
+    let d = posterior_theta.first().map_or(0, Vec::len);
+    let mut extrapolation: f64 = 0.0;
+    for gp in emulator.fitted_gps() {
+        let runs: std::borrow::Cow<'_, [Vec<f64>]> = if gp.dimension() == d {
+            std::borrow::Cow::Borrowed(gp.training_inputs())
+        } else {
+            gp.training_inputs()
+                .iter()
+                .map(|x| x[..d].to_vec())
+                .collect()
+        };
+        let share = extrapolation_share(
+            posterior_theta,
+            &runs,
+            &gp.length_scales_in_input_units()[..d],
+            EXTRAPOLATION_THRESHOLD,
+        )?;
+        extrapolation = extrapolation.max(share);
+    }
+    Ok(extrapolation)
 }
 
 #[cfg(test)]

@@ -1,7 +1,9 @@
 //! A second, cheaper model of the same outputs (`[low_fidelity]`): the surrogate of the study's
 //! model becomes a two-fidelity emulator (`iuq_gp::MultiFidelityGp` per data point: the
-//! expensive output as ρ·(the cheap model's GP) + a GP discrepancy δ), and every adaptive round
-//! chooses, for each run it wants, which model to run there.
+//! expensive output as ρ·(the cheap model's GP) + a GP discrepancy δ, one δ in (θ, abscissa)
+//! shared by the data points of a model run once per point where that predicts better,
+//! `iuq_gp::shared_discrepancy`), and every adaptive round chooses, for each run it wants,
+//! which model to run there.
 //!
 //! ```toml
 //! [low_fidelity]
@@ -432,7 +434,8 @@ fn two_fidelity_entries<'a>(
             "explained_share": gp.explained_share(),
             "loo_log_density_two_fidelities": two,
             "loo_log_density_high_fidelity_alone": one,
-            "discrepancy_std": gp.discrepancy().output_scaling().std,
+            "discrepancy_std": gp.discrepancy_std(),
+            "shared_discrepancy": gp.shared_point().is_some(),
         })
     })
     .collect()
@@ -452,13 +455,21 @@ pub(super) fn two_fidelity_basis_message(basis: &ReducedBasis) -> String {
     helped_line(gps, "principal components")
 }
 
-/// "two fidelities: the cheap model helps u of n `what` (ρ …)".
+/// "two fidelities: the cheap model helps u of n `what` (ρ …)", or with one discrepancy shared
+/// across the data points "… n of n data points through one discrepancy in (θ, abscissa)
+/// (ρ …)".
 fn helped_line<'a>(gps: impl Iterator<Item = &'a MultiFidelityGp> + Clone, what: &str) -> String {
     let used = gps.clone().filter(|g| g.uses_low_fidelity()).count();
+    let n = gps.clone().count();
+    if gps.clone().any(|g| g.shared_point().is_some()) {
+        let rho = gps.clone().next().map_or(0.0, |g| g.rho());
+        return format!(
+            "two fidelities: the cheap model helps {used} of {n} {what} through one discrepancy in (θ, abscissa) (ρ {rho:.3})"
+        );
+    }
     let rhos: Vec<String> = gps.clone().map(|g| format!("{:.3}", g.rho())).collect();
     format!(
-        "two fidelities: the cheap model helps {used} of {} {what} (ρ {})",
-        rhos.len(),
+        "two fidelities: the cheap model helps {used} of {n} {what} (ρ {})",
         rhos.join(", ")
     )
 }

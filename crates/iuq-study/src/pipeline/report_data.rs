@@ -877,7 +877,7 @@ fn two_fidelity_points(results: &PipelineResults<'_>) -> Result<Vec<iuq_report::
             rho: gp.rho(),
             uses_low_fidelity: gp.uses_low_fidelity(),
             explained_share: gp.explained_share(),
-            discrepancy_std: gp.discrepancy().output_scaling().std,
+            discrepancy_std: gp.discrepancy_std(),
             expensive_runs: results.groups[g].training(k).y.len(),
             cheap_runs: low.training(j)?.y.len(),
         });
@@ -913,7 +913,7 @@ fn two_fidelity_components(
                 rho: gp.rho(),
                 uses_low_fidelity: gp.uses_low_fidelity(),
                 explained_share: gp.explained_share(),
-                discrepancy_std: gp.discrepancy().output_scaling().std,
+                discrepancy_std: gp.discrepancy_std(),
                 expensive_runs,
                 cheap_runs,
             })

@@ -319,6 +319,17 @@ pub fn default_adaptive_design_runs(dimension: usize) -> usize {
     6.max(dimension + 2)
 }
 
+/// The initial design per data point of an adaptive study whose model runs once per data point
+/// and has a cheap model (`[low_fidelity]`): the data points' discrepancies are one GP in
+/// (θ, abscissa) that pools their expensive runs (`iuq_gp::shared_discrepancy`), so each needs
+/// only its share of 4·(d + 2) (twice the 2·(d + 2) the shared discrepancy asks for), at least
+/// the 3 a GP needs and at most [`default_adaptive_design_runs`]: ⌈4(d + 2)/m⌉ clamped.
+pub fn shared_discrepancy_design_runs(dimension: usize, data_points: usize) -> usize {
+    (4 * (dimension + 2))
+        .div_ceil(data_points.max(1))
+        .clamp(3, default_adaptive_design_runs(dimension))
+}
+
 /// Read `[surrogate] adaptive`.
 fn parse_adaptive(mut s: StudySection<'_>) -> Result<AdaptiveSettings> {
     let samples = s.count("samples", 10)?.unwrap_or(2000);
@@ -395,10 +406,20 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
         .map(parse_adaptive)
         .transpose()?;
     // A GP needs 3 successful runs.
-    let default_runs = if adaptive.is_some() {
-        default_adaptive_design_runs(study.space.dimension())
-    } else {
-        40
+    let d = study.space.dimension();
+    let per_data_point = study.abscissa.is_some()
+        || matches!(study.model, crate::study::ModelSection::RbcShear { .. });
+    let default_runs = match &adaptive {
+        Some(_) if study.low_fidelity.is_some() && per_data_point => {
+            match crate::likelihood_section::parse_likelihood(study)? {
+                crate::likelihood_section::LikelihoodSection::Data(data) => {
+                    shared_discrepancy_design_runs(d, data.x.len())
+                }
+                _ => default_adaptive_design_runs(d),
+            }
+        }
+        Some(_) => default_adaptive_design_runs(d),
+        None => 40,
     };
     let (training_runs, training_seed) =
         design(&mut surrogate, "design", "lhs", (default_runs, 1), 3)?;
@@ -466,3 +487,19 @@ pub fn parse_pipeline_settings(study: &Study) -> Result<PipelineSettings> {
 /// The final surrogate posterior's population where `[sampler]` gives no `samples` (that of
 /// `iuq.calibrate`'s default).
 pub const PIPELINE_FINAL_SAMPLES: usize = 10_000;
+
+#[cfg(test)]
+mod tests {
+    use super::shared_discrepancy_design_runs;
+
+    #[test]
+    fn a_shared_discrepancy_starts_each_data_point_from_its_share_of_the_pooled_runs() {
+        // 2 parameters, 10 data points: ⌈16/10⌉ = 2, raised to a GP's 3 (30 in all).
+        assert_eq!(shared_discrepancy_design_runs(2, 10), 3);
+        // 4 parameters, 4 data points: ⌈24/4⌉ = 6 each.
+        assert_eq!(shared_discrepancy_design_runs(4, 4), 6);
+        // Never more than one fidelity's default, max(6, d + 2).
+        assert_eq!(shared_discrepancy_design_runs(2, 2), 6);
+        assert_eq!(shared_discrepancy_design_runs(8, 1), 10);
+    }
+}

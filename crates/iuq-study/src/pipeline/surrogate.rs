@@ -10,8 +10,9 @@
 
 use iuq_core::{EvaluationFailure, Model, Outcome, ParameterSpace};
 use iuq_gp::{
-    ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank, MultiFidelityBank,
-    MultiFidelityGp, ReducedBasis, ReducedBasisOptions,
+    CheckedFitOptions, ClassifierOptions, FailureClassifier, FitOptions, GaussianProcess, GpBank,
+    MultiFidelityBank, MultiFidelityGp, PointRuns, ReducedBasis, ReducedBasisOptions,
+    fit_shared_discrepancy_with,
 };
 
 use rayon::prelude::*;
@@ -19,7 +20,7 @@ use rayon::prelude::*;
 use super::emulator::{Emulator, ReducedBasisSettings};
 use super::low_fidelity::LowFidelity;
 use super::model_runs::ModelRuns;
-use super::run_groups::{Curves, GroupRuns};
+use super::run_groups::{Curves, GroupRuns, OutputRuns};
 use crate::error::{Context, Result, StudyError};
 
 /// The probability of failure above which the surrogate gives no answer.
@@ -145,12 +146,16 @@ impl Surrogate {
         // Every data point's training runs, checked in order; then the fits, in parallel (each
         // is deterministic, so the surrogate does not depend on the number of threads).
         let mut tasks = Vec::with_capacity(runs.output_names().len());
+        // Data points whose discrepancies may be shared pool their expensive runs: each needs
+        // only the 2 runs a GP takes.
+        let shared = low.is_some() && runs.groups() > 1 && runs.group_abscissa(0).is_some();
+        let min_runs = if shared { 2 } else { 3 };
         for (g, group) in groups.iter().enumerate() {
             for (k, j) in runs.group_outputs(g).enumerate() {
                 let training = group.training(k);
-                if training.y.len() < 3 {
+                if training.y.len() < min_runs {
                     return Err(StudyError::failure(format!(
-                        "{}: only {} training runs succeeded; a GP needs at least 3 (failures: {}); a larger initial design (`[surrogate] design.n`, `initial_runs` of iuq.calibrate) or narrower priors give it more",
+                        "{}: only {} training runs succeeded; a GP needs at least {min_runs} (failures: {}); a larger initial design (`[surrogate] design.n`, `initial_runs` of iuq.calibrate) or narrower priors give it more",
                         describe(j),
                         training.y.len(),
                         group
@@ -167,6 +172,13 @@ impl Surrogate {
                 let cheap = low.map(|low| low.training(j)).transpose()?;
                 tasks.push((j, training, cheap, options));
             }
+        }
+        // A model run once per data point: the data points' discrepancies may be one GP in
+        // (θ, abscissa), used where it predicts the expensive runs better than each point's
+        // own (`iuq_gp::shared_discrepancy`).
+        if shared {
+            let two_fidelity = Self::fit_shared_discrepancy(&tasks, runs, seed)?;
+            return Self::two_fidelity_surrogate(groups, runs, space, two_fidelity);
         }
         let fits: Vec<_> = tasks
             .par_iter()
@@ -197,30 +209,10 @@ impl Surrogate {
                 FittedOutput::TwoFidelity(gp) => two_fidelity.push(*gp),
             }
         }
-        let mut classifiers = Vec::with_capacity(groups.len());
-        for (g, group) in groups.iter().enumerate() {
-            let (points, failed) = group.failure_labels();
-            let bounds = classifier_bounds(space, &points);
-            let classifier = FailureClassifier::fit(
-                &points,
-                &failed,
-                &bounds,
-                &ClassifierOptions::default().check()?,
-            )
-            .with_context(|| format!("failure classifier of run group {}", g + 1))?;
-            classifiers.push(classifier);
-        }
         if low.is_some() {
-            let bank = MultiFidelityBank::new(
-                runs.parameters().to_vec(),
-                runs.output_names().to_vec(),
-                two_fidelity,
-            )?;
-            return Ok(Self {
-                emulator: Emulator::TwoFidelity(bank),
-                classifiers,
-            });
+            return Self::two_fidelity_surrogate(groups, runs, space, two_fidelity);
         }
+        let classifiers = failure_classifiers(groups, space)?;
         let bank = GpBank::new(
             runs.parameters().to_vec(),
             runs.output_names().to_vec(),
@@ -229,6 +221,58 @@ impl Surrogate {
         Ok(Self {
             emulator: Emulator::PerOutput(bank),
             classifiers,
+        })
+    }
+
+    /// Every data point's two-fidelity GP where the model runs once per data point: on one
+    /// discrepancy in (θ, abscissa) where that wins, else each point's own
+    /// (`iuq_gp::fit_shared_discrepancy_with`; δ's seed follows the points').
+    fn fit_shared_discrepancy(
+        tasks: &[(usize, OutputRuns, Option<OutputRuns>, CheckedFitOptions)],
+        runs: &ModelRuns,
+        seed: u64,
+    ) -> Result<Vec<MultiFidelityGp>> {
+        let mut points = Vec::with_capacity(tasks.len());
+        for (j, training, cheap, _) in tasks {
+            let Some(cheap) = cheap else {
+                return Err(StudyError::failure(format!(
+                    "data point {}: no cheap runs for its two-fidelity GP",
+                    j + 1
+                )));
+            };
+            points.push(PointRuns {
+                abscissa: runs.abscissa_of_output(*j),
+                low_x: &cheap.x,
+                low_y: &cheap.y,
+                high_x: &training.x,
+                high_y: &training.y,
+            });
+        }
+        let shared = FitOptions {
+            seed: seed.wrapping_add(tasks.len() as u64),
+            ..Default::default()
+        }
+        .check()?;
+        fit_shared_discrepancy_with(&points, &shared, &|k| Ok(tasks[k].3))
+            .context("two-fidelity GP fit of the data points")
+    }
+
+    /// The surrogate of a two-fidelity GP per data point, with the groups' failure
+    /// classifiers.
+    fn two_fidelity_surrogate(
+        groups: &[GroupRuns],
+        runs: &ModelRuns,
+        space: &ParameterSpace,
+        two_fidelity: Vec<MultiFidelityGp>,
+    ) -> Result<Self> {
+        let bank = MultiFidelityBank::new(
+            runs.parameters().to_vec(),
+            runs.output_names().to_vec(),
+            two_fidelity,
+        )?;
+        Ok(Self {
+            emulator: Emulator::TwoFidelity(bank),
+            classifiers: failure_classifiers(groups, space)?,
         })
     }
 
@@ -374,4 +418,26 @@ impl Surrogate {
 enum FittedOutput {
     Single(Box<GaussianProcess>),
     TwoFidelity(Box<MultiFidelityGp>),
+}
+
+/// Each run group's failure classifier (GP classification of where its runs failed; `None`
+/// where none failed).
+fn failure_classifiers(
+    groups: &[GroupRuns],
+    space: &ParameterSpace,
+) -> Result<Vec<Option<FailureClassifier>>> {
+    let mut classifiers = Vec::with_capacity(groups.len());
+    for (g, group) in groups.iter().enumerate() {
+        let (points, failed) = group.failure_labels();
+        let bounds = classifier_bounds(space, &points);
+        let classifier = FailureClassifier::fit(
+            &points,
+            &failed,
+            &bounds,
+            &ClassifierOptions::default().check()?,
+        )
+        .with_context(|| format!("failure classifier of run group {}", g + 1))?;
+        classifiers.push(classifier);
+    }
+    Ok(classifiers)
 }
