@@ -18,10 +18,14 @@
 //!
 //! The shared model is used where it has at least 2·(d + 2) expensive runs in all (δ has d + 1
 //! inputs), ρ's cheap outputs explain at least [`crate::multi_fidelity::MIN_EXPLAINED`] of the
-//! scaled runs' variance, and its leave-one-out density over all expensive runs beats the
-//! per-point emulators' summed densities (each point's two-fidelity GP where that is used, else
-//! its single-fidelity GP) by [`crate::multi_fidelity::RHO_PRICE`]; otherwise the per-point
-//! emulators are returned unchanged. Each data point's emulator stays a [`MultiFidelityGp`]
+//! scaled runs' variance, and its leave-one-out density over all expensive runs beats, by
+//! [`crate::multi_fidelity::RHO_PRICE`], both the expensive runs without the cheap model (the
+//! per-point single-fidelity GPs' summed densities, and the pooled GP at ρ = 0, so that the gain
+//! is the cheap model's, not the pooling's) and, where every point has the 2·(d + 1) expensive
+//! runs its own discrepancy needs, the per-point emulators' summed densities (each point's
+//! two-fidelity GP where that is used; with fewer runs a point's density over its handful says
+//! little). Otherwise, or where the pooled fit fails, the per-point emulators are returned
+//! unchanged. Each data point's emulator stays a [`MultiFidelityGp`]
 //! (its predictions at (θ, t_j), [`MultiFidelityGp::shared_point`]); its recorded leave-one-out
 //! densities and explained share are then the pooled ones.
 //!
@@ -132,6 +136,39 @@ pub fn fit_shared_discrepancy_with(
     if points.len() < 2 || runs < min_high_fidelity_runs(d + 1) {
         return Ok(per_point);
     }
+    let Ok(Some((shared, scales))) = fit_pooled(points, &per_point, options) else {
+        return Ok(per_point);
+    };
+    let length = shared.discrepancy.length_scales_in_input_units()[d];
+    let correlated = |t: f64| -> f64 {
+        points
+            .iter()
+            .map(|q| (-0.5 * ((t - q.abscissa) / length).powi(2)).exp())
+            .sum()
+    };
+    Ok(per_point
+        .into_iter()
+        .zip(points.iter().zip(&scales))
+        .map(|(own, (p, &scale))| MultiFidelityGp {
+            low: own.low,
+            single: own.single,
+            shared: Some(SharedPoint {
+                abscissa: p.abscissa,
+                scale,
+                correlated_points: correlated(p.abscissa),
+            }),
+            ..shared.clone()
+        })
+        .collect())
+}
+
+/// The pooled two-fidelity GP (its `shared` left `None`) and each point's s_j, where it wins
+/// (module docs); `None` where it does not.
+fn fit_pooled(
+    points: &[PointRuns<'_>],
+    per_point: &[MultiFidelityGp],
+    options: &CheckedFitOptions,
+) -> Result<Option<(MultiFidelityGp, Vec<f64>)>> {
     let separate: f64 = per_point
         .iter()
         .map(|gp| {
@@ -140,13 +177,14 @@ pub fn fit_shared_discrepancy_with(
         })
         .sum();
     let single: f64 = per_point.iter().map(|gp| gp.loo_log_densities().1).sum();
-    let pooled = Pooled::new(points, &per_point)?;
+    let pooled = Pooled::new(points, per_point)?;
     let discrepancy_at = |rho: f64| -> Result<(f64, GaussianProcess)> {
         let gp = GaussianProcess::fit(&pooled.inputs, &pooled.residuals(rho), options)?;
         Ok((loo_log_density(gp.leave_one_out()) - pooled.log_scales, gp))
     };
+    let (alone, _) = discrepancy_at(0.0)?;
     let slope = least_squares_slope(&pooled.low, &pooled.high);
-    let coarse: Vec<f64> = (0..=8).map(|k| slope * k as f64 / 4.0).collect();
+    let coarse: Vec<f64> = (1..=8).map(|k| slope * k as f64 / 4.0).collect();
     let (mut rho, (mut density, mut discrepancy)) = best_of(&coarse, &discrepancy_at)?;
     let fine: Vec<f64> = (-4..=4)
         .filter(|&k| k != 0)
@@ -169,38 +207,15 @@ pub fn fit_shared_discrepancy_with(
         single: per_point[0].single.clone(),
         rho,
         two_fidelity_loo_log_density: density,
-        single_fidelity_loo_log_density: single,
+        single_fidelity_loo_log_density: single.max(alone),
         explained,
         enough_high_runs: true,
         shared: None,
     };
-    // Each point's own discrepancy competes where every point has the runs it needs; with
-    // fewer, a point's leave-one-out density over its handful of runs says little.
     let own_discrepancies = per_point.iter().all(|gp| gp.enough_high_runs);
-    if !shared.uses_low_fidelity() || (own_discrepancies && density <= separate + RHO_PRICE) {
-        return Ok(per_point);
-    }
-    let length = shared.discrepancy.length_scales_in_input_units()[d];
-    let correlated = |t: f64| -> f64 {
-        points
-            .iter()
-            .map(|q| (-0.5 * ((t - q.abscissa) / length).powi(2)).exp())
-            .sum()
-    };
-    Ok(per_point
-        .into_iter()
-        .zip(points.iter().zip(&pooled.scales))
-        .map(|(own, (p, &scale))| MultiFidelityGp {
-            low: own.low,
-            single: own.single,
-            shared: Some(SharedPoint {
-                abscissa: p.abscissa,
-                scale,
-                correlated_points: correlated(p.abscissa),
-            }),
-            ..shared.clone()
-        })
-        .collect())
+    let wins =
+        shared.uses_low_fidelity() && !(own_discrepancies && density <= separate + RHO_PRICE);
+    Ok(wins.then_some((shared, pooled.scales)))
 }
 
 /// [`fit_shared_discrepancy_with`] with `options` for every GP (point j's own with the seed

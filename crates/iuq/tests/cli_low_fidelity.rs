@@ -227,6 +227,27 @@ fn an_uncorrelated_cheap_model_leaves_the_expensive_runs_in_charge() {
     assert!(runs <= 113 + 2, "{runs} expensive runs");
 }
 
+/// The same unrelated cheap model with the default design, which with a cheap model starts each
+/// data point from 3 expensive runs (the shared discrepancy's share) where the expensive model
+/// alone starts from 6: the shared discrepancy is not used, and the exact posterior comes from
+/// no more expensive runs than the expensive model alone's with its own default design (95) and
+/// a round's batch (2).
+#[test]
+fn an_uncorrelated_cheap_model_with_the_default_design_costs_no_more_expensive_runs() {
+    let dir = scratch("low-fidelity", "uncorrelated-default");
+    let cheap = "[low_fidelity]\nkind = \"expression\"\nabscissa = \"t\"\noutputs = { y = \"cos(13 * A * k + t)\" }\ncost_ratio = 100\n";
+    let study = write_study_with(&dir, "unrelated", cheap, "");
+    let (mean, std, runs) = calibrate(&dir, &study);
+    assert_exact("an uncorrelated cheap model, default design", mean, std);
+    let summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("out/two-fidelity.json")).unwrap()).unwrap();
+    for output in summary["outputs"].as_array().unwrap() {
+        assert_eq!(output["shared_discrepancy"], false, "{output}");
+    }
+    println!("expensive runs with an unrelated cheap model, default design: {runs}");
+    assert!(runs <= 95 + 2, "{runs} expensive runs");
+}
+
 /// A bad `[low_fidelity]` key is refused before any run, with exit code 2 naming the file and
 /// the whole key.
 #[test]

@@ -818,6 +818,13 @@ impl<'a> PipelineRun<'a> {
                 "the model's posterior: its weights are heavy-tailed (k̂ {:.3} above 0.5, where their variance is infinite): its standard errors are at least those of {} batches of the members, at the smoothed estimate's convergence rate {:.2} (the central limit theorem's is 1)",
                 outcome.posterior.pareto_k, heavy.batches, heavy.convergence_rate
             ));
+        } else if outcome.posterior.pareto_k > iuq_basis::heavy_tail_errors::CLT_PARETO_K {
+            events.message(format!(
+                "the model's posterior: its weights are heavy-tailed (k̂ {:.3} above 0.5, where their variance is infinite), but its members descend from {} ancestors, fewer than the {} that batches need: its standard errors are the delta method's and may understate the error (more members, `[model_posterior] samples`, give more ancestors)",
+                outcome.posterior.pareto_k,
+                outcome.posterior.ancestors,
+                iuq_basis::heavy_tail_errors::MIN_GROUPS
+            ));
         }
         // Members for the target Monte Carlo error where `max_samples` (or the surrogate's
         // population) stopped them short of it: the error's variance falls as
