@@ -2,8 +2,8 @@
 //!
 //! Where a model runs once per data point (one run per (θ, t_j)), [`MultiFidelityGp::fit`]
 //! fits a discrepancy per data point, and each needs 2·(d + 1) expensive runs of its own before
-//! the cheap model is used there ([`crate::min_high_fidelity_runs`]): ten data points, sixty
-//! expensive runs. But the discrepancy of neighbouring data points is usually one smooth
+//! the cheap model is used there ([`crate::multi_fidelity::min_high_fidelity_runs`]): ten
+//! data points, sixty expensive runs. But the discrepancy of neighbouring data points is usually one smooth
 //! function of the abscissa too, as in Kennedy & O'Hagan's (2001, "Bayesian calibration of
 //! computer models", JRSS B 63(3)) δ(x) over the experimental inputs. So here
 //!
