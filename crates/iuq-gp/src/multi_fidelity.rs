@@ -155,16 +155,7 @@ impl MultiFidelityGp {
             Ok((loo_log_density(gp.leave_one_out()), gp))
         };
         let slope = least_squares_slope(&at_high, high_y);
-        let coarse: Vec<f64> = (0..=8).map(|k| slope * k as f64 / 4.0).collect();
-        let (mut rho, (mut density, mut discrepancy)) = best_of(&coarse, &discrepancy_at)?;
-        let fine: Vec<f64> = (-4..=4)
-            .filter(|&k| k != 0)
-            .map(|k| rho + slope * k as f64 / 32.0)
-            .collect();
-        let (rho_fine, (density_fine, discrepancy_fine)) = best_of(&fine, &discrepancy_at)?;
-        if density_fine > density {
-            (rho, density, discrepancy) = (rho_fine, density_fine, discrepancy_fine);
-        }
+        let (rho, (density, discrepancy)) = search_rho(slope, 0, &discrepancy_at)?;
         let residuals: Vec<f64> = high_y
             .iter()
             .zip(&at_high)
@@ -414,9 +405,30 @@ impl MultiFidelityGp {
     }
 }
 
+/// ρ's grid search: k·`slope`/4 for k = `first`…8, then steps of `slope`/32 within ±4 of the
+/// best; the ρ with the highest `score` (δ's leave-one-out density, and δ).
+pub(crate) fn search_rho(
+    slope: f64,
+    first: i32,
+    score: &dyn Fn(f64) -> Result<(f64, GaussianProcess)>,
+) -> Result<(f64, (f64, GaussianProcess))> {
+    let coarse: Vec<f64> = (first..=8).map(|k| slope * k as f64 / 4.0).collect();
+    let (rho, (density, discrepancy)) = best_of(&coarse, score)?;
+    let fine: Vec<f64> = (-4..=4)
+        .filter(|&k| k != 0)
+        .map(|k| rho + slope * k as f64 / 32.0)
+        .collect();
+    let (rho_fine, (density_fine, discrepancy_fine)) = best_of(&fine, score)?;
+    Ok(if density_fine > density {
+        (rho_fine, (density_fine, discrepancy_fine))
+    } else {
+        (rho, (density, discrepancy))
+    })
+}
+
 /// The value of `values` whose `score` (a density, and the GP that gave it) is highest; the
 /// first on ties.
-pub(crate) fn best_of(
+fn best_of(
     values: &[f64],
     score: &dyn Fn(f64) -> Result<(f64, GaussianProcess)>,
 ) -> Result<(f64, (f64, GaussianProcess))> {

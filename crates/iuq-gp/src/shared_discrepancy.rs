@@ -86,8 +86,8 @@ use crate::error::{GpError, Result};
 use crate::fit::{CheckedFitOptions, FitOptions};
 use crate::gaussian_process::GaussianProcess;
 use crate::multi_fidelity::{
-    MultiFidelityGp, RHO_PRICE, SharedPoint, best_of, least_squares_slope, loo_log_density,
-    min_high_fidelity_runs, variance, variance_scale,
+    MultiFidelityGp, RHO_PRICE, SharedPoint, least_squares_slope, loo_log_density,
+    min_high_fidelity_runs, search_rho, variance, variance_scale,
 };
 
 /// The runs of both fidelities at one data point.
@@ -184,16 +184,8 @@ fn fit_pooled(
     };
     let (alone, _) = discrepancy_at(0.0)?;
     let slope = least_squares_slope(&pooled.low, &pooled.high);
-    let coarse: Vec<f64> = (1..=8).map(|k| slope * k as f64 / 4.0).collect();
-    let (mut rho, (mut density, mut discrepancy)) = best_of(&coarse, &discrepancy_at)?;
-    let fine: Vec<f64> = (-4..=4)
-        .filter(|&k| k != 0)
-        .map(|k| rho + slope * k as f64 / 32.0)
-        .collect();
-    let (rho_fine, (density_fine, discrepancy_fine)) = best_of(&fine, &discrepancy_at)?;
-    if density_fine > density {
-        (rho, density, discrepancy) = (rho_fine, density_fine, discrepancy_fine);
-    }
+    // ρ = 0 was scored above.
+    let (rho, (density, discrepancy)) = search_rho(slope, 1, &discrepancy_at)?;
     let total = variance(&pooled.high);
     let explained = if total > 0.0 {
         1.0 - variance(&pooled.residuals(rho)) / total
